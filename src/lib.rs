@@ -1,0 +1,22 @@
+//! ghostship — from measured radiosonde soundings to physically accurate images of what an
+//! observer sees through a layered atmosphere: superior and inferior mirages, Fata Morgana, the
+//! distorted horizon and the Novaya Zemlya sun.
+//!
+//! The stages, each a module with one input and one output type:
+//!
+//! ```text
+//! sounding file ─ingest→ Sounding ─fit→ Profile ─refract→ refractive atmosphere (n, dn/dh)
+//!                                                              │
+//! scene file ─parse→ Scene ────────────────────────────────────┤
+//!                                                              ▼
+//!                                        tracer → paths, transfer curves → renderer → EXR/PNG
+//! ```
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod output;
+pub mod profile;
+pub mod refractivity;
+pub mod sounding;
+pub mod tracer;
+pub mod units;

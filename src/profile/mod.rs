@@ -1,0 +1,32 @@
+//! Stage 2 — fit. In: a [`Sounding`](crate::sounding::Sounding) or a synthetic layer description.
+//! Out: a [`Profile`]: smooth, monotone-safe T(h), P(h) and vapour pressure e(h) with their height
+//! derivatives, blended into the U.S. Standard Atmosphere 1976 above the data, plus the inversion
+//! layers and refractive regimes found in it.
+
+pub mod us1976;
+
+/// The state of the air at one height, with height derivatives (SI).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AirSample {
+    /// Temperature (K).
+    pub temperature_k: f64,
+    /// dT/dh (K m⁻¹).
+    pub dtemperature_dh_k_per_m: f64,
+    /// Pressure (Pa).
+    pub pressure_pa: f64,
+    /// dP/dh (Pa m⁻¹).
+    pub dpressure_dh_pa_per_m: f64,
+    /// Water-vapour partial pressure (Pa); 0 for dry air.
+    pub vapour_pressure_pa: f64,
+    /// de/dh (Pa m⁻¹).
+    pub dvapour_pressure_dh_pa_per_m: f64,
+}
+
+/// A column of air: anything that gives T, P, e and their derivatives by height above mean sea
+/// level. Implemented by fitted profiles, synthetic layered atmospheres and the standard atmosphere.
+pub trait AirColumn: Send + Sync {
+    /// Height of the ground (m above mean sea level); the column is not defined below it.
+    fn surface_height_m(&self) -> f64;
+    /// Air at `height_m` above mean sea level (at or above the surface).
+    fn air_at(&self, height_m: f64) -> AirSample;
+}
