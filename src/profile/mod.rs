@@ -30,3 +30,32 @@ pub trait AirColumn: Send + Sync {
     /// Air at `height_m` above mean sea level (at or above the surface).
     fn air_at(&self, height_m: f64) -> AirSample;
 }
+
+/// Whether an inversion starts at the ground or aloft.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InversionKind {
+    /// The layer's base is at the surface.
+    Surface,
+    /// The layer's base is above the surface.
+    Elevated,
+}
+
+/// A temperature inversion layer (temperature increasing with height) found in a profile.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct InversionLayer {
+    /// Base height above mean sea level (m).
+    pub base_m: f64,
+    /// Top height above mean sea level (m).
+    pub top_m: f64,
+    /// Base height above ground level (m).
+    pub base_agl_m: f64,
+    /// Top height above ground level (m).
+    pub top_agl_m: f64,
+    /// Temperature increase from base to top (K), positive.
+    pub delta_t_k: f64,
+    /// Largest dT/dh inside the layer (K m⁻¹).
+    pub max_gradient_k_per_m: f64,
+    /// Surface-based or elevated.
+    pub kind: InversionKind,
+}
