@@ -15,6 +15,7 @@
 #![warn(missing_docs)]
 
 pub mod output;
+pub mod pipeline;
 pub mod profile;
 pub mod refractivity;
 pub mod sounding;
