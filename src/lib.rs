@@ -17,6 +17,7 @@
 pub mod output;
 pub mod profile;
 pub mod refractivity;
+pub mod report;
 pub mod sounding;
 pub mod tracer;
 pub mod units;

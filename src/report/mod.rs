@@ -1,0 +1,1 @@
+//! Outputs of the `profile` command (to be filled).
