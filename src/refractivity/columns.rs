@@ -10,8 +10,10 @@ use crate::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
 
 const G_OVER_R: f64 = STANDARD_GRAVITY_M_S2 / DRY_AIR_GAS_CONSTANT_J_KG_K;
 
-/// Hydrostatic dry-air column with a constant lapse rate (0 = isothermal) and a constant
-/// water-vapour partial pressure (capped at half the local pressure high up).
+/// Hydrostatic column with a constant temperature gradient (0 = isothermal) up to
+/// `isothermal_above_agl_m` and isothermal above it (a tropopause, so that a lapse rate does not
+/// reach 0 K), with a constant water-vapour partial pressure (capped at half the local pressure
+/// high up).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LapseRateColumn {
     /// Surface height above mean sea level (m).
@@ -24,6 +26,8 @@ pub struct LapseRateColumn {
     pub gradient_k_per_m: f64,
     /// Water-vapour partial pressure (Pa), constant with height.
     pub vapour_pressure_pa: f64,
+    /// Height above the surface (m) from which the air is isothermal (`f64::INFINITY`: never).
+    pub isothermal_above_agl_m: f64,
 }
 
 impl AirColumn for LapseRateColumn {
@@ -33,15 +37,19 @@ impl AirColumn for LapseRateColumn {
 
     fn air_at(&self, height_m: f64) -> AirSample {
         let z = height_m - self.surface_height_m;
+        let zt = self.isothermal_above_agl_m.max(0.0);
         let t0 = self.surface_temperature_k;
-        let g = self.gradient_k_per_m;
-        let t = t0 + g * z;
-        // P = P0·exp(−(g/R)∫dz/T): ∫dz/T = ln(T/T0)/Γ, or z/T0 when isothermal.
-        let integral = if g.abs() < 1e-12 {
-            z / t0
+        let gradient = self.gradient_k_per_m;
+        let (zl, g) = if z <= zt { (z, gradient) } else { (zt, 0.0) };
+        let t = t0 + gradient * zl;
+        // P = P0·exp(−(g/R)∫dz/T): ∫dz/T = ln(T/T0)/Γ in the gradient part (z/T0 when
+        // isothermal), plus (z − zt)/T above the tropopause.
+        let lower = if gradient.abs() < 1e-12 {
+            zl / t0
         } else {
-            (t / t0).ln() / g
+            (t / t0).ln() / gradient
         };
+        let integral = lower + (z - zl) / t;
         let p = self.surface_pressure_pa * (-G_OVER_R * integral).exp();
         let e = self.vapour_pressure_pa.min(0.5 * p);
         let de = if e < self.vapour_pressure_pa {
@@ -183,6 +191,7 @@ mod tests {
             surface_pressure_pa: 100_000.0,
             gradient_k_per_m: -0.0065,
             vapour_pressure_pa: 500.0,
+            isothermal_above_agl_m: 2_000.0,
         };
         check_derivatives(&lapse, &[10.5, 100.0, 3000.0]);
         let inversion = SmoothInversionColumn {
