@@ -603,3 +603,224 @@ fn profile_png_draws_panels_and_shading() {
         .is_err()
     );
 }
+
+/// A measured sounding as a column with a kink at every level: T and e linear between levels,
+/// P hydrostatic (closed form per linear-T segment) from the measured surface pressure,
+/// isothermal above the top. Built here only to exercise the table's exact fallback and the
+/// regime detection on real structure (the real fit is the profile stage's job).
+struct PiecewiseSounding {
+    heights_m: Vec<f64>,
+    temperatures_k: Vec<f64>,
+    vapour_pa: Vec<f64>,
+    /// Pressure at each level (Pa), integrated hydrostatically from the surface.
+    pressures_pa: Vec<f64>,
+}
+
+const G_OVER_R: f64 =
+    ghostship::units::STANDARD_GRAVITY_M_S2 / ghostship::units::DRY_AIR_GAS_CONSTANT_J_KG_K;
+
+/// ∫ dz/T over [0, dz] for T linear from t0 with slope g.
+fn inverse_t_integral(t0: f64, g: f64, dz: f64) -> f64 {
+    if g.abs() < 1e-12 {
+        dz / t0
+    } else {
+        ((t0 + g * dz) / t0).ln() / g
+    }
+}
+
+impl PiecewiseSounding {
+    fn read(name: &str) -> (Self, Vec<Level>) {
+        let path = format!(
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings/{}"),
+            name
+        );
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+            panic!("sounding {path} is missing ({e}); tests need /work/shared")
+        });
+        let mut s = PiecewiseSounding {
+            heights_m: vec![],
+            temperatures_k: vec![],
+            vapour_pa: vec![],
+            pressures_pa: vec![],
+        };
+        let mut levels = Vec::new();
+        let mut surface_pressure = None;
+        for (i, line) in text.lines().enumerate() {
+            if line.starts_with('#') || line.starts_with("pressure_hpa") {
+                continue;
+            }
+            let f: Vec<&str> = line.split(',').collect();
+            let (Ok(h), Ok(t_c)) = (f[1].parse::<f64>(), f[2].parse::<f64>()) else {
+                continue;
+            };
+            if s.heights_m.last().is_some_and(|&last| h <= last) {
+                continue;
+            }
+            if surface_pressure.is_none() {
+                surface_pressure = Some(f[0].parse::<f64>().expect("surface pressure") * 100.0);
+            }
+            let t = t_c + 273.15;
+            let e = f[3]
+                .parse::<f64>()
+                .map(|d| ghostship::units::saturation_vapour_pressure_pa(d + 273.15))
+                .unwrap_or(0.0);
+            s.heights_m.push(h);
+            s.temperatures_k.push(t);
+            s.vapour_pa.push(e);
+            levels.push(Level {
+                height_m: h,
+                pressure_pa: None,
+                temperature_k: t,
+                vapour_pressure_pa: Some(e),
+                height_source: HeightSource::Measured,
+                line: i + 1,
+            });
+        }
+        let mut p = surface_pressure.expect("no levels");
+        s.pressures_pa.push(p);
+        for k in 1..s.heights_m.len() {
+            let dz = s.heights_m[k] - s.heights_m[k - 1];
+            let g = (s.temperatures_k[k] - s.temperatures_k[k - 1]) / dz;
+            p *= (-G_OVER_R * inverse_t_integral(s.temperatures_k[k - 1], g, dz)).exp();
+            s.pressures_pa.push(p);
+        }
+        (s, levels)
+    }
+}
+
+impl AirColumn for PiecewiseSounding {
+    fn surface_height_m(&self) -> f64 {
+        self.heights_m[0]
+    }
+
+    fn air_at(&self, height_m: f64) -> AirSample {
+        let n = self.heights_m.len();
+        let k = self
+            .heights_m
+            .partition_point(|&h| h <= height_m)
+            .clamp(1, n)
+            - 1;
+        let (t0, p0, e0) = (
+            self.temperatures_k[k],
+            self.pressures_pa[k],
+            self.vapour_pa[k],
+        );
+        let dz = height_m - self.heights_m[k];
+        let (g, de) = if k + 1 < n {
+            let span = self.heights_m[k + 1] - self.heights_m[k];
+            (
+                (self.temperatures_k[k + 1] - t0) / span,
+                (self.vapour_pa[k + 1] - e0) / span,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let t = t0 + g * dz;
+        let p = p0 * (-G_OVER_R * inverse_t_integral(t0, g, dz)).exp();
+        let e = (e0 + de * dz).min(0.5 * p);
+        AirSample {
+            temperature_k: t,
+            dtemperature_dh_k_per_m: g,
+            pressure_pa: p,
+            dpressure_dh_pa_per_m: -G_OVER_R * p / t,
+            vapour_pressure_pa: e,
+            dvapour_pressure_dh_pa_per_m: if e < e0 + de * dz {
+                -0.5 * G_OVER_R * p / t
+            } else {
+                de
+            },
+        }
+    }
+}
+
+/// Bjørnøya 2024-02-26 11 UTC (1 s RS41): ~11 m between levels, so dn/dh jumps at every level.
+/// The table must still agree with the exact path everywhere (by falling back in those cells),
+/// and the detected layers must contain exactly the heights where dN/dh is below −79 N/km.
+#[test]
+fn real_sounding_with_kinks_table_and_regimes() {
+    let (column, levels) = PiecewiseSounding::read("Bjornoya-01028_2024022611.csv");
+    let atm = atmosphere(column);
+    let err = atm.table_max_error();
+    assert!(
+        err.max_abs_dn() <= 1e-11 && err.max_abs_ddndh_per_m() <= 1e-11,
+        "{err:?}"
+    );
+    assert!(err.fine.exact_cells > 100, "kinks must be caught: {err:?}");
+    eprintln!("Bjornoya table: {err:?}");
+    for (i, x) in uniform(11, 40_000).iter().enumerate() {
+        let h = if i % 2 == 0 {
+            1_000.0 * x
+        } else {
+            30_000.0 * x
+        };
+        let (n_t, d_t) = atm.table_refractivity(h);
+        let (n_e, d_e) = atm.exact_refractivity(h);
+        assert!(
+            (n_t - n_e).abs() < 2e-11 && (d_t - d_e).abs() < 2e-11,
+            "at {h}: {d_t:e} vs {d_e:e}"
+        );
+    }
+    let surface = atm.surface_height_m();
+    let layers = detect_regimes(&atm, surface + 1_000.0, &RegimeOptions::default());
+    for w in layers.windows(2) {
+        assert!(w[0].top_m <= w[1].base_m + 1e-9, "overlap: {w:?}");
+    }
+    // Independent check on a 0.1 m grid offset from the detection's 0.25 m samples (points
+    // within 0.3 m of a layer boundary are skipped: boundaries are interpolated).
+    let inside = |h: f64, kinds: &[RegimeKind]| {
+        layers
+            .iter()
+            .any(|l| kinds.contains(&l.kind) && l.base_agl_m <= h && h <= l.top_agl_m)
+    };
+    let near_edge = |h: f64| {
+        layers
+            .iter()
+            .any(|l| (l.base_agl_m - h).abs() < 0.3 || (l.top_agl_m - h).abs() < 0.3)
+    };
+    let mut strong = 0;
+    for k in 0..9_990 {
+        let h = 0.05 + 0.1 * k as f64;
+        if near_edge(h) {
+            continue;
+        }
+        let d = atm.exact(h).1 * 1e9;
+        let expect_strong = d < -79.0;
+        strong += expect_strong as usize;
+        assert_eq!(
+            inside(h, &[RegimeKind::Trapping, RegimeKind::SuperRefraction]),
+            expect_strong,
+            "{h} m AGL: dN/dh {d}"
+        );
+        assert_eq!(
+            inside(h, &[RegimeKind::InferiorMirage]),
+            d > 0.0,
+            "{h} m AGL: dN/dh {d}"
+        );
+    }
+    assert!(
+        strong > 0,
+        "the 86–172 m inversion should be super-refractive"
+    );
+    eprintln!("{}", summary_text(&LayersReport::new(&atm, &[], &layers)));
+    let png = profile_png(
+        &ProfilePlot {
+            atmosphere: &atm,
+            levels: &levels,
+            inversions: &[],
+            regimes: &layers,
+            title: "Bjørnøya 2024-02-26 11 UTC (levels joined linearly)",
+        },
+        &PlotOptions {
+            top_agl_m: 600.0,
+            ..PlotOptions::default()
+        },
+    )
+    .unwrap();
+    if let Ok(dir) = std::env::var("GHOSTSHIP_PLOT_DIR") {
+        std::fs::write(
+            std::path::Path::new(&dir).join("profile_bjornoya.png"),
+            &png,
+        )
+        .unwrap();
+    }
+}
