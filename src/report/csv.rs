@@ -97,3 +97,48 @@ pub fn profile_csv(atm: &RefractiveAtmosphere, grid: &ProfileGrid) -> Vec<u8> {
     }
     out.into_bytes()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_grid_rows_and_spacing() {
+        let h = ProfileGrid::default().heights_agl_m();
+        assert_eq!(h.len(), 2001 + 1800 + 200);
+        assert_eq!(&h[..3], &[0.0, 1.0, 2.0]);
+        assert_eq!(h[2000], 2000.0);
+        assert_eq!(h[2001], 2010.0);
+        assert_eq!(*h.last().unwrap(), 40_000.0);
+        assert!(h.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    #[test]
+    fn bad_segments_are_skipped() {
+        let grid = ProfileGrid {
+            segments: vec![
+                GridSegment {
+                    step_m: 0.0,
+                    top_agl_m: 10.0,
+                },
+                GridSegment {
+                    step_m: f64::NAN,
+                    top_agl_m: 10.0,
+                },
+                GridSegment {
+                    step_m: 2.0,
+                    top_agl_m: 6.0,
+                },
+                GridSegment {
+                    step_m: 1.0,
+                    top_agl_m: 3.0,
+                },
+                GridSegment {
+                    step_m: 5.0,
+                    top_agl_m: 16.0,
+                },
+            ],
+        };
+        assert_eq!(grid.heights_agl_m(), vec![0.0, 2.0, 4.0, 6.0, 11.0, 16.0]);
+    }
+}

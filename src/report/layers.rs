@@ -245,3 +245,53 @@ pub fn summary_text(report: &LayersReport) -> String {
     );
     o
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::refractivity::columns::LapseRateColumn;
+    use std::sync::Arc;
+
+    #[test]
+    fn summary_lists_surface_and_inversions_and_json_round_trips() {
+        let atm = RefractiveAtmosphere::new(
+            Arc::new(LapseRateColumn {
+                surface_height_m: 5.0,
+                surface_temperature_k: 253.15,
+                surface_pressure_pa: 102_000.0,
+                gradient_k_per_m: 0.02,
+                vapour_pressure_pa: 50.0,
+                isothermal_above_agl_m: 300.0,
+            }),
+            550.0,
+        )
+        .unwrap();
+        let inv = InversionLayer {
+            base_m: 5.0,
+            top_m: 305.0,
+            base_agl_m: 0.0,
+            top_agl_m: 300.0,
+            delta_t_k: 6.0,
+            max_gradient_k_per_m: 0.02,
+            kind: InversionKind::Surface,
+        };
+        let report = LayersReport::new(&atm, &[inv], &[]);
+        let text = summary_text(&report);
+        assert!(
+            text.contains("Surface 5.0 m: -20.00 °C, 1020.00 hPa"),
+            "{text}"
+        );
+        assert!(
+            text.contains("  surface ") && text.contains("0.0–  300.0 m AGL: +6.00 K"),
+            "{text}"
+        );
+        assert!(text.contains("Ducts: 0"), "{text}");
+        let v: serde_json::Value = serde_json::from_slice(&summary_json(&report)).unwrap();
+        assert_eq!(v["inversions"][0]["kind"], "surface");
+        assert_eq!(v["surface"]["pressure_hpa"], 1020.0);
+        // Critical gradient at −20 °C, 1020 hPa: references.md gives 0.0915 K/m at 1013.25 hPa;
+        // higher pressure lowers it slightly (n − 1 ∝ P).
+        let g = v["surface"]["critical_gradient_k_per_m"].as_f64().unwrap();
+        assert!(g > 0.089 && g < 0.0915, "{g}");
+    }
+}
