@@ -101,8 +101,17 @@ pub struct RefractiveSample {
 /// A horizontally stratified refractive atmosphere built on an air column.
 ///
 /// Heights are **above the surface** (the column's `surface_height_m`). Heights below the surface
-/// are clamped to it (the tracer stops rays at h = 0 anyway). A NaN height returns (NaN, NaN)
-/// without panicking, so the tracer can detect it and terminate the ray.
+/// are clamped to it (the tracer stops rays at h = 0 anyway). A NaN (or +∞) height returns
+/// (NaN, NaN) without panicking and without consulting the column, so the tracer can detect it
+/// and terminate the ray.
+///
+/// The table (see [`TableSpec`]): 0.25 m cells up to 4 km above the surface, 5 m cells up to
+/// 80 km, exact above; each cell a cubic Hermite through the exact (n − 1, dn/dh) at its ends. At
+/// construction every cell is checked against the exact formula at three points; cells off by
+/// more than 1e-11 (in n or in dn/dh per metre) evaluate the exact formula instead. The measured
+/// errors are in [`table_max_error`](Self::table_max_error). Building takes about 10 ms
+/// (≈ 125 000 exact evaluations, in parallel); a lookup about 20 ns against ≈ 100 ns exact for
+/// the standard atmosphere (more for a fitted profile).
 pub struct RefractiveAtmosphere {
     column: Arc<dyn AirColumn>,
     surface_m: f64,
@@ -259,7 +268,7 @@ impl RefractiveAtmosphere {
 
     /// Like [`exact`](Self::exact) but returns n − 1 (more significant digits).
     pub fn exact_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
-        if height_agl_m.is_nan() {
+        if height_agl_m.is_nan() || height_agl_m == f64::INFINITY {
             return (f64::NAN, f64::NAN);
         }
         let s = self.sample_at(self.surface_m + height_agl_m.max(0.0));
@@ -268,7 +277,24 @@ impl RefractiveAtmosphere {
 
     /// The air, n − 1 and dn/dh (exact) at `height_m` above **mean sea level** (clamped to the
     /// surface). Invalid air gives NaN values here; the constructor has checked the table's range.
+    /// A NaN or +∞ height gives a NaN sample without consulting the column.
     pub fn sample_at(&self, height_m: f64) -> RefractiveSample {
+        if height_m.is_nan() || height_m == f64::INFINITY {
+            let nan = f64::NAN;
+            return RefractiveSample {
+                height_m: nan,
+                air: AirSample {
+                    temperature_k: nan,
+                    dtemperature_dh_k_per_m: nan,
+                    pressure_pa: nan,
+                    dpressure_dh_pa_per_m: nan,
+                    vapour_pressure_pa: nan,
+                    dvapour_pressure_dh_pa_per_m: nan,
+                },
+                n_minus_1: nan,
+                dn_dh_per_m: nan,
+            };
+        }
         let h = if height_m < self.surface_m {
             self.surface_m
         } else {
@@ -293,7 +319,7 @@ impl RefractiveAtmosphere {
     /// n − 1 and dn/dh (m⁻¹) from the table (what [`StratifiedIndex`] returns, minus the 1).
     #[inline]
     pub fn table_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
-        if height_agl_m.is_nan() {
+        if height_agl_m.is_nan() || height_agl_m == f64::INFINITY {
             return (f64::NAN, f64::NAN);
         }
         let h = height_agl_m.max(0.0);

@@ -824,3 +824,59 @@ fn real_sounding_with_kinks_table_and_regimes() {
         .unwrap();
     }
 }
+
+#[test]
+fn wavelength_range_is_inclusive_and_dispersion_is_normal() {
+    let column = Arc::new(isothermal());
+    assert!(RefractiveAtmosphere::new(column.clone(), 299.0).is_err());
+    assert!(RefractiveAtmosphere::new(column.clone(), 1701.0).is_err());
+    let blue = RefractiveAtmosphere::new(column.clone(), 300.0).unwrap();
+    let red = RefractiveAtmosphere::new(column.clone(), 1700.0).unwrap();
+    assert!(blue.exact(0.0).0 > red.exact(0.0).0);
+    assert!(
+        blue.exact(0.0).1 < red.exact(0.0).1,
+        "|dn/dh| larger in the blue"
+    );
+    let atm = RefractiveAtmosphere::new(column, 550.0).unwrap();
+    let (n, d) = atm.index_and_derivative(f64::INFINITY);
+    assert!(n.is_nan() && d.is_nan());
+    assert!(atm.sample_at(f64::NAN).n_minus_1.is_nan());
+}
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+
+        /// For any smooth hydrostatic lapse-rate column the table matches the exact path at
+        /// arbitrary heights, and dn/dh agrees with a Richardson central difference of n.
+        #[test]
+        fn table_and_derivative_hold_for_any_lapse_column(
+            t0 in 220.0f64..310.0,
+            gradient in -0.0098f64..0.08,
+            e in 0.0f64..1500.0,
+            surface in -50.0f64..3000.0,
+            p0 in 60_000.0f64..105_000.0,
+            h in 0.02f64..3_990.0,
+            wavelength in 350.0f64..1000.0,
+        ) {
+            let column = LapseRateColumn {
+                surface_height_m: surface,
+                surface_temperature_k: t0,
+                surface_pressure_pa: p0,
+                gradient_k_per_m: gradient,
+                vapour_pressure_pa: e.min(0.9 * ghostship::units::saturation_vapour_pressure_pa(t0)),
+                isothermal_above_agl_m: 4_000.0,
+            };
+            let atm = RefractiveAtmosphere::new(Arc::new(column), wavelength).unwrap();
+            let (n_t, d_t) = atm.table_refractivity(h);
+            let (n_e, d_e) = atm.exact_refractivity(h);
+            prop_assert!((n_t - n_e).abs() < 2e-11 && (d_t - d_e).abs() < 2e-11);
+            let fd = |d: f64| (atm.exact_refractivity(h + d).0 - atm.exact_refractivity(h - d).0) / (2.0 * d);
+            let richardson = (4.0 * fd(0.005) - fd(0.01)) / 3.0;
+            prop_assert!((richardson - d_e).abs() < 2e-15 + 1e-9 * d_e.abs(), "{} vs {}", richardson, d_e);
+        }
+    }
+}
