@@ -256,6 +256,22 @@ fn critical_gradient_matches_reference_and_definition() {
     let g15 = critical_temperature_gradient_k_per_m(288.15, 101_325.0, 0.0, 550e-9, EARTH_RADIUS_M);
     assert!((g0 - 0.1121).abs() < 1e-4, "{g0}");
     assert!((g15 - 0.1286).abs() < 1e-4, "{g15}");
+    // The rest of the table in references.md §2.3 (given to 3–4 digits).
+    for (t_c, expected, tol) in [
+        (30.0, 0.146, 5e-4),
+        (-10.0, 0.1016, 1e-4),
+        (-20.0, 0.0915, 1e-4),
+        (-30.0, 0.0817, 1e-4),
+    ] {
+        let g = critical_temperature_gradient_k_per_m(
+            t_c + 273.15,
+            101_325.0,
+            0.0,
+            550e-9,
+            EARTH_RADIUS_M,
+        );
+        assert!((g - expected).abs() < tol, "{t_c} °C: {g}");
+    }
     // Definition: a hydrostatic layer with that gradient has dn/dh = −1/R at its base (the
     // compressibility term of Ciddor, absent from the P/T model, moves it by < 0.1 %).
     let atm = atmosphere(LapseRateColumn {
