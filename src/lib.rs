@@ -18,6 +18,7 @@ pub mod output;
 pub mod pipeline;
 pub mod profile;
 pub mod refractivity;
+pub mod report;
 pub mod sounding;
 pub mod tracer;
 pub mod units;
