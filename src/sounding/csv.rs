@@ -84,8 +84,8 @@ fn classify(name: &str) -> Option<(Role, Quantity)> {
     })
 }
 
-/// Whether the first data-bearing line (after `#` comments and blank lines) is a CSV header of a
-/// kind this module reads, and which.
+/// Whether the first data-bearing line (after `#` comments and blank lines) is a CSV header with
+/// at least one recognised column name, and whether it is Wyoming TEXT:CSV or normalised.
 pub(crate) fn detect(text: &str) -> Option<SoundingFormat> {
     let header = text
         .lines()
@@ -98,12 +98,9 @@ pub(crate) fn detect(text: &str) -> Option<SoundingFormat> {
         .split(',')
         .map(|s| s.trim().trim_matches('"').to_ascii_lowercase())
         .collect();
-    let roles: Vec<Role> = names
-        .iter()
-        .filter_map(|n| classify(n))
-        .map(|c| c.0)
-        .collect();
-    if !roles.contains(&Role::Temperature) {
+    // Any recognised column makes it a sounding CSV; a missing temperature, height or pressure
+    // column is then reported by `read` with the header's line.
+    if !names.iter().any(|n| classify(n).is_some()) {
         return None;
     }
     if names.iter().any(|n| n == "time") && names.iter().any(|n| n == "geopotential height_m") {
@@ -368,6 +365,10 @@ mod tests {
             Some(SoundingFormat::WyomingTextCsv)
         );
         assert_eq!(detect("a,b,c\n1,2,3\n"), None);
+        assert_eq!(
+            detect("height_m,wind\n"),
+            Some(SoundingFormat::NormalizedCsv)
+        );
         assert_eq!(detect("PRES HGHT TEMP\n"), None);
     }
 
