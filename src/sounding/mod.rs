@@ -72,7 +72,10 @@ pub struct Sounding {
     /// Detected format.
     pub format: SoundingFormat,
     /// `key: value` metadata (station, latitude, longitude, station_elevation_m, launch time …),
-    /// as given in the file.
+    /// as given in the file. Keys every reader uses where the format has the information:
+    /// `station`, `latitude`, `longitude` (degrees), `station_elevation_m`, `launch_time_utc`,
+    /// `nominal_time_utc`; normalised CSVs keep all their `# key: value` lines, Wyoming TEXT:LIST
+    /// its station block (snake_case keys), IGRA2 its header fields.
     pub metadata: BTreeMap<String, String>,
     /// Levels, strictly increasing in height.
     pub levels: Vec<Level>,
@@ -171,6 +174,17 @@ pub fn detect_format(text: &str) -> Option<SoundingFormat> {
 }
 
 impl Sounding {
+    /// The number at the start of a metadata value, e.g. `20.0` from
+    /// `station_elevation_m: 20.0 (release altitude from file header)`; `None` if the key is
+    /// absent or its value does not start with a finite number.
+    pub fn metadata_number(&self, key: &str) -> Option<f64> {
+        let value = self.metadata.get(key)?;
+        let token = value
+            .split(|c: char| c.is_whitespace() || c == ',' || c == ';' || c == '(')
+            .find(|t| !t.is_empty())?;
+        token.parse::<f64>().ok().filter(|v| v.is_finite())
+    }
+
     /// The lowest level (the surface, for a sounding launched from the ground).
     pub fn surface(&self) -> &Level {
         &self.levels[0]

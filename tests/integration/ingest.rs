@@ -157,6 +157,9 @@ fn every_shared_csv_ingests_with_its_values() {
 #[test]
 fn one_second_files_policy() {
     let tr = read(&shared("TroisRivieres-UQAM_2022022222.csv"));
+    assert_eq!(tr.metadata_number("station_elevation_m"), Some(59.0));
+    assert_eq!(tr.metadata_number("latitude"), Some(46.349));
+    assert_eq!(tr.metadata_number("station"), None);
     assert_eq!(tr.levels[0].pressure_pa, None);
     assert_eq!(tr.levels[0].height_m, 91.3);
     let dropped: Vec<&String> = tr
@@ -855,4 +858,32 @@ proptest! {
             Err(e) => prop_assert!(e.to_string().starts_with("mutated")),
         }
     }
+}
+
+/// Every raw file either ingests (Wyoming TEXT:CSV, IGRA2) or is refused as an unrecognised
+/// format (WMO TEMP bulletins, EOL ESC/CLASS, NOAA GSL: not supported; their normalised CSVs are).
+#[test]
+fn raw_files_ingest_or_are_refused_clearly() {
+    let mut seen = 0;
+    for entry in std::fs::read_dir(shared("raw")).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let supported = name.contains("uwyo_TEXT-CSV") || name.starts_with("USM00070026");
+        match read_sounding(&path, &ReadOptions::default()) {
+            Ok(s) => {
+                assert!(supported, "{name} unexpectedly ingested as {:?}", s.format);
+                assert_well_formed(&s);
+            }
+            Err(e) => {
+                assert!(!supported, "{name}: {e}");
+                assert!(matches!(e, SoundingError::File { .. }), "{name}: {e}");
+                assert!(
+                    e.to_string().contains("cannot recognise the format"),
+                    "{name}: {e}"
+                );
+            }
+        }
+        seen += 1;
+    }
+    assert_eq!(seen, 14);
 }
