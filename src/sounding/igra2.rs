@@ -428,6 +428,24 @@ mod tests {
     }
 
     #[test]
+    fn derived_record_fields_and_calculated_height_fallback() {
+        // Real 12 UTC surface record of the derived excerpt, then the same with REPGPH missing.
+        let line = " 101890      15      15    2742     -60    2727      40    2748    2733    6273    6598     950     951    -139     -64    -219     -43     265     320";
+        let row = derived_record(Path::new("d.txt"), 5, line).unwrap();
+        assert_eq!(row.pressure_pa, Some(101_890.0));
+        assert_eq!(row.height_m, Some(15.0));
+        assert_eq!(row.height_source, HeightSource::Measured);
+        assert_eq!(row.temperature_k, Some(274.2));
+        assert_eq!(row.humidity, RawHumidity::VapourPressurePa(627.3));
+        let missing = line.replacen("      15      15", "  -99999      17", 1);
+        let row = derived_record(Path::new("d.txt"), 5, &missing).unwrap();
+        assert_eq!(row.height_m, Some(17.0));
+        assert_eq!(row.height_source, HeightSource::Hypsometric);
+        let e = derived_record(Path::new("d.txt"), 5, &line[..60]).unwrap_err();
+        assert!(e.to_string().contains("too short"), "{e}");
+    }
+
+    #[test]
     fn level_count_mismatch_and_garbage_are_located() {
         let text = DATA.replace("2303    3", "2303    4");
         let e = read(

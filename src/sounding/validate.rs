@@ -3,7 +3,7 @@
 //! a [`Sounding`](super::Sounding), plus warnings for rows that were skipped or dropped.
 //!
 //! The rules, in order (all documented in `data/README.md` too):
-//! 1. Every value is finite, not a missing-value sentinel, and in range (see [`Quantity`]).
+//! 1. Every value is finite, not a missing-value sentinel, and in range (see `Quantity` in this file).
 //! 2. Rows without temperature (wind-only levels, below-ground levels) are skipped, with one
 //!    summary warning; they are not errors.
 //! 3. A row with temperature but neither height nor pressure cannot be placed: error.
@@ -707,6 +707,33 @@ mod tests {
         .unwrap_err();
         assert_eq!(e.line(), Some(4));
         assert!(e.to_string().contains("conflicting duplicate"), "{e}");
+    }
+
+    #[test]
+    fn pressure_only_repeat_of_a_reported_level_is_merged() {
+        // A Part B level repeating a Part A level (same pressure and temperature, no height).
+        let (levels, warnings) = build(vec![
+            row(2, Some(0.0), Some(1000.0), Some(10.0)),
+            row(3, Some(100.0), Some(988.0), Some(9.5)),
+            row(4, None, Some(988.0), Some(9.5)),
+            row(5, None, Some(980.0), Some(9.0)),
+        ])
+        .unwrap();
+        assert_eq!(levels.len(), 3);
+        assert_eq!(levels[2].height_source, HeightSource::Hypsometric);
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.contains("merged 1") && w.contains("lines 4"))
+        );
+        // With a different temperature it is a conflict.
+        let e = build(vec![
+            row(2, Some(0.0), Some(1000.0), Some(10.0)),
+            row(3, Some(100.0), Some(988.0), Some(9.5)),
+            row(4, None, Some(988.0), Some(9.0)),
+        ])
+        .unwrap_err();
+        assert_eq!(e.line(), Some(4));
     }
 
     #[test]
