@@ -887,3 +887,79 @@ fn raw_files_ingest_or_are_refused_clearly() {
     }
     assert_eq!(seen, 14);
 }
+
+/// A random valid sounding: (pressure hPa, height m, temperature °C, dewpoint depression K or
+/// None), heights increasing and pressures decreasing, all on the 0.1 grid files use.
+fn valid_levels() -> impl Strategy<Value = Vec<(f64, f64, f64, Option<f64>)>> {
+    proptest::collection::vec(
+        (
+            1u32..200,
+            1u32..300,
+            -300i32..300,
+            proptest::option::of(0u32..300),
+        ),
+        3..60,
+    )
+    .prop_map(|steps| {
+        let (mut p, mut h) = (10_300u32, 0u32); // tenths of hPa, tenths of m
+        steps
+            .into_iter()
+            .map(|(dp, dh, t, dd)| {
+                p = p.saturating_sub(dp).max(10);
+                h += dh;
+                (
+                    p as f64 / 10.0,
+                    h as f64 / 10.0,
+                    t as f64 / 10.0,
+                    dd.map(|d| d as f64 / 10.0),
+                )
+            })
+            .collect::<Vec<_>>()
+    })
+    .prop_filter("pressures strictly decrease", |levels| {
+        levels.windows(2).all(|w| w[1].0 < w[0].0)
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+
+    /// Whatever the column order and the (documented) aliases, a valid CSV reads back to the
+    /// values written.
+    #[test]
+    fn csv_round_trip_any_column_order_and_alias(
+        levels in valid_levels(),
+        order in Just([0usize, 1, 2, 3]).prop_shuffle(),
+        alias in 0usize..3,
+    ) {
+        let names = [
+            ["pressure_hpa", "height_m", "temperature_c", "dewpoint_c"],
+            ["pres", "hght", "temp", "dwpt"],
+            ["Pressure", "Altitude", "Temperature", "Dewpoint"],
+        ][alias];
+        let mut text = String::from("# station: synthetic\n");
+        text.push_str(&order.iter().map(|&i| names[i]).collect::<Vec<_>>().join(","));
+        text.push('\n');
+        for &(p, h, t, dd) in &levels {
+            let td = dd.map(|d| format!("{:.1}", t - d)).unwrap_or_default();
+            let fields = [format!("{p:.1}"), format!("{h:.1}"), format!("{t:.1}"), td];
+            text.push_str(&order.iter().map(|&i| fields[i].clone()).collect::<Vec<_>>().join(","));
+            text.push('\n');
+        }
+        let s = parse_sounding(&text, Path::new("rt.csv"), &ReadOptions::default()).unwrap();
+        prop_assert_eq!(s.levels.len(), levels.len());
+        for (k, (l, &(p, h, t, dd))) in s.levels.iter().zip(&levels).enumerate() {
+            prop_assert_eq!(l.line, k + 3);
+            prop_assert!((l.height_m - h).abs() < 1e-9);
+            prop_assert!((l.pressure_pa.unwrap() - p * 100.0).abs() < 1e-6);
+            prop_assert!((l.temperature_k - (t + 273.15)).abs() < 1e-9);
+            match dd {
+                Some(d) => {
+                    let e = units::saturation_vapour_pressure_pa(t - d + 273.15);
+                    prop_assert!((l.vapour_pressure_pa.unwrap() - e).abs() < 1e-6 * e);
+                }
+                None => prop_assert_eq!(l.vapour_pressure_pa, None),
+            }
+        }
+    }
+}
