@@ -1,9 +1,25 @@
 //! Stage 1 — ingest. In: a sounding file (normalised CSV, University of Wyoming TEXT:LIST or
 //! TEXT:CSV, IGRA2 data or derived). Out: a validated [`Sounding`]: levels sorted by height, in SI
 //! units, with every level carrying a height (measured or hypsometric) and its source line.
+//!
+//! Entry points: [`read_sounding`] (a file) and [`parse_sounding`] (text already in memory). The
+//! format is detected from the content, never from the extension: IGRA2 header record first →
+//! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; a CSV header with a
+//! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
+//! CSV. Readers live in [`csv`], [`wyoming`] and [`igra2`]; the rules every sounding must pass
+//! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
+
+pub mod csv;
+pub mod error;
+pub mod hypsometric;
+pub mod igra2;
+pub mod validate;
+pub mod wyoming;
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+pub use error::SoundingError;
 
 /// Where a level's height came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -56,13 +72,119 @@ pub struct Sounding {
     /// Detected format.
     pub format: SoundingFormat,
     /// `key: value` metadata (station, latitude, longitude, station_elevation_m, launch time …),
-    /// as given in the file.
+    /// as given in the file. Keys every reader uses where the format has the information:
+    /// `station`, `latitude`, `longitude` (degrees), `station_elevation_m`, `launch_time_utc`,
+    /// `nominal_time_utc`; normalised CSVs keep all their `# key: value` lines, Wyoming TEXT:LIST
+    /// its station block (snake_case keys), IGRA2 its header fields.
     pub metadata: BTreeMap<String, String>,
     /// Levels, strictly increasing in height.
     pub levels: Vec<Level>,
+    /// What ingest skipped, merged or dropped (one line per kind, with the source lines), e.g.
+    /// rows without temperature or the backward steps of a 1-s ascent. Empty for a clean file.
+    pub warnings: Vec<String>,
+}
+
+/// Options for reading a sounding.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Which sounding of a multi-sounding IGRA2 file to read, as `"YYYY-MM-DD HH"` (nominal date
+    /// and hour, UTC). `None`: the first in the file. Ignored by the other formats.
+    pub igra2_time: Option<String>,
+}
+
+impl ReadOptions {
+    /// Options choosing the IGRA2 sounding at `time` (`"YYYY-MM-DD HH"`).
+    pub fn with_igra2_time(time: impl Into<String>) -> Self {
+        ReadOptions {
+            igra2_time: Some(time.into()),
+        }
+    }
+}
+
+/// Reads and validates the sounding in the file at `path` (any supported format, detected from
+/// the content). Never panics, whatever the bytes; non-UTF-8 input is a
+/// [`SoundingError::NotUtf8`] naming the line.
+pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, SoundingError> {
+    let bytes = std::fs::read(path).map_err(|source| SoundingError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let text = match std::str::from_utf8(&bytes) {
+        Ok(text) => text,
+        Err(e) => {
+            let byte_offset = e.valid_up_to();
+            let line = 1 + bytes[..byte_offset].iter().filter(|&&b| b == b'\n').count();
+            return Err(SoundingError::NotUtf8 {
+                path: path.to_path_buf(),
+                line,
+                byte_offset,
+            });
+        }
+    };
+    parse_sounding(text, path, options)
+}
+
+/// Parses and validates a sounding from `text`; `source` names it in errors and in
+/// [`Sounding::source`].
+pub fn parse_sounding(
+    text: &str,
+    source: &Path,
+    options: &ReadOptions,
+) -> Result<Sounding, SoundingError> {
+    // A UTF-8 byte-order mark is not part of the first header.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let format = detect_format(text).ok_or_else(|| {
+        SoundingError::file(
+            source,
+            "cannot recognise the format: expected a normalised CSV (header such as \
+             pressure_hpa,height_m,temperature_c,dewpoint_c), a University of Wyoming TEXT:LIST \
+             or TEXT:CSV page, or an IGRA2 data or derived file",
+        )
+    })?;
+    let mut metadata = BTreeMap::new();
+    let (rows, names) = match format {
+        SoundingFormat::NormalizedCsv | SoundingFormat::WyomingTextCsv => {
+            csv::read(source, text, format, &mut metadata)?
+        }
+        SoundingFormat::WyomingTextList => wyoming::read(source, text, &mut metadata)?,
+        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived => igra2::read(
+            source,
+            text,
+            format,
+            options.igra2_time.as_deref(),
+            &mut metadata,
+        )?,
+    };
+    let mut warnings = Vec::new();
+    let levels = validate::build_levels(source, rows, &names, &mut warnings)?;
+    Ok(Sounding {
+        source: source.to_path_buf(),
+        format,
+        metadata,
+        levels,
+        warnings,
+    })
+}
+
+/// The format of `text`, from its content; `None` if it is none of the supported ones.
+pub fn detect_format(text: &str) -> Option<SoundingFormat> {
+    igra2::detect(text)
+        .or_else(|| wyoming::detect(text).then_some(SoundingFormat::WyomingTextList))
+        .or_else(|| csv::detect(text))
 }
 
 impl Sounding {
+    /// The number at the start of a metadata value, e.g. `20.0` from
+    /// `station_elevation_m: 20.0 (release altitude from file header)`; `None` if the key is
+    /// absent or its value does not start with a finite number.
+    pub fn metadata_number(&self, key: &str) -> Option<f64> {
+        let value = self.metadata.get(key)?;
+        let token = value
+            .split(|c: char| c.is_whitespace() || c == ',' || c == ';' || c == '(')
+            .find(|t| !t.is_empty())?;
+        token.parse::<f64>().ok().filter(|v| v.is_finite())
+    }
+
     /// The lowest level (the surface, for a sounding launched from the ground).
     pub fn surface(&self) -> &Level {
         &self.levels[0]

@@ -1,2 +1,3 @@
 //! One integration-test binary (keeps link time low); each file is a module.
+mod ingest;
 mod refractivity;
