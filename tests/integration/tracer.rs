@@ -1,0 +1,345 @@
+//! Tracer and analysis checks against exact solutions and published reference numbers
+//! (/work/shared/notes/references.md §1, §2.1, §2.2, §2.3, §2.7).
+
+use ghostship::profile::us1976::us1976;
+use ghostship::tracer::{
+    Ground, IndexField, NoHook, Spherical, StratifiedIndex, Termination, Tracer, TracerConfig,
+    straight_ray, trace_field,
+};
+use ghostship::units::{ARCMIN_PER_RAD, DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
+use glam::DVec3;
+
+const R: f64 = 6_371_000.0;
+
+/// n constant.
+struct Constant(f64);
+impl StratifiedIndex for Constant {
+    fn index_and_derivative(&self, _h: f64) -> (f64, f64) {
+        (self.0, 0.0)
+    }
+}
+
+/// n = n₀·R/(R + h): the perfect duct, horizontal rays are circles.
+struct InverseRadius(f64);
+impl StratifiedIndex for InverseRadius {
+    fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+        let r = R + h;
+        (self.0 * R / r, -self.0 * R / (r * r))
+    }
+}
+
+/// Dry air with n − 1 = A·P[mb]/T (SLALIB/H&S optical form, references.md §2.6) over US1976.
+struct Us1976Field {
+    a: f64,
+}
+impl Us1976Field {
+    fn new(wavelength_um: f64) -> Self {
+        let l2 = wavelength_um * wavelength_um;
+        Us1976Field {
+            a: (287.6155 + 1.62887 / l2 + 0.01360 / (l2 * l2)) * 273.15e-6 / 1013.25,
+        }
+    }
+}
+impl StratifiedIndex for Us1976Field {
+    fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+        let air = us1976(h);
+        let t = air.temperature_k;
+        let p_mb = air.pressure_pa / 100.0;
+        // Hydrostatic dP/dz in geometric height: −P g₀/(R_d T) · (r₀/(r₀+z))² (geopotential).
+        let ratio = 6_356_766.0 / (6_356_766.0 + h);
+        let dp_mb =
+            -p_mb * STANDARD_GRAVITY_M_S2 / (DRY_AIR_GAS_CONSTANT_J_KG_K * t) * ratio * ratio;
+        let n = 1.0 + self.a * p_mb / t;
+        let dn = self.a * (dp_mb / t - p_mb * air.dtemperature_dh_k_per_m / (t * t));
+        (n, dn)
+    }
+}
+
+/// references.md §2.7: T = 273.15 + 0.1121·h, P hydrostatic from 101 325 Pa, n−1 = 7.9012e-7·P/T.
+struct CriticalGradient;
+impl StratifiedIndex for CriticalGradient {
+    fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+        let lapse = 0.1121;
+        let t0 = 273.15;
+        let t = t0 + lapse * h;
+        let g_over_r = STANDARD_GRAVITY_M_S2 / DRY_AIR_GAS_CONSTANT_J_KG_K;
+        let p = 101_325.0 * (t / t0).powf(-g_over_r / lapse);
+        let dp = -p * g_over_r / t;
+        let k = 7.9012e-7;
+        (1.0 + k * p / t, k * (dp / t - p * lapse / (t * t)))
+    }
+}
+
+fn config(tolerance_m: f64) -> TracerConfig {
+    TracerConfig {
+        tolerance_m,
+        ..TracerConfig::default()
+    }
+}
+
+#[test]
+fn constant_index_gives_straight_lines() {
+    let field = Constant(1.000_3);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    let distances: Vec<f64> = (1..=30).map(|k| k as f64 * 1_000.0).collect();
+    for &alpha_deg in &[-0.1_f64, -0.05, 0.0, 0.02, 0.1, 0.5, 2.0] {
+        let alpha = alpha_deg.to_radians();
+        let curved = tracer.trace(10.0, alpha, &distances).unwrap();
+        let straight = straight_ray(10.0, alpha, R, 40_000.0, &distances).unwrap();
+        assert_eq!(curved.termination.is_some(), true);
+        for (a, b) in curved.heights_m.iter().zip(&straight.heights_m) {
+            match (a, b) {
+                (Some(a), Some(b)) => assert!((a - b).abs() < 1e-4, "α {alpha_deg}: {a} vs {b}"),
+                (None, None) => {}
+                _ => panic!("α {alpha_deg}: curved {a:?} vs straight {b:?}"),
+            }
+        }
+        if straight.termination == Some(Termination::Ground) {
+            assert_eq!(curved.termination, Some(Termination::Ground));
+            assert!((curved.end.distance_m - straight.end.distance_m).abs() < 0.05);
+        }
+    }
+}
+
+/// Lowest elevation whose ray does not reach the ground (bisection on the tracer).
+fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
+    let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
+    let (mut lo, mut hi) = (-0.02, 0.0);
+    assert!(hits(lo) && !hits(hi));
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if hits(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+#[test]
+fn constant_index_gives_geometric_dip() {
+    let field = Constant(1.000_3);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    for (h0, dip_arcmin) in [(10.0, 6.091), (100.0, 19.261), (1.0, 1.926)] {
+        let dip = -sea_horizon_rad(&tracer, h0) * ARCMIN_PER_RAD;
+        assert!((dip - dip_arcmin).abs() < 0.001, "h0 {h0}: dip {dip}′");
+    }
+}
+
+#[test]
+fn inverse_radius_index_keeps_horizontal_ray_level() {
+    let field = InverseRadius(1.000_3);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    let distances: Vec<f64> = (1..=20).map(|k| k as f64 * 5_000.0).collect();
+    let rec = tracer.trace(25.0, 0.0, &distances).unwrap();
+    assert_eq!(rec.termination, Some(Termination::TargetsDone));
+    for h in &rec.heights_m {
+        let h = h.unwrap();
+        assert!((h - 25.0).abs() < 1e-4, "{h}");
+    }
+    // An inclined ray keeps its local elevation (logarithmic spiral).
+    let alpha = 0.3_f64.to_radians();
+    let rec = tracer.trace(25.0, alpha, &distances).unwrap();
+    for e in &rec.target_elevations_rad {
+        assert!((e.unwrap() - alpha).abs() < 1e-8, "{e:?}");
+    }
+    assert!(rec.invariant_drift < 1e-10, "drift {}", rec.invariant_drift);
+}
+
+/// Flat Earth, n² = n₀² + 2g·z: with the optical parameter σ (ds = n dσ) the ray equation is
+/// d²r/dσ² = ∇(n²/2) = (0, 0, g), so z(x) = z₀ + tan ψ₀·x + g·x²/(2c²), c = n₀ cos ψ₀.
+struct FlatSquareLinear {
+    n0: f64,
+    g: f64,
+}
+impl IndexField for FlatSquareLinear {
+    fn index_and_gradient(&self, p: DVec3) -> (f64, DVec3) {
+        let n = (self.n0 * self.n0 + 2.0 * self.g * p.z).sqrt();
+        (n, DVec3::new(0.0, 0.0, self.g / n))
+    }
+}
+
+#[test]
+fn flat_earth_square_linear_index_gives_parabola() {
+    let field = FlatSquareLinear {
+        n0: 1.000_3,
+        g: -4e-7,
+    };
+    let cfg = TracerConfig {
+        tolerance_m: 0.01,
+        top_m: 5_000.0,
+        ..TracerConfig::default()
+    };
+    let distances: Vec<f64> = (1..=10).map(|k| k as f64 * 3_000.0).collect();
+    let mut worst: f64 = 0.0;
+    for psi0_deg in [0.0_f64, 0.5, 1.0, 3.0] {
+        let psi0 = psi0_deg.to_radians();
+        let z0 = 20.0;
+        let dir = DVec3::new(psi0.cos(), 0.0, psi0.sin());
+        let rec = trace_field(
+            &field,
+            Ground::Flat,
+            &cfg,
+            DVec3::new(0.0, 0.0, z0),
+            dir,
+            &distances,
+            &mut NoHook,
+            None,
+        )
+        .unwrap();
+        // c = n(z₀)·cos ψ₀ (Snell's invariant at the launch point).
+        let c = field.index_and_gradient(DVec3::new(0.0, 0.0, z0)).0 * psi0.cos();
+        for (x, h) in distances.iter().zip(&rec.heights_m) {
+            let exact = z0 + psi0.tan() * x + field.g * x * x / (2.0 * c * c);
+            match h {
+                Some(h) => {
+                    worst = worst.max((h - exact).abs());
+                }
+                None => assert!(
+                    exact <= 0.0,
+                    "ψ0 {psi0_deg} x {x}: ray ended early, exact {exact}"
+                ),
+            }
+        }
+    }
+    eprintln!(
+        "parabola: worst error {worst:.2e} m at tolerance {} m",
+        cfg.tolerance_m
+    );
+    assert!(worst < 0.1 * cfg.tolerance_m, "worst error {worst} m");
+}
+
+#[test]
+fn us1976_astronomical_refraction_matches_palrefro() {
+    let field = Us1976Field::new(0.55);
+    let cfg = TracerConfig {
+        tolerance_m: 0.001,
+        top_m: 80_000.0,
+        ..TracerConfig::default()
+    };
+    let tracer = Tracer::new(&field, cfg).unwrap();
+    // palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (references.md §2.1): observed ZD → arcmin.
+    let cases = [
+        (45.0, 0.953, 0.02),
+        (80.0, 5.223, 0.02),
+        (85.0, 9.666, 0.02),
+        (88.0, 17.789, 0.02),
+        (89.0, 23.545, 0.02),
+        (89.5, 27.650, 0.02),
+        (90.0, 33.000, 0.05),
+    ];
+    for (zd, expected, tol) in cases {
+        let alpha = (90.0_f64 - zd).to_radians();
+        let rec = tracer.trace(0.0, alpha, &[]).unwrap();
+        assert_eq!(rec.termination, Some(Termination::Escaped), "ZD {zd}");
+        let got = rec.refraction_rad.unwrap() * ARCMIN_PER_RAD;
+        eprintln!(
+            "ZD {zd}: {got:.4}′ (palRefro {expected}′), steps {}",
+            rec.steps()
+        );
+        assert!(
+            (got - expected).abs() < tol,
+            "ZD {zd}: {got}′ vs {expected}′"
+        );
+    }
+}
+
+#[test]
+fn critical_gradient_ray_matches_reference_trace() {
+    let cfg = TracerConfig {
+        tolerance_m: 1e-4,
+        ..TracerConfig::default()
+    };
+    let tracer = Tracer::new(&CriticalGradient, cfg).unwrap();
+    let distances = [10_000.0, 20_000.0, 50_000.0, 100_000.0];
+    // references.md §2.7 (DOP853, rtol 1e-12); tolerances are half a unit in the last printed digit.
+    let cases: [(f64, [(f64, f64); 4]); 2] = [
+        (
+            0.0,
+            [
+                (0.0032, 0.00005),
+                (0.0129, 0.00005),
+                (0.083, 0.0005),
+                (0.362, 0.0005),
+            ],
+        ),
+        (
+            10.0,
+            [
+                (10.077, 0.0005),
+                (10.309, 0.0005),
+                (11.98, 0.005),
+                (18.67, 0.005),
+            ],
+        ),
+    ];
+    for (h0, expected) in cases {
+        let rec = tracer.trace(h0, 0.0, &distances).unwrap();
+        for ((h, (e, tol)), d) in rec.heights_m.iter().zip(expected).zip(distances) {
+            let h = h.unwrap();
+            eprintln!("h0 {h0}, x {d}: {h:.5} m (reference {e})");
+            assert!((h - e).abs() <= tol, "h0 {h0}, x {d}: {h} vs {e}");
+        }
+    }
+}
+
+#[test]
+fn planar_and_3d_paths_agree() {
+    let field = Us1976Field::new(0.55);
+    let cfg = config(0.01);
+    let tracer = Tracer::new(&field, cfg.clone()).unwrap();
+    let sphere = Spherical {
+        index: Us1976Field::new(0.55),
+        earth_radius_m: R,
+    };
+    let distances: Vec<f64> = (1..=10).map(|k| k as f64 * 10_000.0).collect();
+    // Observer somewhere off-axis, looking in an arbitrary azimuth.
+    let up = DVec3::new(0.3, -0.5, 0.8).normalize();
+    let east = up.cross(DVec3::Z).normalize();
+    let h0 = 15.0;
+    for alpha_deg in [-0.05_f64, 0.0, 0.1, 1.0, 10.0] {
+        let alpha = alpha_deg.to_radians();
+        let planar = tracer.trace(h0, alpha, &distances).unwrap();
+        let dir = east * alpha.cos() + up * alpha.sin();
+        let full = trace_field(
+            &sphere,
+            Ground::Sphere { radius_m: R },
+            &cfg,
+            up * (R + h0),
+            dir,
+            &distances,
+            &mut NoHook,
+            None,
+        )
+        .unwrap();
+        assert_eq!(planar.termination, full.termination, "α {alpha_deg}");
+        for (a, b) in planar.heights_m.iter().zip(&full.heights_m) {
+            match (a, b) {
+                (Some(a), Some(b)) => assert!((a - b).abs() < 0.01, "α {alpha_deg}: {a} vs {b}"),
+                (None, None) => {}
+                _ => panic!("α {alpha_deg}: {a:?} vs {b:?}"),
+            }
+        }
+        assert!((planar.end.distance_m - full.end.distance_m).abs() < 1.0);
+    }
+}
+
+#[test]
+fn halving_the_tolerance_changes_heights_less_than_the_tolerance() {
+    let field = Us1976Field::new(0.55);
+    let distances: Vec<f64> = (1..=30).map(|k| k as f64 * 1_000.0).collect();
+    for tol in [1.0, 0.1, 0.01, 0.001] {
+        let a = Tracer::new(&field, config(tol)).unwrap();
+        let b = Tracer::new(&field, config(tol / 2.0)).unwrap();
+        for alpha_deg in [-0.08_f64, -0.02, 0.0, 0.05, 0.3, 3.0] {
+            let ra = a.trace(20.0, alpha_deg.to_radians(), &distances).unwrap();
+            let rb = b.trace(20.0, alpha_deg.to_radians(), &distances).unwrap();
+            for (x, y) in ra.heights_m.iter().zip(&rb.heights_m) {
+                if let (Some(x), Some(y)) = (x, y) {
+                    assert!((x - y).abs() < tol, "tol {tol} α {alpha_deg}: {x} vs {y}");
+                }
+            }
+        }
+    }
+}
