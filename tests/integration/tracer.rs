@@ -1,6 +1,7 @@
 //! Tracer and analysis checks against exact solutions and published reference numbers
 //! (/work/shared/notes/references.md §1, §2.1, §2.2, §2.3, §2.7).
 
+use ghostship::analysis::{TraceRequest, trace_plot_png, trace_report};
 use ghostship::profile::us1976::us1976;
 use ghostship::tracer::{
     Ground, IndexField, NoHook, Spherical, StratifiedIndex, Termination, Tracer, TracerConfig,
@@ -341,5 +342,178 @@ fn halving_the_tolerance_changes_heights_less_than_the_tolerance() {
                 }
             }
         }
+    }
+}
+
+/// A smooth elevated inversion: n drops by `dn` across a layer of half-width `w` at `hc`, over a
+/// weak standard gradient. With dn = 1e-5 (≈ 10 K) over a few metres its gradient is ~10× the
+/// ducting value 1/R: a duct with a Fata-Morgana-like, non-monotone transfer curve.
+struct Inversion {
+    dn: f64,
+    hc: f64,
+    w: f64,
+}
+impl StratifiedIndex for Inversion {
+    fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+        let t = ((h - self.hc) / self.w).tanh();
+        let n = 1.0003 - 3e-8 * h - self.dn * 0.5 * (1.0 + t);
+        let dn = -3e-8 - self.dn * 0.5 * (1.0 - t * t) / self.w;
+        (n, dn)
+    }
+}
+
+const FATA_MORGANA: Inversion = Inversion {
+    dn: 1e-5,
+    hc: 15.0,
+    w: 3.0,
+};
+
+fn fata_morgana_request() -> TraceRequest {
+    TraceRequest {
+        observer_height_m: 10.0,
+        elevation_min_deg: -0.2,
+        elevation_max_deg: 0.3,
+        elevation_count: 401,
+        distances_m: vec![20_000.0],
+        target_heights_m: vec![30.0],
+        ..TraceRequest::default()
+    }
+}
+
+#[test]
+fn fata_morgana_images_are_all_found_and_alternate() {
+    let request = fata_morgana_request();
+    let report = trace_report(&FATA_MORGANA, &request).unwrap();
+    let images = &report.images;
+    assert!(images.len() >= 3, "{images:#?}");
+    let probe = Tracer::new(&FATA_MORGANA, request.tracer.clone()).unwrap();
+    let (d, big_h) = (20_000.0, 30.0);
+    let h_at = |deg: f64| probe.trace(10.0, deg.to_radians(), &[d]).unwrap().heights_m[0];
+    for pair in images.windows(2) {
+        assert!(pair[0].elevation_max_deg <= pair[1].elevation_min_deg + 1e-12);
+        assert_ne!(
+            pair[0].erect, pair[1].erect,
+            "orientation must alternate: {pair:#?}"
+        );
+    }
+    for image in images {
+        // Re-trace inside the image: the ray lands on the target, with the stated orientation.
+        let width = image.elevation_max_deg - image.elevation_min_deg;
+        assert!(width > 0.0);
+        let (a1, a2) = (
+            image.elevation_min_deg + 0.25 * width,
+            image.elevation_min_deg + 0.75 * width,
+        );
+        let mid = h_at(image.elevation_deg).expect("image ray reaches the target");
+        assert!((0.0..=big_h).contains(&mid), "{image:?}: h {mid}");
+        let (h1, h2) = (h_at(a1).unwrap(), h_at(a2).unwrap());
+        assert_eq!(h2 > h1, image.erect, "{image:?}");
+        assert!(image.magnification > 0.0 && image.magnification.is_finite());
+    }
+    // Brute force: a fan 20× denser finds the same number of in-band monotone pieces.
+    let n = 8001;
+    let alphas: Vec<f64> = (0..n)
+        .map(|i| (-0.2 + 0.5 * i as f64 / (n - 1) as f64).to_radians())
+        .collect();
+    let fan = probe.trace_fan(10.0, &alphas, &[d]).unwrap();
+    let heights: Vec<Option<f64>> = fan.iter().map(|r| r.heights_m[0]).collect();
+    let mut pieces = 0;
+    let mut prev_in = false;
+    let mut prev_dir = 0.0f64;
+    for i in 1..n {
+        let inside = matches!((heights[i - 1], heights[i]), (Some(a), Some(b)) if (0.0..=big_h).contains(&a) && (0.0..=big_h).contains(&b));
+        let dir = match (heights[i - 1], heights[i]) {
+            (Some(a), Some(b)) => (b - a).signum(),
+            _ => 0.0,
+        };
+        if inside && (!prev_in || dir != prev_dir) {
+            pieces += 1;
+        }
+        prev_in = inside;
+        prev_dir = dir;
+    }
+    assert_eq!(pieces, images.len(), "brute force {pieces} vs {images:#?}");
+    // Rays inside the duct are trapped.
+    assert!(!report.trapped_elevations_deg.is_empty());
+}
+
+#[test]
+fn report_json_has_the_documented_shape() {
+    let mut request = fata_morgana_request();
+    request.elevation_count = 41;
+    let report = trace_report(&FATA_MORGANA, &request).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&report.to_json().unwrap()).unwrap();
+    for key in [
+        "observer_height_m",
+        "tolerance_m",
+        "wavelength_nm",
+        "distances_m",
+        "rays",
+        "images",
+    ] {
+        assert!(json.get(key).is_some(), "missing {key}");
+    }
+    let ray = &json["rays"][0];
+    for key in [
+        "elevation_deg",
+        "termination",
+        "heights_m",
+        "end_distance_m",
+        "refraction_deg",
+        "steps",
+        "invariant_drift",
+    ] {
+        assert!(ray.get(key).is_some(), "missing rays[].{key}");
+    }
+    assert_eq!(ray["termination"], "ground");
+    assert!(ray["heights_m"][0].is_null());
+    for key in ["distance_m", "height_m", "elevation_deg", "erect"] {
+        assert!(
+            json["images"][0].get(key).is_some(),
+            "missing images[].{key}"
+        );
+    }
+    let csv = String::from_utf8(report.rays_csv().unwrap()).unwrap();
+    assert_eq!(csv.lines().count(), 42);
+    assert!(csv.lines().next().unwrap().ends_with("height_m_at_20000"));
+}
+
+#[test]
+fn fan_is_bit_identical_for_any_thread_count() {
+    let request = fata_morgana_request();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| trace_report(&FATA_MORGANA, &request).unwrap())
+    };
+    let one = run(1);
+    let three = run(3);
+    assert_eq!(one.to_json().unwrap(), three.to_json().unwrap());
+    for (a, b) in one.rays.iter().zip(&three.rays) {
+        for (x, y) in a.heights_m.iter().zip(&b.heights_m) {
+            assert_eq!(x.map(f64::to_bits), y.map(f64::to_bits));
+        }
+    }
+}
+
+#[test]
+fn plot_png_is_drawn() {
+    let mut request = fata_morgana_request();
+    request.elevation_count = 81;
+    request.distances_m = vec![10_000.0, 20_000.0];
+    let report = trace_report(&FATA_MORGANA, &request).unwrap();
+    let png = trace_plot_png(&FATA_MORGANA, &request, &report).unwrap();
+    let img = image::load_from_memory(&png).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (1600, 700));
+    // Not blank: plenty of coloured (non-grey) pixels from the rays and curves.
+    let coloured = img
+        .pixels()
+        .filter(|p| p[0].abs_diff(p[1]) > 40 || p[1].abs_diff(p[2]) > 40)
+        .count();
+    assert!(coloured > 2_000, "{coloured}");
+    if let Ok(dir) = std::env::var("GHOSTSHIP_PLOT_DIR") {
+        std::fs::write(format!("{dir}/fata_morgana_trace.png"), &png).unwrap();
     }
 }
