@@ -92,6 +92,7 @@ pub(crate) struct Step<const N: usize> {
 impl<const N: usize> Step<N> {
     /// Take one Dormand–Prince step of length `h` from `y0`, whose derivative is `k1`.
     #[inline]
+    #[allow(clippy::needless_range_loop)]
     pub fn attempt(
         f: &mut impl FnMut(&[f64; N]) -> [f64; N],
         y0: &[f64; N],
@@ -147,6 +148,7 @@ impl<const N: usize> Step<N> {
     }
 
     /// The continuous extension of this step.
+    #[allow(clippy::needless_range_loop)] // one index walks eight parallel arrays
     pub fn dense(&self) -> Dense<N> {
         let mut c = [[0.0; N]; 5];
         for i in 0..N {

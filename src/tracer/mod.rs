@@ -197,6 +197,7 @@ fn check_distances(distances_m: &[f64]) -> Result<(), TracerError> {
 /// measured from the observer's ground point. The record's `elevation_rad` is the launch
 /// direction's elevation above the local horizontal; `config.earth_radius_m` is ignored (the
 /// ground says).
+#[allow(clippy::too_many_arguments)] // field, geometry, settings, ray, targets, hook, path: all distinct
 pub fn trace_field<F: IndexField + ?Sized>(
     field: &F,
     ground: Ground,

@@ -133,7 +133,7 @@ impl TracerConfig {
                 });
             }
         }
-        if !(self.max_length_m > 0.0) || self.max_length_m.is_nan() {
+        if self.max_length_m.is_nan() || self.max_length_m <= 0.0 {
             return Err(TracerError::InvalidConfig {
                 name: "max_length_m",
                 value: self.max_length_m,
@@ -513,7 +513,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         } else {
             f64::INFINITY
         };
-        if !(err <= 1.0) {
+        if err.is_nan() || err > 1.0 {
             rec.rejected_steps += 1;
             let shrunk = controller.reject(h, err);
             if !err.is_finite() && shrunk < cfg.min_step_m {

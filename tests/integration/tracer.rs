@@ -87,7 +87,7 @@ fn constant_index_gives_straight_lines() {
         let alpha = alpha_deg.to_radians();
         let curved = tracer.trace(10.0, alpha, &distances).unwrap();
         let straight = straight_ray(10.0, alpha, R, 40_000.0, &distances).unwrap();
-        assert_eq!(curved.termination.is_some(), true);
+        assert!(curved.termination.is_some());
         for (a, b) in curved.heights_m.iter().zip(&straight.heights_m) {
             match (a, b) {
                 (Some(a), Some(b)) => assert!((a - b).abs() < 1e-4, "α {alpha_deg}: {a} vs {b}"),
