@@ -67,7 +67,7 @@ impl Default for TracerConfig {
             earth_radius_m: crate::units::EARTH_RADIUS_M,
             top_m: 40_000.0,
             tolerance_m: 0.01,
-            direction_length_m: 10_000.0,
+            direction_length_m: 100_000.0,
             max_step_m: 2_000.0,
             min_step_m: 1e-7,
             initial_step_m: 1.0,

@@ -517,3 +517,195 @@ fn plot_png_is_drawn() {
         std::fs::write(format!("{dir}/fata_morgana_trace.png"), &png).unwrap();
     }
 }
+
+/// Piecewise-linear temperature over layers, hydrostatic pressure, n − 1 = 7.9012e-7·P/T.
+#[derive(Debug, Clone)]
+struct Layered {
+    /// (base height, base T, base P, lapse dT/dh) per layer, ascending.
+    layers: Vec<(f64, f64, f64, f64)>,
+}
+impl Layered {
+    fn new(t0: f64, spec: &[(f64, f64)]) -> Self {
+        let g_over_r = STANDARD_GRAVITY_M_S2 / DRY_AIR_GAS_CONSTANT_J_KG_K;
+        let (mut h, mut t, mut p) = (0.0, t0, 101_325.0);
+        let mut layers = Vec::new();
+        for &(thickness, lapse) in spec {
+            // Keep T physical: turn the gradient around rather than leave 150…350 K.
+            let mut lapse = lapse;
+            let t_top = t + lapse * thickness;
+            if !(150.0..=350.0).contains(&t_top) {
+                lapse = -lapse;
+            }
+            layers.push((h, t, p, lapse));
+            let (t1, p1) = Self::state(t, p, lapse, thickness, g_over_r);
+            h += thickness;
+            t = t1;
+            p = p1;
+        }
+        layers.push((h, t, p, -0.0065));
+        Layered { layers }
+    }
+    fn state(t: f64, p: f64, lapse: f64, dh: f64, g_over_r: f64) -> (f64, f64) {
+        if lapse.abs() < 1e-12 {
+            (t, p * (-g_over_r * dh / t).exp())
+        } else {
+            let t1 = t + lapse * dh;
+            (t1, p * (t1 / t).powf(-g_over_r / lapse))
+        }
+    }
+}
+impl StratifiedIndex for Layered {
+    fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+        let g_over_r = STANDARD_GRAVITY_M_S2 / DRY_AIR_GAS_CONSTANT_J_KG_K;
+        let i = self.layers.partition_point(|l| l.0 <= h).saturating_sub(1);
+        let (base, t0, p0, lapse) = self.layers[i];
+        // Clamp into the column's valid range (T stays > 0 far above the top).
+        let dh = (h - base).clamp(-1_000.0, 60_000.0);
+        let lapse = if t0 + lapse * dh < 100.0 { 0.0 } else { lapse };
+        let (t, p) = Self::state(t0, p0, lapse, dh, g_over_r);
+        let k = 7.9012e-7;
+        let dp = -p * g_over_r / t;
+        (1.0 + k * p / t, k * (dp / t - p * lapse / (t * t)))
+    }
+}
+
+#[test]
+fn elevated_duct_carries_a_ray_5000_km() {
+    // 30 m of +0.5 K/m (≈ 4× the critical gradient) 100 m above the sea: an elevated duct. A ray
+    // launched level in its middle turns down, crosses the inversion's base at ψ ≈ 3.8 mrad and
+    // turns up again ≈ 54 m lower in standard air (curvature 0.83/R relative to the ground), so it
+    // oscillates between ≈ 46 m and 115 m without touching the (absorbing) sea.
+    let field = Layered::new(263.15, &[(100.0, -0.0065), (30.0, 0.5)]);
+    let distances: Vec<f64> = (1..=50).map(|k| k as f64 * 100_000.0).collect();
+    for tolerance_m in [0.01, 1e-6] {
+        let cfg = TracerConfig {
+            tolerance_m,
+            max_distance_m: Some(5_000_000.0),
+            stop_after_last_target: false,
+            ..TracerConfig::default()
+        };
+        let tracer = Tracer::new(&field, cfg).unwrap();
+        let rec = tracer.trace(115.0, 0.0, &distances).unwrap();
+        eprintln!(
+            "5000 km duct, tolerance {tolerance_m} m: {} steps ({} rejected), invariant drift {:.2e}",
+            rec.steps(),
+            rec.rejected_steps,
+            rec.invariant_drift
+        );
+        assert_eq!(rec.termination, Some(Termination::MaxDistance), "{rec:?}");
+        assert!((rec.end.distance_m - 5_000_000.0).abs() < 1e-3);
+        for h in &rec.heights_m {
+            let h = h.unwrap();
+            assert!(h > 30.0 && h < 116.0, "left the duct: {h}");
+        }
+        if tolerance_m < 1e-5 {
+            // Bouguer's invariant holds over 5 000 km (and 23 kinks of dn/dh per 1 000 km).
+            assert!(rec.invariant_drift < 1e-8, "drift {}", rec.invariant_drift);
+        }
+    }
+}
+
+mod stress {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn profile() -> impl Strategy<Value = Vec<(f64, f64)>> {
+        // Layers 0.1 m … 1 km thick with gradients up to ±50 K/m (less where that would exceed
+        // ±40 K across the layer).
+        prop::collection::vec(
+            (-1.0f64..3.0, -1.0f64..1.0).prop_map(|(log_thickness, g)| {
+                let thickness = 10f64.powf(log_thickness);
+                let max_gradient = (40.0 / thickness).min(50.0);
+                (thickness, g * max_gradient)
+            }),
+            1..12,
+        )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+        #[test]
+        fn every_ray_terminates_with_a_reason(
+            spec in profile(),
+            t0 in 230.0f64..300.0,
+            log_tol in -6.0f64..1.0,
+            layer_pick in 0usize..12,
+            tilt in -1e-3f64..1e-3,
+        ) {
+            let field = Layered::new(t0, &spec);
+            let tolerance_m = 10f64.powf(log_tol);
+            let cfg = TracerConfig {
+                tolerance_m,
+                max_steps: 50_000,
+                max_distance_m: Some(5_000_000.0),
+                stop_after_last_target: false,
+                ..TracerConfig::default()
+            };
+            let tracer = Tracer::new(&field, cfg).unwrap();
+            // Observer on a layer boundary: the α = 0 ray is tangent to that layer.
+            let boundary = field.layers[layer_pick % field.layers.len()].0;
+            let h0 = boundary.clamp(0.0, 2_000.0);
+            let distances = [1_000.0, 30_000.0, 1_000_000.0];
+            for alpha in [0.0, tilt, -tilt.abs() * 0.01, 0.5f64.to_radians(), -0.2f64.to_radians()] {
+                let rec = tracer.trace(h0, alpha, &distances).unwrap();
+                let t = rec.termination.expect("terminated");
+                prop_assert!(rec.steps() <= 50_000);
+                prop_assert!(rec.end.height_m.is_finite() && rec.end.distance_m.is_finite());
+                prop_assert!(rec.end.elevation_rad.is_finite() && rec.end_observer_elevation_rad.is_finite());
+                prop_assert!(rec.invariant_drift.is_finite());
+                for h in rec.heights_m.iter().flatten() {
+                    prop_assert!(h.is_finite());
+                }
+                if let Some(r) = rec.refraction_rad {
+                    prop_assert!(r.is_finite());
+                    prop_assert_eq!(t, Termination::Escaped);
+                }
+                prop_assert!(rec.end.height_m >= -1e-6, "{t}: {}", rec.end.height_m);
+            }
+        }
+    }
+}
+
+#[test]
+fn homogeneous_air_gives_one_geometric_image_and_the_geometric_dip() {
+    let field = Constant(1.000_3);
+    let (h0, d, big_h) = (2.0, 2_000.0, 10.0);
+    let request = TraceRequest {
+        observer_height_m: h0,
+        elevation_min_deg: -0.2,
+        elevation_max_deg: 0.5,
+        elevation_count: 201,
+        distances_m: vec![d],
+        target_heights_m: vec![big_h],
+        ..TraceRequest::default()
+    };
+    let report = trace_report(&field, &request).unwrap();
+    assert_eq!(report.images.len(), 1, "{:#?}", report.images);
+    let image = &report.images[0];
+    assert!(image.erect);
+    // Exact elevation of the point (D, h) seen from the observer, straight lines over a sphere.
+    let seen = |h: f64| {
+        let theta = d / R;
+        let x = (R + h) * theta.sin();
+        let y = (R + h) * theta.cos() - (R + h0);
+        y.atan2(x).to_degrees()
+    };
+    assert!(
+        (image.elevation_min_deg - seen(0.0)).abs() < 1e-8,
+        "{image:?}"
+    );
+    assert!(
+        (image.elevation_max_deg - seen(big_h)).abs() < 1e-8,
+        "{image:?}"
+    );
+    assert!((image.magnification - 1.0).abs() < 0.01, "{image:?}");
+    // Sea horizon: the geometric dip 1.926′·√2 = 2.724′.
+    let sea = report.horizons.last().unwrap();
+    assert!(sea.distance_m.is_none());
+    let dip_arcmin = -sea.elevation_deg.unwrap() * 60.0;
+    assert!(
+        (dip_arcmin - 1.926 * 2f64.sqrt()).abs() < 0.002,
+        "{dip_arcmin}"
+    );
+    assert!(report.trapped_elevations_deg.is_empty());
+}
