@@ -32,7 +32,14 @@ fn trace_fan(tracer: &Tracer<'_, SharpInversion>, fan: &[f64], record: &mut RayR
     let mut steps = 0u64;
     for &a in fan {
         tracer
-            .trace_into(5.0, a, &[10_000.0, 20_000.0, 30_000.0], &mut NoHook, record, None)
+            .trace_into(
+                5.0,
+                a,
+                &[10_000.0, 20_000.0, 30_000.0],
+                &mut NoHook,
+                record,
+                None,
+            )
             .expect("valid ray");
         steps += record.steps() as u64;
     }
@@ -55,9 +62,11 @@ fn bench_tolerance(c: &mut Criterion) {
             "tolerance {tolerance_m} m: {:.1} steps per ray",
             steps as f64 / RAYS as f64
         );
-        group.bench_with_input(BenchmarkId::new("tolerance_m", tolerance_m), &tolerance_m, |b, _| {
-            b.iter(|| black_box(trace_fan(&tracer, black_box(&fan), &mut record)))
-        });
+        group.bench_with_input(
+            BenchmarkId::new("tolerance_m", tolerance_m),
+            &tolerance_m,
+            |b, _| b.iter(|| black_box(trace_fan(&tracer, black_box(&fan), &mut record))),
+        );
     }
     group.finish();
 }

@@ -236,9 +236,28 @@ pub fn trace_report(
     horizon_targets.push(None);
     let horizons = horizon_targets
         .par_iter()
-        .map(|&d| Horizon {
-            distance_m: d,
-            elevation_deg: apparent_horizon(&probe_tracer, h0, &elevations, d).map(f64::to_degrees),
+        .map(|&d| {
+            // From the fan: a ray is clear of the ground before D if it has a height there; clear
+            // of it altogether if it did not end on the ground (out to the trap distance).
+            let clear: Vec<bool> = records
+                .iter()
+                .map(|r| match d {
+                    Some(_) => {
+                        let j = request
+                            .distances_m
+                            .iter()
+                            .position(|&x| Some(x) == d)
+                            .unwrap_or(0);
+                        r.heights_m[j].is_some()
+                    }
+                    None => r.termination != Some(Termination::Ground),
+                })
+                .collect();
+            Horizon {
+                distance_m: d,
+                elevation_deg: apparent_horizon(&probe_tracer, h0, &elevations, &clear, d)
+                    .map(f64::to_degrees),
+            }
         })
         .collect();
     let trapped_elevations_deg = rays

@@ -286,27 +286,82 @@ pub fn find_images<S: StratifiedIndex + ?Sized>(
 }
 
 /// The lowest apparent elevation whose ray is not stopped by the ground before ground distance
-/// `distance_m` (`None`: the ray must escape or be trapped, the sea horizon). Searched on the
-/// fan `elevations_rad` (ascending) and refined by bisection; `None` if every fan ray qualifies
-/// (the horizon is below the fan) or none does.
+/// `distance_m` (`None`: before it ends at all — the sea horizon). `clear[i]` says whether the
+/// fan ray `elevations_rad[i]` (ascending) qualifies; the lowest qualifying fan ray and the one
+/// below it bracket the horizon, which is refined by bisection on fresh traces. `None` if the
+/// lowest fan ray already qualifies (the horizon is below the fan) or none does.
 pub fn apparent_horizon<S: StratifiedIndex + ?Sized>(
     tracer: &Tracer<'_, S>,
     observer_height_m: f64,
     elevations_rad: &[f64],
+    clear: &[bool],
     distance_m: Option<f64>,
 ) -> Option<f64> {
     let targets: Vec<f64> = distance_m.into_iter().collect();
-    let clear = |alpha: f64| match tracer.trace(observer_height_m, alpha, &targets) {
+    let is_clear = |alpha: f64| match tracer.trace(observer_height_m, alpha, &targets) {
         Ok(r) => match distance_m {
             Some(_) => r.heights_m[0].is_some(),
             None => r.termination != Some(Termination::Ground),
         },
         Err(_) => false,
     };
-    let first = elevations_rad.iter().position(|&a| clear(a))?;
-    if first == 0 {
+    let first = clear.iter().position(|&c| c)?;
+    if first == 0 || first >= elevations_rad.len() {
         return None;
     }
-    let (_, hi) = bisect(elevations_rad[first - 1], elevations_rad[first], clear);
+    let (_, hi) = bisect(elevations_rad[first - 1], elevations_rad[first], is_clear);
     Some(hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bisect_brackets_the_switch() {
+        let (lo, hi) = bisect(0.0, 1.0, |x| x >= 0.3);
+        assert!(lo < 0.3 && hi >= 0.3 && hi - lo < 1e-10);
+    }
+
+    #[test]
+    fn golden_finds_maximum_and_minimum() {
+        let (x, v) = golden(0.0, 2.0, true, |x| -(x - 1.2) * (x - 1.2) + 3.0);
+        assert!((x - 1.2).abs() < 1e-5 && (v - 3.0).abs() < 1e-9);
+        let (x, _) = golden(0.0, 2.0, false, |x| (x - 0.4) * (x - 0.4));
+        assert!((x - 0.4).abs() < 1e-5);
+    }
+
+    #[test]
+    fn reach_values_order_ground_below_and_escape_above() {
+        assert_eq!(Reach::GroundBefore.value(), f64::NEG_INFINITY);
+        assert_eq!(Reach::EscapedBefore.value(), f64::INFINITY);
+        assert!(Reach::Unknown.value().is_nan());
+        assert_eq!(Reach::Height(3.5).value(), 3.5);
+    }
+
+    struct Homogeneous;
+    impl StratifiedIndex for Homogeneous {
+        fn index_and_derivative(&self, _h: f64) -> (f64, f64) {
+            (1.0, 0.0)
+        }
+    }
+
+    #[test]
+    fn straight_rays_see_one_erect_image_with_unit_magnification() {
+        let tracer = Tracer::new(&Homogeneous, crate::tracer::TracerConfig::default()).unwrap();
+        let elevations: Vec<f64> = (0..51)
+            .map(|i| (-0.2 + 0.02 * i as f64).to_radians())
+            .collect();
+        let records = tracer.trace_fan(3.0, &elevations, &[1_000.0]).unwrap();
+        let curve = TransferCurve {
+            distance_m: 1_000.0,
+            elevations_rad: elevations,
+            reach: records.iter().map(|r| Reach::from_record(r, 0)).collect(),
+        };
+        let images = find_images(&tracer, 3.0, &curve, 5.0);
+        assert_eq!(images.len(), 1);
+        assert!(images[0].erect);
+        assert!((images[0].magnification - 1.0).abs() < 0.01);
+        assert!((images[0].height_at_max_m - 5.0).abs() < 1e-6);
+    }
 }

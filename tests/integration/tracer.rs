@@ -709,3 +709,89 @@ fn homogeneous_air_gives_one_geometric_image_and_the_geometric_dip() {
     );
     assert!(report.trapped_elevations_deg.is_empty());
 }
+
+/// Ends the ray on a vertical wall at a ground distance (an object surface as an event function).
+struct Wall {
+    distance_m: f64,
+}
+impl ghostship::tracer::RayHook for Wall {
+    fn event(&self, p: &ghostship::tracer::RayPoint) -> Option<f64> {
+        Some(p.distance_m - self.distance_m)
+    }
+}
+
+#[test]
+fn hooks_end_rays_on_events_and_early_stops() {
+    use ghostship::tracer::{RayRecord, StopAboveClimbing};
+    let field = Constant(1.0);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    let mut record = RayRecord::default();
+    let alpha = 0.1_f64.to_radians();
+    tracer
+        .trace_into(
+            5.0,
+            alpha,
+            &[],
+            &mut Wall {
+                distance_m: 7_000.0,
+            },
+            &mut record,
+            None,
+        )
+        .unwrap();
+    assert_eq!(record.termination, Some(Termination::Event));
+    let exact = straight_ray(5.0, alpha, R, 40_000.0, &[7_000.0])
+        .unwrap()
+        .heights_m[0]
+        .unwrap();
+    assert!((record.end.distance_m - 7_000.0).abs() < 1e-6);
+    assert!(
+        (record.end.height_m - exact).abs() < 1e-4,
+        "{} vs {exact}",
+        record.end.height_m
+    );
+    let mut path = Vec::new();
+    tracer
+        .trace_into(
+            5.0,
+            alpha,
+            &[],
+            &mut StopAboveClimbing { height_m: 50.0 },
+            &mut record,
+            Some(&mut path),
+        )
+        .unwrap();
+    assert_eq!(record.termination, Some(Termination::LeftRegion));
+    assert!(record.end.height_m > 50.0 && record.end.height_m < 50.0 + 2.0 + 0.05 * 50.0 + 1.0);
+    assert_eq!(path.last().unwrap().height_m, record.end.height_m);
+    assert!(path.windows(2).all(|w| w[1].distance_m > w[0].distance_m));
+}
+
+#[test]
+fn bad_input_is_a_typed_error() {
+    let field = Constant(1.0);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    assert!(tracer.trace(-1.0, 0.0, &[]).is_err());
+    assert!(tracer.trace(50_000.0, 0.0, &[]).is_err());
+    assert!(tracer.trace(1.0, f64::NAN, &[]).is_err());
+    assert!(tracer.trace(1.0, 0.0, &[2.0, 1.0]).is_err());
+    assert!(Tracer::new(&field, config(-1.0)).is_err());
+    // A field that turns NaN above 20 m: the ray stops with NonFinite, no NaN in the record.
+    struct Broken;
+    impl StratifiedIndex for Broken {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            if h > 20.0 {
+                (f64::NAN, f64::NAN)
+            } else {
+                (1.0003, -2e-8)
+            }
+        }
+    }
+    let tracer = Tracer::new(&Broken, config(0.01)).unwrap();
+    let rec = tracer
+        .trace(10.0, 1.0_f64.to_radians(), &[100_000.0])
+        .unwrap();
+    assert_eq!(rec.termination, Some(Termination::NonFinite));
+    assert!(rec.end.height_m.is_finite() && rec.end.height_m <= 20.0 + 1e-9);
+    assert!(rec.heights_m[0].is_none());
+}
