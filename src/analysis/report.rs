@@ -255,8 +255,12 @@ pub fn trace_report(
                 .collect();
             Horizon {
                 distance_m: d,
-                elevation_deg: apparent_horizon(&probe_tracer, h0, &elevations, &clear, d)
-                    .map(f64::to_degrees),
+                // The sea horizon is refined with the fan's own settings (out to the trap distance).
+                elevation_deg: match d {
+                    Some(_) => apparent_horizon(&probe_tracer, h0, &elevations, &clear, d),
+                    None => apparent_horizon(&fan_tracer, h0, &elevations, &clear, d),
+                }
+                .map(f64::to_degrees),
             }
         })
         .collect();
