@@ -83,6 +83,7 @@ fn constant_index_gives_straight_lines() {
     let field = Constant(1.000_3);
     let tracer = Tracer::new(&field, config(0.01)).unwrap();
     let distances: Vec<f64> = (1..=30).map(|k| k as f64 * 1_000.0).collect();
+    let mut worst: f64 = 0.0;
     for &alpha_deg in &[-0.1_f64, -0.05, 0.0, 0.02, 0.1, 0.5, 2.0] {
         let alpha = alpha_deg.to_radians();
         let curved = tracer.trace(10.0, alpha, &distances).unwrap();
@@ -90,7 +91,10 @@ fn constant_index_gives_straight_lines() {
         assert!(curved.termination.is_some());
         for (a, b) in curved.heights_m.iter().zip(&straight.heights_m) {
             match (a, b) {
-                (Some(a), Some(b)) => assert!((a - b).abs() < 1e-4, "α {alpha_deg}: {a} vs {b}"),
+                (Some(a), Some(b)) => {
+                    worst = worst.max((a - b).abs());
+                    assert!((a - b).abs() < 1e-4, "α {alpha_deg}: {a} vs {b}")
+                }
                 (None, None) => {}
                 _ => panic!("α {alpha_deg}: curved {a:?} vs straight {b:?}"),
             }
@@ -100,6 +104,7 @@ fn constant_index_gives_straight_lines() {
             assert!((curved.end.distance_m - straight.end.distance_m).abs() < 0.05);
         }
     }
+    eprintln!("constant n: worst height error against straight lines {worst:.2e} m");
 }
 
 /// Lowest elevation whose ray does not reach the ground (bisection on the tracer).
@@ -236,8 +241,9 @@ fn us1976_astronomical_refraction_matches_palrefro() {
         assert_eq!(rec.termination, Some(Termination::Escaped), "ZD {zd}");
         let got = rec.refraction_rad.unwrap() * ARCMIN_PER_RAD;
         eprintln!(
-            "ZD {zd}: {got:.4}′ (palRefro {expected}′), steps {}",
-            rec.steps()
+            "ZD {zd}: {got:.4}′ (palRefro {expected}′), steps {}, invariant drift {:.1e}",
+            rec.steps(),
+            rec.invariant_drift
         );
         assert!(
             (got - expected).abs() < tol,
@@ -299,6 +305,7 @@ fn planar_and_3d_paths_agree() {
     let up = DVec3::new(0.3, -0.5, 0.8).normalize();
     let east = up.cross(DVec3::Z).normalize();
     let h0 = 15.0;
+    let mut worst: f64 = 0.0;
     for alpha_deg in [-0.05_f64, 0.0, 0.1, 1.0, 10.0] {
         let alpha = alpha_deg.to_radians();
         let planar = tracer.trace(h0, alpha, &distances).unwrap();
@@ -317,13 +324,17 @@ fn planar_and_3d_paths_agree() {
         assert_eq!(planar.termination, full.termination, "α {alpha_deg}");
         for (a, b) in planar.heights_m.iter().zip(&full.heights_m) {
             match (a, b) {
-                (Some(a), Some(b)) => assert!((a - b).abs() < 0.01, "α {alpha_deg}: {a} vs {b}"),
+                (Some(a), Some(b)) => {
+                    worst = worst.max((a - b).abs());
+                    assert!((a - b).abs() < 0.01, "α {alpha_deg}: {a} vs {b}")
+                }
                 (None, None) => {}
                 _ => panic!("α {alpha_deg}: {a:?} vs {b:?}"),
             }
         }
         assert!((planar.end.distance_m - full.end.distance_m).abs() < 1.0);
     }
+    eprintln!("3-D vs planar: worst height difference {worst:.2e} m (tolerance 0.01 m)");
 }
 
 #[test]
@@ -794,4 +805,26 @@ fn bad_input_is_a_typed_error() {
     assert_eq!(rec.termination, Some(Termination::NonFinite));
     assert!(rec.end.height_m.is_finite() && rec.end.height_m <= 20.0 + 1e-9);
     assert!(rec.heights_m[0].is_none());
+}
+
+#[test]
+fn us1976_dip_matches_the_refraction_coefficient() {
+    let field = Us1976Field::new(0.55);
+    let tracer = Tracer::new(&field, config(0.001)).unwrap();
+    let h0 = 10.0;
+    let dip = -sea_horizon_rad(&tracer, h0);
+    // Near the ground the ray is a circle of curvature k/R, k = −R·(dn/dh)/n: then the dip is
+    // √(2h(1 − k)/R) (references.md §2.2).
+    let (n, dn) = field.index_and_derivative(h0 / 2.0);
+    let k = -R * dn / n;
+    let expected = (2.0 * h0 * (1.0 - k) / R).sqrt();
+    eprintln!(
+        "US1976 dip at 10 m: {:.4}′ (circle with k = {k:.4}: {:.4}′; Nautical Almanac 1.76′√h = {:.3}′)",
+        dip * ARCMIN_PER_RAD,
+        expected * ARCMIN_PER_RAD,
+        1.76 * h0.sqrt()
+    );
+    assert!((k - 0.170).abs() < 0.005, "k {k}");
+    assert!(((dip - expected) * ARCMIN_PER_RAD).abs() < 0.005);
+    assert!((dip * ARCMIN_PER_RAD - 1.76 * h0.sqrt()).abs() < 0.05);
 }
