@@ -105,7 +105,8 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
 /// The ground under a 3-D field.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Ground {
-    /// A sphere of this radius (m) centred at the origin; the observer's ground point is on +z.
+    /// A sphere of this radius (m) centred at the origin; height = |r| − R, ground distance =
+    /// R × the angle between r and the observer's position.
     Sphere {
         /// Radius (m).
         radius_m: f64,
