@@ -2,8 +2,31 @@
 //! [`StratifiedIndex`] for horizontally layered air over a sphere) and rays (origin, direction).
 //! Out: ray paths and a typed termination for every ray. One tracer serves every scene, the
 //! transfer-curve analysis and the renderer.
+//!
+//! * [`Tracer`] — the fast path for stratified air: a ray launched at apparent elevation α from
+//!   an observer at height h₀ stays in its vertical plane; Dormand–Prince 5(4) in arc length with
+//!   dense-output event location ([`RayRecord`], [`Termination`]).
+//! * [`trace_field`] — the same integrator for any 3-D [`IndexField`] over a sphere or a flat
+//!   Earth; [`Spherical`] turns a stratified index into a 3-D field (∇n = dn/dh · r̂) so the two
+//!   paths can be checked against each other.
+//! * [`straight_ray`] — exact straight-line geometry (n ≡ 1), the paper's Figure 1.
 
-use glam::DVec3;
+mod dopri;
+mod ray;
+mod straight;
+mod system;
+
+use glam::{DVec3, DVec4};
+use rayon::prelude::*;
+
+pub use ray::{
+    HookAction, NoHook, RayHook, RayPoint, RayRecord, StopAboveClimbing, Termination, TracerConfig,
+    TracerError,
+};
+pub use straight::straight_ray;
+pub use system::Ground;
+
+use system::{FieldSystem, PlanarSystem};
 
 /// A refractive-index field in 3-D: n and ∇n at a point (Earth-centred coordinates, metres).
 pub trait IndexField: Send + Sync {
@@ -16,4 +39,213 @@ pub trait IndexField: Send + Sync {
 pub trait StratifiedIndex: Send + Sync {
     /// n and dn/dh (m⁻¹) at height `height_m` above the surface.
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64);
+}
+
+impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
+    fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        (**self).index_and_derivative(height_m)
+    }
+}
+
+/// A stratified index seen as a 3-D field about Earth's centre: ∇n = dn/dh · r̂.
+#[derive(Debug, Clone, Copy)]
+pub struct Spherical<S> {
+    /// The stratified index.
+    pub index: S,
+    /// Earth radius (m): h = |r| − R.
+    pub earth_radius_m: f64,
+}
+
+impl<S: StratifiedIndex> IndexField for Spherical<S> {
+    fn index_and_gradient(&self, position_m: DVec3) -> (f64, DVec3) {
+        let r = position_m.length();
+        let (n, dn) = self.index.index_and_derivative(r - self.earth_radius_m);
+        (n, position_m * (dn / r))
+    }
+}
+
+/// The ray tracer for a stratified atmosphere (planar fast path). Cheap to build and `Sync`:
+/// share one across threads. Per-ray scratch lives on the stack; [`Tracer::trace_into`] reuses
+/// the caller's record and path buffers so a tight loop allocates nothing.
+#[derive(Clone)]
+pub struct Tracer<'a, S: StratifiedIndex + ?Sized> {
+    field: &'a S,
+    config: TracerConfig,
+}
+
+impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
+    /// A tracer through `field` with `config` (validated).
+    pub fn new(field: &'a S, config: TracerConfig) -> Result<Self, TracerError> {
+        config.validate()?;
+        Ok(Tracer { field, config })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TracerConfig {
+        &self.config
+    }
+
+    /// The field.
+    pub fn field(&self) -> &'a S {
+        self.field
+    }
+
+    fn check(
+        &self,
+        observer_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+    ) -> Result<(), TracerError> {
+        if !(observer_height_m >= 0.0 && observer_height_m < self.config.top_m) {
+            return Err(TracerError::ObserverOutside {
+                height_m: observer_height_m,
+                top_m: self.config.top_m,
+            });
+        }
+        if !elevation_rad.is_finite() {
+            return Err(TracerError::BadDirection);
+        }
+        check_distances(distances_m)
+    }
+
+    /// Trace one ray launched at `elevation_rad` above the horizontal from `observer_height_m`,
+    /// reporting its height at each of `distances_m` (ascending ground distances).
+    pub fn trace(
+        &self,
+        observer_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+    ) -> Result<RayRecord, TracerError> {
+        let mut record = RayRecord::default();
+        self.trace_into(
+            observer_height_m,
+            elevation_rad,
+            distances_m,
+            &mut NoHook,
+            &mut record,
+            None,
+        )?;
+        Ok(record)
+    }
+
+    /// Trace one ray into `record` (its buffers are reused), with a `hook`, optionally recording
+    /// the path into `path` (cleared first).
+    pub fn trace_into<H: RayHook + ?Sized>(
+        &self,
+        observer_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        hook: &mut H,
+        record: &mut RayRecord,
+        path: Option<&mut Vec<RayPoint>>,
+    ) -> Result<(), TracerError> {
+        self.check(observer_height_m, elevation_rad, distances_m)?;
+        let sys = PlanarSystem {
+            field: self.field,
+            radius_m: self.config.earth_radius_m,
+        };
+        let (n0, _) = self.field.index_and_derivative(observer_height_m);
+        let (sin_a, cos_a) = elevation_rad.sin_cos();
+        let state = DVec4::new(
+            0.0,
+            self.config.earth_radius_m + observer_height_m,
+            n0 * cos_a,
+            n0 * sin_a,
+        );
+        ray::integrate(
+            &sys,
+            state.to_array(),
+            elevation_rad,
+            &self.config,
+            distances_m,
+            hook,
+            record,
+            path,
+        );
+        Ok(())
+    }
+
+    /// Trace a fan of elevations in parallel (rayon). Each ray depends only on its own inputs, so
+    /// the result is bit-identical for any thread count.
+    pub fn trace_fan(
+        &self,
+        observer_height_m: f64,
+        elevations_rad: &[f64],
+        distances_m: &[f64],
+    ) -> Result<Vec<RayRecord>, TracerError> {
+        for &e in elevations_rad {
+            self.check(observer_height_m, e, distances_m)?;
+        }
+        elevations_rad
+            .par_iter()
+            .map(|&e| self.trace(observer_height_m, e, distances_m))
+            .collect()
+    }
+}
+
+fn check_distances(distances_m: &[f64]) -> Result<(), TracerError> {
+    if distances_m.iter().any(|d| !(d.is_finite() && *d >= 0.0))
+        || distances_m.windows(2).any(|w| w[1] < w[0])
+    {
+        return Err(TracerError::BadDistances);
+    }
+    Ok(())
+}
+
+/// Trace one ray through any 3-D field (the general path). `origin_m` is the observer
+/// (Earth-centred for [`Ground::Sphere`], above z = 0 for [`Ground::Flat`]); ground distances are
+/// measured from the observer's ground point. The record's `elevation_rad` is the launch
+/// direction's elevation above the local horizontal; `config.earth_radius_m` is ignored (the
+/// ground says).
+#[allow(clippy::too_many_arguments)] // field, geometry, settings, ray, targets, hook, path: all distinct
+pub fn trace_field<F: IndexField + ?Sized>(
+    field: &F,
+    ground: Ground,
+    config: &TracerConfig,
+    origin_m: DVec3,
+    direction: DVec3,
+    distances_m: &[f64],
+    hook: &mut dyn RayHook,
+    path: Option<&mut Vec<RayPoint>>,
+) -> Result<RayRecord, TracerError> {
+    config.validate()?;
+    check_distances(distances_m)?;
+    let dir = direction.normalize_or_zero();
+    if !origin_m.is_finite() || dir == DVec3::ZERO || !dir.is_finite() {
+        return Err(TracerError::BadDirection);
+    }
+    let (up, height) = match ground {
+        Ground::Sphere { radius_m } => (origin_m.normalize(), origin_m.length() - radius_m),
+        Ground::Flat => (DVec3::Z, origin_m.z),
+    };
+    if !(height >= 0.0 && height < config.top_m) {
+        return Err(TracerError::ObserverOutside {
+            height_m: height,
+            top_m: config.top_m,
+        });
+    }
+    let sys = FieldSystem {
+        field,
+        ground,
+        start_direction: match ground {
+            Ground::Sphere { .. } => up,
+            Ground::Flat => DVec3::ZERO,
+        },
+    };
+    let (n0, _) = field.index_and_gradient(origin_m);
+    let t = dir * n0;
+    let elevation = dir.dot(up).clamp(-1.0, 1.0).asin();
+    let mut record = RayRecord::default();
+    let state = [origin_m.x, origin_m.y, origin_m.z, t.x, t.y, t.z];
+    ray::integrate(
+        &sys,
+        state,
+        elevation,
+        config,
+        distances_m,
+        hook,
+        &mut record,
+        path,
+    );
+    Ok(record)
 }

@@ -1,0 +1,346 @@
+//! Stage 5 (analysis), the `trace` command as a library function.
+//!
+//! In: a stratified atmosphere (`&dyn StratifiedIndex`) and a [`TraceRequest`] (observer, fan of
+//! elevations, target distances and heights, tracer settings). Out: a serialisable
+//! [`TraceReport`] — every ray of the fan with its heights at the distances, termination and
+//! refraction; every image of every target; the apparent horizons; the trapped rays — and its CSV
+//! forms. The CLI wiring and atmosphere loading live elsewhere.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::AnalysisError;
+use super::transfer::{Image, Reach, TransferCurve, apparent_horizon, find_images};
+use crate::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig};
+
+/// What to trace.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TraceRequest {
+    /// Observer height above the surface (m).
+    pub observer_height_m: f64,
+    /// Lowest apparent elevation of the fan (deg).
+    pub elevation_min_deg: f64,
+    /// Highest apparent elevation of the fan (deg).
+    pub elevation_max_deg: f64,
+    /// Number of rays in the fan (≥ 3), evenly spaced.
+    pub elevation_count: usize,
+    /// Ground distances at which heights are reported (m), ascending.
+    pub distances_m: Vec<f64>,
+    /// Heights of targets standing at every distance (m): images of [0, H] are searched.
+    pub target_heights_m: Vec<f64>,
+    /// Wavelength the atmosphere was built for (nm); recorded in the report.
+    pub wavelength_nm: f64,
+    /// Rays still inside the atmosphere, off the ground, at this ground distance are "trapped" (m).
+    pub trap_distance_m: f64,
+    /// Tracer settings (tolerance, Earth radius, top, ...).
+    pub tracer: TracerConfig,
+}
+
+impl Default for TraceRequest {
+    fn default() -> Self {
+        TraceRequest {
+            observer_height_m: 10.0,
+            elevation_min_deg: -0.5,
+            elevation_max_deg: 0.5,
+            elevation_count: 1001,
+            distances_m: vec![10_000.0, 20_000.0, 30_000.0],
+            target_heights_m: vec![20.0],
+            wavelength_nm: 550.0,
+            trap_distance_m: 1_000_000.0,
+            tracer: TracerConfig::default(),
+        }
+    }
+}
+
+impl TraceRequest {
+    /// The fan's apparent elevations (rad), ascending.
+    pub fn elevations_rad(&self) -> Vec<f64> {
+        let n = self.elevation_count.max(2);
+        let (lo, hi) = (self.elevation_min_deg, self.elevation_max_deg);
+        (0..n)
+            .map(|i| (lo + (hi - lo) * i as f64 / (n - 1) as f64).to_radians())
+            .collect()
+    }
+
+    /// Check the request.
+    pub fn validate(&self) -> Result<(), AnalysisError> {
+        let bad = |m: &str| Err(AnalysisError::InvalidRequest(m.to_string()));
+        if self.elevation_count < 3 {
+            return bad("elevation_count must be at least 3");
+        }
+        if !(self.elevation_min_deg.is_finite()
+            && self.elevation_max_deg.is_finite()
+            && self.elevation_min_deg < self.elevation_max_deg
+            && self.elevation_min_deg > -90.0
+            && self.elevation_max_deg < 90.0)
+        {
+            return bad("need -90 < elevation_min_deg < elevation_max_deg < 90");
+        }
+        if self
+            .distances_m
+            .iter()
+            .any(|d| !(d.is_finite() && *d > 0.0))
+            || self.distances_m.windows(2).any(|w| w[1] <= w[0])
+        {
+            return bad("distances_m must be finite, > 0 and strictly ascending");
+        }
+        if self
+            .target_heights_m
+            .iter()
+            .any(|h| !(h.is_finite() && *h > 0.0))
+        {
+            return bad("target_heights_m must be finite and > 0");
+        }
+        if !(self.trap_distance_m.is_finite()
+            && self.trap_distance_m >= self.distances_m.last().copied().unwrap_or(0.0))
+        {
+            return bad("trap_distance_m must be finite and at least the largest distance");
+        }
+        self.tracer.validate()?;
+        Ok(())
+    }
+}
+
+/// One ray of the fan, as reported.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RayReport {
+    /// Apparent elevation (deg).
+    pub elevation_deg: f64,
+    /// Why the ray stopped (traced out to the trap distance).
+    pub termination: Termination,
+    /// Height at each requested distance (m), null where the ray ended before it.
+    pub heights_m: Vec<Option<f64>>,
+    /// Ground distance where the ray ended (m).
+    pub end_distance_m: f64,
+    /// Height where the ray ended (m).
+    pub end_height_m: f64,
+    /// Elevation of the final direction relative to the observer's horizontal (deg).
+    pub end_elevation_deg: f64,
+    /// Astronomical refraction of an escaped ray (deg), else null.
+    pub refraction_deg: Option<f64>,
+    /// Steps taken (accepted + rejected).
+    pub steps: u32,
+    /// Rejected steps among them.
+    pub rejected_steps: u32,
+    /// Largest relative drift of Bouguer's invariant along the ray.
+    pub invariant_drift: f64,
+    /// Neither escaped nor hit the ground within the trap distance.
+    pub trapped: bool,
+}
+
+impl RayReport {
+    fn from_record(r: &RayRecord, distances: usize) -> RayReport {
+        let termination = r.termination.unwrap_or(Termination::NonFinite);
+        RayReport {
+            elevation_deg: r.elevation_rad.to_degrees(),
+            termination,
+            heights_m: r.heights_m.iter().take(distances).copied().collect(),
+            end_distance_m: r.end.distance_m,
+            end_height_m: r.end.height_m,
+            end_elevation_deg: r.end_observer_elevation_rad.to_degrees(),
+            refraction_deg: r.refraction_rad.map(f64::to_degrees),
+            steps: r.steps(),
+            rejected_steps: r.rejected_steps,
+            invariant_drift: r.invariant_drift,
+            trapped: termination == Termination::MaxDistance,
+        }
+    }
+}
+
+/// The apparent horizon for one distance.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Horizon {
+    /// Ground distance (m); null for the sea horizon (rays that never meet the ground).
+    pub distance_m: Option<f64>,
+    /// Lowest apparent elevation whose ray is not stopped by the ground before the distance
+    /// (deg); null when it lies below the fan or no ray of the fan qualifies.
+    pub elevation_deg: Option<f64>,
+}
+
+/// The `trace` command's result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TraceReport {
+    /// Observer height (m).
+    pub observer_height_m: f64,
+    /// Tracer tolerance (m).
+    pub tolerance_m: f64,
+    /// Wavelength (nm).
+    pub wavelength_nm: f64,
+    /// Earth radius (m).
+    pub earth_radius_m: f64,
+    /// Top of the atmosphere (m).
+    pub top_m: f64,
+    /// Distance beyond which rays still in the air count as trapped (m).
+    pub trap_distance_m: f64,
+    /// Requested distances (m).
+    pub distances_m: Vec<f64>,
+    /// Target heights (m).
+    pub target_heights_m: Vec<f64>,
+    /// The fan.
+    pub rays: Vec<RayReport>,
+    /// Every image of every target, by distance, height and elevation.
+    pub images: Vec<Image>,
+    /// Apparent horizon at each distance, then the sea horizon.
+    pub horizons: Vec<Horizon>,
+    /// Elevations (deg) of the fan rays that are trapped.
+    pub trapped_elevations_deg: Vec<f64>,
+}
+
+/// Trace the request's fan through `atmosphere` and analyse it.
+pub fn trace_report(
+    atmosphere: &dyn StratifiedIndex,
+    request: &TraceRequest,
+) -> Result<TraceReport, AnalysisError> {
+    request.validate()?;
+    let fan_cfg = TracerConfig {
+        stop_after_last_target: false,
+        max_distance_m: Some(request.trap_distance_m),
+        ..request.tracer.clone()
+    };
+    let probe_cfg = TracerConfig {
+        stop_after_last_target: true,
+        max_distance_m: None,
+        ..request.tracer.clone()
+    };
+    let fan_tracer = Tracer::new(atmosphere, fan_cfg)?;
+    let probe_tracer = Tracer::new(atmosphere, probe_cfg)?;
+    let h0 = request.observer_height_m;
+    let elevations = request.elevations_rad();
+    let records = fan_tracer.trace_fan(h0, &elevations, &request.distances_m)?;
+
+    let rays: Vec<RayReport> = records
+        .iter()
+        .map(|r| RayReport::from_record(r, request.distances_m.len()))
+        .collect();
+    // Images, one job per (distance, height), in parallel; the order is fixed by the job list.
+    let jobs: Vec<(usize, f64)> = (0..request.distances_m.len())
+        .flat_map(|j| request.target_heights_m.iter().map(move |&h| (j, h)))
+        .collect();
+    let images: Vec<Image> = jobs
+        .par_iter()
+        .map(|&(j, height)| {
+            let curve = TransferCurve {
+                distance_m: request.distances_m[j],
+                elevations_rad: elevations.clone(),
+                reach: records.iter().map(|r| Reach::from_record(r, j)).collect(),
+            };
+            find_images(&probe_tracer, h0, &curve, height)
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect();
+    let mut horizon_targets: Vec<Option<f64>> =
+        request.distances_m.iter().copied().map(Some).collect();
+    horizon_targets.push(None);
+    let horizons = horizon_targets
+        .par_iter()
+        .map(|&d| {
+            // From the fan: a ray is clear of the ground before D if it has a height there; clear
+            // of it altogether if it did not end on the ground (out to the trap distance).
+            let clear: Vec<bool> = records
+                .iter()
+                .map(|r| match d {
+                    Some(_) => {
+                        let j = request
+                            .distances_m
+                            .iter()
+                            .position(|&x| Some(x) == d)
+                            .unwrap_or(0);
+                        r.heights_m[j].is_some()
+                    }
+                    None => r.termination != Some(Termination::Ground),
+                })
+                .collect();
+            Horizon {
+                distance_m: d,
+                // The sea horizon is refined with the fan's own settings (out to the trap distance).
+                elevation_deg: match d {
+                    Some(_) => apparent_horizon(&probe_tracer, h0, &elevations, &clear, d),
+                    None => apparent_horizon(&fan_tracer, h0, &elevations, &clear, d),
+                }
+                .map(f64::to_degrees),
+            }
+        })
+        .collect();
+    let trapped_elevations_deg = rays
+        .iter()
+        .filter(|r| r.trapped)
+        .map(|r| r.elevation_deg)
+        .collect();
+    Ok(TraceReport {
+        observer_height_m: h0,
+        tolerance_m: request.tracer.tolerance_m,
+        wavelength_nm: request.wavelength_nm,
+        earth_radius_m: request.tracer.earth_radius_m,
+        top_m: request.tracer.top_m,
+        trap_distance_m: request.trap_distance_m,
+        distances_m: request.distances_m.clone(),
+        target_heights_m: request.target_heights_m.clone(),
+        rays,
+        images,
+        horizons,
+        trapped_elevations_deg,
+    })
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map(|x| format!("{x}")).unwrap_or_default()
+}
+
+impl TraceReport {
+    /// The report as pretty JSON.
+    pub fn to_json(&self) -> Result<String, serde_json::Error> {
+        serde_json::to_string_pretty(self)
+    }
+
+    /// The fan as CSV: one row per ray, one `height_m_at_<D>` column per distance (empty where the
+    /// ray ended before it).
+    pub fn rays_csv(&self) -> Result<Vec<u8>, AnalysisError> {
+        let mut w = csv::Writer::from_writer(Vec::new());
+        let mut header: Vec<String> = [
+            "elevation_deg",
+            "termination",
+            "trapped",
+            "end_distance_m",
+            "end_height_m",
+            "end_elevation_deg",
+            "refraction_deg",
+            "steps",
+            "invariant_drift",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        header.extend(self.distances_m.iter().map(|d| format!("height_m_at_{d}")));
+        w.write_record(&header)?;
+        for r in &self.rays {
+            let mut row = vec![
+                format!("{}", r.elevation_deg),
+                r.termination.to_string(),
+                r.trapped.to_string(),
+                format!("{}", r.end_distance_m),
+                format!("{}", r.end_height_m),
+                format!("{}", r.end_elevation_deg),
+                opt(r.refraction_deg),
+                r.steps.to_string(),
+                format!("{}", r.invariant_drift),
+            ];
+            row.extend(r.heights_m.iter().map(|h| opt(*h)));
+            w.write_record(&row)?;
+        }
+        w.into_inner()
+            .map_err(|e| AnalysisError::Csv(e.into_error().into()))
+    }
+
+    /// The images as CSV, one row per image.
+    pub fn images_csv(&self) -> Result<Vec<u8>, AnalysisError> {
+        let mut w = csv::Writer::from_writer(Vec::new());
+        for image in &self.images {
+            w.serialize(image)?;
+        }
+        w.into_inner()
+            .map_err(|e| AnalysisError::Csv(e.into_error().into()))
+    }
+}

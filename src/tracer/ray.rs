@@ -1,0 +1,719 @@
+//! Stage 4 (trace), the ray loop: adaptive Dormand–Prince integration of one ray with exact
+//! event location, typed termination and a per-ray record.
+//!
+//! In: a ray system (planar or 3-D, see `system`), a launch state, a [`TracerConfig`], sorted
+//! ground distances at which the caller wants the ray's height, and an optional [`RayHook`].
+//! Out: a [`RayRecord`] (heights at the distances, end point and direction, refraction of escaped
+//! rays, step counts, drift of Bouguer's invariant) and optionally the sampled path.
+//!
+//! Error control: the scaled error of a step is the largest of |δposition| / tol and
+//! |δT| · L / tol over the components, where tol = `tolerance_m` and L = `direction_length_m`. A
+//! direction error ε turns into a position error ε·L after L metres of further travel, so L is the
+//! distance over which a direction error is allowed to grow to the position tolerance (default
+//! 10 km, a third of the paper's longest scene).
+//!
+//! Events are searched on the step's 4th-order continuous extension: a sign change of the event
+//! function between the ends of a step, or — for the ground and the top, which a ray can touch and
+//! leave within one step — an extremum of the height inside the step (found as the root of the
+//! vertical direction component) that crosses the level. Roots are refined with the Illinois
+//! variant of regula falsi to 1e-9 m along the ray.
+
+use std::fmt;
+
+use serde::Serialize;
+
+use super::dopri::{Controller, Dense, Step};
+use super::system::{Observables, RaySystem};
+
+/// Settings of the tracer. All lengths in metres.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TracerConfig {
+    /// Earth radius (m).
+    pub earth_radius_m: f64,
+    /// Top of the atmosphere above the surface (m); above it n = 1.
+    pub top_m: f64,
+    /// Error tolerance on position per step (m); the paper used 1 cm.
+    pub tolerance_m: f64,
+    /// Length over which a direction error may grow to `tolerance_m` (m); see the module docs.
+    pub direction_length_m: f64,
+    /// Longest step (m).
+    pub max_step_m: f64,
+    /// Shortest step (m); a step below it ends the ray with [`Termination::StepUnderflow`].
+    pub min_step_m: f64,
+    /// First trial step (m); the controller adapts from there.
+    pub initial_step_m: f64,
+    /// Largest height change per step near the ground (m). A step could otherwise jump over a thin
+    /// layer that none of its stages samples; the limit grows with height (next field).
+    pub vertical_step_base_m: f64,
+    /// Growth of the per-step height limit with height: limit = base + this × h (sounding
+    /// resolution also coarsens with height).
+    pub vertical_step_per_height: f64,
+    /// Longest path along the ray (m).
+    pub max_length_m: f64,
+    /// Stop when the ground distance reaches this (m), if set: [`Termination::MaxDistance`].
+    pub max_distance_m: Option<f64>,
+    /// Most steps (accepted + rejected) per ray.
+    pub max_steps: u32,
+    /// End the ray as soon as it has reached the last requested distance.
+    pub stop_after_last_target: bool,
+    /// Extra interpolated points per step in recorded paths (0: step ends only).
+    pub path_samples_per_step: u32,
+}
+
+impl Default for TracerConfig {
+    fn default() -> Self {
+        TracerConfig {
+            earth_radius_m: crate::units::EARTH_RADIUS_M,
+            top_m: 40_000.0,
+            tolerance_m: 0.01,
+            direction_length_m: 100_000.0,
+            max_step_m: 2_000.0,
+            min_step_m: 1e-7,
+            initial_step_m: 1.0,
+            vertical_step_base_m: 2.0,
+            vertical_step_per_height: 0.05,
+            max_length_m: 10_000_000.0,
+            max_distance_m: None,
+            max_steps: 200_000,
+            stop_after_last_target: true,
+            path_samples_per_step: 0,
+        }
+    }
+}
+
+/// Invalid tracer input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TracerError {
+    /// A configuration value is out of range.
+    #[error("invalid tracer setting {name} = {value}: {reason}")]
+    InvalidConfig {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// The observer is below the ground or at/above the top of the atmosphere.
+    #[error("observer height {height_m} m is outside the atmosphere [0, {top_m}) m")]
+    ObserverOutside {
+        /// Observer height (m).
+        height_m: f64,
+        /// Top of the atmosphere (m).
+        top_m: f64,
+    },
+    /// The launch elevation or direction is not finite (or is a zero vector).
+    #[error("ray direction is not finite or zero")]
+    BadDirection,
+    /// The requested distances are not finite, negative or not ascending.
+    #[error("target distances must be finite, ≥ 0 and ascending")]
+    BadDistances,
+}
+
+impl TracerConfig {
+    /// Check every setting.
+    pub fn validate(&self) -> Result<(), TracerError> {
+        let positive: [(&'static str, f64); 8] = [
+            ("earth_radius_m", self.earth_radius_m),
+            ("top_m", self.top_m),
+            ("tolerance_m", self.tolerance_m),
+            ("direction_length_m", self.direction_length_m),
+            ("max_step_m", self.max_step_m),
+            ("min_step_m", self.min_step_m),
+            ("initial_step_m", self.initial_step_m),
+            ("vertical_step_base_m", self.vertical_step_base_m),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(TracerError::InvalidConfig {
+                    name,
+                    value,
+                    reason: "must be finite and > 0",
+                });
+            }
+        }
+        if self.max_length_m.is_nan() || self.max_length_m <= 0.0 {
+            return Err(TracerError::InvalidConfig {
+                name: "max_length_m",
+                value: self.max_length_m,
+                reason: "must be > 0",
+            });
+        }
+        if !(self.vertical_step_per_height.is_finite() && self.vertical_step_per_height >= 0.0) {
+            return Err(TracerError::InvalidConfig {
+                name: "vertical_step_per_height",
+                value: self.vertical_step_per_height,
+                reason: "must be finite and ≥ 0",
+            });
+        }
+        if let Some(d) = self.max_distance_m
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(TracerError::InvalidConfig {
+                name: "max_distance_m",
+                value: d,
+                reason: "must be finite and > 0",
+            });
+        }
+        if self.min_step_m > self.max_step_m {
+            return Err(TracerError::InvalidConfig {
+                name: "min_step_m",
+                value: self.min_step_m,
+                reason: "must not exceed max_step_m",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Why a ray stopped. Every traced ray ends with exactly one of these.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Termination {
+    /// Reached the ground (h = 0), which absorbs it.
+    Ground,
+    /// Left the top of the atmosphere (refracted into vacuum there).
+    Escaped,
+    /// Reached the last requested ground distance.
+    TargetsDone,
+    /// Reached `max_distance_m` still inside the atmosphere (trapped for the analysis).
+    MaxDistance,
+    /// Travelled `max_length_m` along the path.
+    MaxLength,
+    /// Used up `max_steps`.
+    MaxSteps,
+    /// The step size fell below `min_step_m`.
+    StepUnderflow,
+    /// The field or the state became NaN or infinite.
+    NonFinite,
+    /// The hook's event function crossed zero (e.g. the ray hit an object surface).
+    Event,
+    /// The hook asked to stop (e.g. the ray is above every object and climbing).
+    LeftRegion,
+}
+
+impl Termination {
+    /// The snake_case name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Termination::Ground => "ground",
+            Termination::Escaped => "escaped",
+            Termination::TargetsDone => "targets_done",
+            Termination::MaxDistance => "max_distance",
+            Termination::MaxLength => "max_length",
+            Termination::MaxSteps => "max_steps",
+            Termination::StepUnderflow => "step_underflow",
+            Termination::NonFinite => "non_finite",
+            Termination::Event => "event",
+            Termination::LeftRegion => "left_region",
+        }
+    }
+}
+
+impl fmt::Display for Termination {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A point on a ray.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RayPoint {
+    /// Path length from the observer (m).
+    pub arc_length_m: f64,
+    /// Ground distance from the observer, x = R·θ (m).
+    pub distance_m: f64,
+    /// Height above the ground (m).
+    pub height_m: f64,
+    /// Elevation of the ray direction above the local horizontal (rad).
+    pub elevation_rad: f64,
+}
+
+/// The outcome of tracing one ray.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct RayRecord {
+    /// Apparent elevation at the observer (rad).
+    pub elevation_rad: f64,
+    /// Why the ray stopped (`None` only in a record that was never traced).
+    pub termination: Option<Termination>,
+    /// Height at each requested distance (m); `None` where the ray ended before it.
+    pub heights_m: Vec<Option<f64>>,
+    /// Local elevation of the ray at each requested distance (rad); `None` as above.
+    pub target_elevations_rad: Vec<Option<f64>>,
+    /// Where the ray ended.
+    pub end: RayPoint,
+    /// Elevation of the final direction relative to the observer's horizontal (rad): the local
+    /// elevation at the end (after refraction into vacuum for escaped rays) minus the angle θ the
+    /// ray travelled around the Earth.
+    pub end_observer_elevation_rad: f64,
+    /// Astronomical refraction of an escaped ray, apparent minus true elevation (rad).
+    pub refraction_rad: Option<f64>,
+    /// Accepted steps.
+    pub accepted_steps: u32,
+    /// Rejected steps.
+    pub rejected_steps: u32,
+    /// Largest |I − I₀| / (n₀ r₀) along the ray, I = n·r·cos ψ (Bouguer); only meaningful for
+    /// spherically symmetric fields (on a flat Earth: Snell's n·cos ψ, relative to n₀).
+    pub invariant_drift: f64,
+}
+
+impl RayRecord {
+    /// Total steps (accepted + rejected).
+    pub fn steps(&self) -> u32 {
+        self.accepted_steps + self.rejected_steps
+    }
+
+    pub(crate) fn reset(&mut self, elevation_rad: f64, targets: usize) {
+        self.elevation_rad = elevation_rad;
+        self.termination = None;
+        self.heights_m.clear();
+        self.heights_m.resize(targets, None);
+        self.target_elevations_rad.clear();
+        self.target_elevations_rad.resize(targets, None);
+        self.end = RayPoint::default();
+        self.end_observer_elevation_rad = 0.0;
+        self.refraction_rad = None;
+        self.accepted_steps = 0;
+        self.rejected_steps = 0;
+        self.invariant_drift = 0.0;
+    }
+}
+
+/// What a hook tells the tracer after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HookAction {
+    /// Keep tracing.
+    Continue,
+    /// Stop here with [`Termination::LeftRegion`].
+    Stop,
+}
+
+/// Caller-side control of a ray (the renderer's object surfaces and early stops).
+pub trait RayHook {
+    /// An event function of the ray state: the ray ends with [`Termination::Event`] where it
+    /// changes sign between two points (located on the dense output). `None`: no event.
+    fn event(&self, _point: &RayPoint) -> Option<f64> {
+        None
+    }
+    /// Called after every accepted step with its start and end.
+    fn after_step(&mut self, _from: &RayPoint, _to: &RayPoint) -> HookAction {
+        HookAction::Continue
+    }
+}
+
+/// The hook that does nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoHook;
+
+impl RayHook for NoHook {}
+
+/// Stop rays that are above `height_m` and climbing. Safe only where no ray can turn down again
+/// above that height (ray curvature less than Earth's there), which the caller must know.
+#[derive(Debug, Clone, Copy)]
+pub struct StopAboveClimbing {
+    /// Height above which climbing rays stop (m).
+    pub height_m: f64,
+}
+
+impl RayHook for StopAboveClimbing {
+    fn after_step(&mut self, _from: &RayPoint, to: &RayPoint) -> HookAction {
+        if to.height_m > self.height_m && to.elevation_rad > 0.0 {
+            HookAction::Stop
+        } else {
+            HookAction::Continue
+        }
+    }
+}
+
+fn finite<const N: usize>(y: &[f64; N]) -> bool {
+    y.iter().all(|v| v.is_finite())
+}
+
+fn obs_finite(o: &Observables) -> bool {
+    o.height_m.is_finite()
+        && o.distance_m.is_finite()
+        && o.elevation_rad.is_finite()
+        && o.invariant.is_finite()
+        && o.index.is_finite()
+}
+
+/// Root of `g` on [a, b] with g(a)·g(b) ≤ 0 (Illinois). `scale` converts a fraction to metres.
+fn locate(mut g: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, scale: f64) -> f64 {
+    let mut ga = g(a);
+    let mut gb = g(b);
+    if ga == 0.0 {
+        return a;
+    }
+    if gb == 0.0 {
+        return b;
+    }
+    if !(ga.is_finite() && gb.is_finite()) || ga.signum() == gb.signum() {
+        return b;
+    }
+    let mut side = 0i8;
+    for _ in 0..200 {
+        if (b - a).abs() * scale < 1e-9 {
+            break;
+        }
+        let mut c = (a * gb - b * ga) / (gb - ga);
+        if !(c > a.min(b) && c < a.max(b)) {
+            c = 0.5 * (a + b);
+        }
+        let gc = g(c);
+        if gc == 0.0 || !gc.is_finite() {
+            return c;
+        }
+        if gc.signum() == gb.signum() {
+            b = c;
+            gb = gc;
+            if side == -1 {
+                ga *= 0.5;
+            }
+            side = -1;
+        } else {
+            a = c;
+            ga = gc;
+            if side == 1 {
+                gb *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    // Return the end on the "before the event" side's far boundary: the crossing point.
+    if ga.abs() < gb.abs() { a } else { b }
+}
+
+fn point(o: &Observables, arc_length_m: f64) -> RayPoint {
+    RayPoint {
+        arc_length_m,
+        distance_m: o.distance_m,
+        height_m: o.height_m,
+        elevation_rad: o.elevation_rad,
+    }
+}
+
+/// Fill the end of the record from the final state.
+fn finish(
+    rec: &mut RayRecord,
+    kind: Termination,
+    o: &Observables,
+    arc_length_m: f64,
+    elevation0: f64,
+) {
+    rec.termination = Some(kind);
+    rec.end = point(o, arc_length_m);
+    if kind == Termination::Escaped {
+        // Snell at the top, spherical form: n·r·cos ψ is conserved across the interface (r equal).
+        let cos_out = (o.index * o.elevation_rad.cos()).min(1.0);
+        let psi_out = cos_out.acos().copysign(o.elevation_rad);
+        rec.end_observer_elevation_rad = psi_out - o.angle_rad;
+        rec.refraction_rad = Some(elevation0 - rec.end_observer_elevation_rad);
+    } else {
+        rec.end_observer_elevation_rad = o.elevation_rad - o.angle_rad;
+        rec.refraction_rad = None;
+    }
+}
+
+/// Integrate one ray. `y0` is the launch state, `elevation0` the apparent elevation (rad).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
+    sys: &Sys,
+    y0: [f64; N],
+    elevation0: f64,
+    cfg: &TracerConfig,
+    targets: &[f64],
+    hook: &mut H,
+    rec: &mut RayRecord,
+    mut path: Option<&mut Vec<RayPoint>>,
+) {
+    rec.reset(elevation0, targets.len());
+    let top = cfg.top_m;
+    let half = N / 2;
+    let dir_weight = cfg.direction_length_m / cfg.tolerance_m;
+    let pos_weight = 1.0 / cfg.tolerance_m;
+
+    let mut f = |y: &[f64; N]| sys.derivative(y);
+    let mut y = y0;
+    let mut k1 = f(&y);
+    let mut obs = sys.observe(&y);
+    if !(finite(&y) && finite(&k1) && obs_finite(&obs)) {
+        rec.termination = Some(Termination::NonFinite);
+        rec.end = RayPoint {
+            elevation_rad: elevation0,
+            ..RayPoint::default()
+        };
+        rec.end_observer_elevation_rad = elevation0;
+        return;
+    }
+    let scale = sys.invariant_scale(&y);
+    let invariant0 = obs.invariant;
+    let mut cur = point(&obs, 0.0);
+    if let Some(p) = path.as_deref_mut() {
+        p.clear();
+        p.push(cur);
+    }
+    // Targets at the observer's own distance.
+    let mut next = 0;
+    while next < targets.len() && targets[next] <= obs.distance_m {
+        rec.heights_m[next] = Some(obs.height_m);
+        rec.target_elevations_rad[next] = Some(obs.elevation_rad);
+        next += 1;
+    }
+    if obs.height_m <= 0.0 && sys.climb(&y) < 0.0 {
+        finish(rec, Termination::Ground, &obs, 0.0, elevation0);
+        return;
+    }
+    if obs.height_m >= top && sys.climb(&y) > 0.0 {
+        finish(rec, Termination::Escaped, &obs, 0.0, elevation0);
+        return;
+    }
+    if cfg.stop_after_last_target && !targets.is_empty() && next == targets.len() {
+        finish(rec, Termination::TargetsDone, &obs, 0.0, elevation0);
+        return;
+    }
+    let mut event_prev = hook.event(&cur);
+
+    let mut s = 0.0;
+    let mut h = cfg.initial_step_m.min(cfg.max_step_m);
+    let mut controller = Controller::new();
+    let mut steps = 0u32;
+    loop {
+        if steps >= cfg.max_steps {
+            finish(rec, Termination::MaxSteps, &obs, s, elevation0);
+            return;
+        }
+        steps += 1;
+        // Step caps: longest step, height change per step, remaining path length.
+        let sin_psi = obs.elevation_rad.sin().abs();
+        let vertical_limit =
+            cfg.vertical_step_base_m + cfg.vertical_step_per_height * obs.height_m.max(0.0);
+        if sin_psi * cfg.max_step_m > vertical_limit {
+            h = h.min(vertical_limit / sin_psi);
+        }
+        h = h.min(cfg.max_step_m);
+        let remaining = cfg.max_length_m - s;
+        if remaining <= cfg.min_step_m {
+            finish(rec, Termination::MaxLength, &obs, s, elevation0);
+            return;
+        }
+        h = h.min(remaining);
+        if h < cfg.min_step_m {
+            finish(rec, Termination::StepUnderflow, &obs, s, elevation0);
+            return;
+        }
+        let step = Step::attempt(&mut f, &y, &k1, h);
+        let err = if step.is_finite() {
+            let mut e: f64 = 0.0;
+            for i in 0..N {
+                let w = if i < half { pos_weight } else { dir_weight };
+                e = e.max(step.error[i].abs() * w);
+            }
+            e
+        } else {
+            f64::INFINITY
+        };
+        if err.is_nan() || err > 1.0 {
+            rec.rejected_steps += 1;
+            let shrunk = controller.reject(h, err);
+            if !err.is_finite() && shrunk < cfg.min_step_m {
+                finish(rec, Termination::NonFinite, &obs, s, elevation0);
+                return;
+            }
+            h = shrunk;
+            continue;
+        }
+        rec.accepted_steps += 1;
+        let y1 = step.y1;
+        let obs1 = sys.observe(&y1);
+        if !obs_finite(&obs1) {
+            finish(rec, Termination::NonFinite, &obs, s, elevation0);
+            return;
+        }
+        let mut dense: Option<Dense<N>> = None;
+        let get_dense = |dense: &mut Option<Dense<N>>| *dense.get_or_insert_with(|| step.dense());
+
+        // Terminating events: earliest wins.
+        let mut end: Option<(f64, Termination)> = None;
+        let consider = |end: &mut Option<(f64, Termination)>, t: f64, kind| {
+            if end.is_none_or(|(te, _)| t < te) {
+                *end = Some((t, kind));
+            }
+        };
+        // Ground.
+        let climb0 = sys.climb(&y);
+        let climb1 = sys.climb(&y1);
+        if obs1.height_m < 0.0 {
+            let d = get_dense(&mut dense);
+            let t = locate(|t| sys.height(&d.at(t)), 0.0, 1.0, h);
+            consider(&mut end, t, Termination::Ground);
+        } else if climb0 < 0.0 && climb1 > 0.0 {
+            let d = get_dense(&mut dense);
+            let tm = locate(|t| sys.climb(&d.at(t)), 0.0, 1.0, h);
+            if sys.height(&d.at(tm)) < 0.0 {
+                let t = locate(|t| sys.height(&d.at(t)), 0.0, tm, h);
+                consider(&mut end, t, Termination::Ground);
+            }
+        }
+        // Top.
+        if obs1.height_m > top {
+            let d = get_dense(&mut dense);
+            let t = locate(|t| sys.height(&d.at(t)) - top, 0.0, 1.0, h);
+            consider(&mut end, t, Termination::Escaped);
+        } else if climb0 > 0.0 && climb1 < 0.0 {
+            let d = get_dense(&mut dense);
+            let tm = locate(|t| sys.climb(&d.at(t)), 0.0, 1.0, h);
+            if sys.height(&d.at(tm)) > top {
+                let t = locate(|t| sys.height(&d.at(t)) - top, 0.0, tm, h);
+                consider(&mut end, t, Termination::Escaped);
+            }
+        }
+        if let Some(max_d) = cfg.max_distance_m
+            && obs1.distance_m >= max_d
+        {
+            let d = get_dense(&mut dense);
+            let t = locate(|t| sys.distance(&d.at(t)) - max_d, 0.0, 1.0, h);
+            consider(&mut end, t, Termination::MaxDistance);
+        }
+        if s + h >= cfg.max_length_m {
+            consider(&mut end, 1.0, Termination::MaxLength);
+        }
+        // The hook's event function.
+        let event1 = hook.event(&point(&obs1, s + h));
+        if let (Some(e0), Some(e1)) = (event_prev, event1)
+            && e0.signum() != e1.signum()
+        {
+            let d = get_dense(&mut dense);
+            let t = locate(
+                |t| {
+                    let o = sys.observe(&d.at(t));
+                    hook.event(&point(&o, s + t * h)).unwrap_or(e1)
+                },
+                0.0,
+                1.0,
+                h,
+            );
+            consider(&mut end, t, Termination::Event);
+        }
+        event_prev = event1;
+        // Requested distances up to the end of the step (or the terminating event).
+        let limit_t = end.map_or(1.0, |(t, _)| t);
+        let limit_distance = if limit_t >= 1.0 {
+            obs1.distance_m
+        } else {
+            sys.distance(&get_dense(&mut dense).at(limit_t))
+        };
+        while next < targets.len() && targets[next] <= limit_distance {
+            let d = get_dense(&mut dense);
+            let target = targets[next];
+            let t = locate(|t| sys.distance(&d.at(t)) - target, 0.0, limit_t, h);
+            let o = sys.observe(&d.at(t));
+            rec.heights_m[next] = Some(o.height_m);
+            rec.target_elevations_rad[next] = Some(o.elevation_rad);
+            next += 1;
+            if next == targets.len() && cfg.stop_after_last_target {
+                end = Some((t, Termination::TargetsDone));
+            }
+        }
+        // Path samples inside the step.
+        if let Some(p) = path.as_deref_mut() {
+            let last_t = end.map_or(1.0, |(t, _)| t);
+            let n = cfg.path_samples_per_step;
+            if n > 0 {
+                let d = get_dense(&mut dense);
+                for j in 1..=n {
+                    let t = last_t * j as f64 / (n + 1) as f64;
+                    let o = sys.observe(&d.at(t));
+                    if obs_finite(&o) {
+                        p.push(point(&o, s + t * h));
+                    }
+                }
+            }
+        }
+        if let Some((t, kind)) = end {
+            let o = if t >= 1.0 {
+                obs1
+            } else {
+                let o = sys.observe(&get_dense(&mut dense).at(t));
+                if obs_finite(&o) { o } else { obs1 }
+            };
+            let o = clamp_level(o, kind, top);
+            let p = point(&o, s + t * h);
+            if let Some(path) = path.as_deref_mut() {
+                path.push(p);
+            }
+            rec.invariant_drift = rec
+                .invariant_drift
+                .max((o.invariant - invariant0).abs() / scale);
+            finish(rec, kind, &o, s + t * h, elevation0);
+            return;
+        }
+        rec.invariant_drift = rec
+            .invariant_drift
+            .max((obs1.invariant - invariant0).abs() / scale);
+        let next_point = point(&obs1, s + h);
+        if let Some(p) = path.as_deref_mut() {
+            p.push(next_point);
+        }
+        let action = hook.after_step(&cur, &next_point);
+        y = y1;
+        k1 = step.k7;
+        s += h;
+        obs = obs1;
+        cur = next_point;
+        if action == HookAction::Stop {
+            finish(rec, Termination::LeftRegion, &obs, s, elevation0);
+            return;
+        }
+        h = controller.accept(h, err);
+    }
+}
+
+/// Snap the end height of a ground or top event onto its level (the root finder stops within
+/// 1e-9 m along the path; the snapped value is what the event means).
+fn clamp_level(mut o: Observables, kind: Termination, top: f64) -> Observables {
+    match kind {
+        Termination::Ground => o.height_m = 0.0,
+        Termination::Escaped => o.height_m = top,
+        _ => {}
+    }
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locate_finds_root() {
+        let r = locate(|t| t * t - 0.25, 0.0, 1.0, 1000.0);
+        assert!((r - 0.5).abs() < 1e-11);
+    }
+
+    #[test]
+    fn termination_names_round_trip_serde() {
+        for t in [
+            Termination::Ground,
+            Termination::TargetsDone,
+            Termination::LeftRegion,
+        ] {
+            let j = serde_json::to_string(&t).unwrap();
+            assert_eq!(j, format!("\"{}\"", t));
+        }
+    }
+
+    #[test]
+    fn config_validation_rejects_bad_values() {
+        let c = TracerConfig {
+            tolerance_m: 0.0,
+            ..TracerConfig::default()
+        };
+        assert!(c.validate().is_err());
+        let c = TracerConfig {
+            top_m: f64::NAN,
+            ..TracerConfig::default()
+        };
+        assert!(c.validate().is_err());
+        assert!(TracerConfig::default().validate().is_ok());
+    }
+}
