@@ -8,14 +8,16 @@
 //! * **Temperature**: PCHIP (Fritsch–Butland) through the (smoothed) levels: C¹, no extremum
 //!   between levels, so the fit never invents an inversion; dT/dh is the analytic derivative of
 //!   the same cubic segment.
-//! * **Pressure**: PCHIP of ln P through the levels. Where a level has a measured pressure, that
-//!   (smoothed) pressure is the knot; where pressure is missing (a gap, or none at all) the knot is
-//!   hydrostatic — d(ln P)/dh = −g₀/(R_d·T_v) integrated through the fitted T and e (virtual
-//!   temperature), started from the measured level below and corrected linearly in height so that
-//!   it also meets the measured level above (one-sided outside the measured range; from
-//!   [`FitOptions::surface_pressure_pa`] or the US1976 pressure at the surface height when no
-//!   level has a pressure). Measured pressures that do not decrease with height are treated as
-//!   missing. dP/dh = P·d(ln P)/dh from the same cubic, so P and dP/dh are consistent.
+//! * **Pressure**: PCHIP of ln P through one knot per level, ln P = H + R: H is the hydrostatic
+//!   d(ln P)/dh = −g₀/(R_d·T_v) integrated through the fitted T and e (virtual temperature), R the
+//!   residual to the measured pressures — smoothed where levels are dense (over 5·smooth_m,
+//!   widened as 1/P, where ≥ 10 levels fall in it, since pressure is reported at a fixed
+//!   0.1 hPa), linear in height across gaps
+//!   without pressure, constant beyond the measured range. Sparse measured pressures are met
+//!   exactly; where no level has a pressure the integration starts from
+//!   [`FitOptions::surface_pressure_pa`] or the US1976 pressure at the surface height. Measured
+//!   pressures that do not decrease with height are treated as missing. dP/dh = P·d(ln P)/dh
+//!   from the same cubic, so P and dP/dh are consistent (and close to hydrostatic).
 //! * **Vapour pressure**: PCHIP of e through the levels that have humidity (non-negative, since
 //!   PCHIP never leaves the range of its knots); below the lowest of them the mixing ratio e/P is
 //!   held; above the highest, e/P relaxes from the measured ratio with a C¹ join (see
@@ -33,7 +35,7 @@ use std::path::PathBuf;
 
 use super::hydrostatic::{G_OVER_R, HydrostaticTable, integrate_ln_p, virtual_temperature_k};
 use super::monotone::MonotoneCubic;
-use super::smooth::local_linear;
+use super::smooth::{local_linear, local_linear_varying};
 use super::standard::StandardAtmosphere;
 use super::us1976::us1976;
 use super::{AirColumn, AirSample, MODEL_TOP_M, ProfileError};
@@ -325,93 +327,11 @@ impl Profile {
             virtual_temperature_k(t_of(h), e, p)
         };
 
-        // Pressure knots: measured where given (smoothed, strictly decreasing), else hydrostatic.
-        let measured: Vec<(usize, f64)> = levels
-            .iter()
-            .enumerate()
-            .filter_map(|(i, l)| l.pressure_pa.map(|p| (i, p.ln())))
-            .collect();
-        let mx: Vec<f64> = measured.iter().map(|m| heights[m.0]).collect();
-        let my: Vec<f64> = measured.iter().map(|m| m.1).collect();
-        let smoothed = local_linear(&mx, &my, smooth);
-        let mut anchors: Vec<(usize, f64)> = Vec::with_capacity(measured.len());
-        for (k, &(i, _)) in measured.iter().enumerate() {
-            let lnp = smoothed[k];
-            if anchors.last().is_none_or(|&(_, last)| lnp < last) {
-                anchors.push((i, lnp));
-            }
-        }
+        // Pressure knots: ln P = hydrostatic ln P through the fitted T_v + a residual R(h) that
+        // carries the measurements (see `pressure_knots`).
         let n = heights.len();
-        let mut ln_p = vec![f64::NAN; n];
-        let mut is_measured = vec![false; n];
-        let max_step = 10.0;
-        if anchors.is_empty() {
-            let p0 = match options.surface_pressure_pa {
-                Some(p) => p,
-                None => {
-                    StandardAtmosphere::default()
-                        .air_at(surface_height_m)
-                        .pressure_pa
-                }
-            };
-            ln_p[0] = p0.ln();
-            for i in 1..n {
-                ln_p[i] = integrate_ln_p(
-                    heights[i - 1],
-                    ln_p[i - 1],
-                    heights[i],
-                    max_step,
-                    &tv_provisional,
-                );
-            }
-        } else {
-            for &(i, lnp) in &anchors {
-                ln_p[i] = lnp;
-                is_measured[i] = true;
-            }
-            let (first, _) = anchors[0];
-            for i in (0..first).rev() {
-                ln_p[i] = integrate_ln_p(
-                    heights[i + 1],
-                    ln_p[i + 1],
-                    heights[i],
-                    max_step,
-                    &tv_provisional,
-                );
-            }
-            for pair in anchors.windows(2) {
-                let (a, b) = (pair[0].0, pair[1].0);
-                if b == a + 1 {
-                    continue;
-                }
-                let mut hydro = vec![0.0; b - a + 1];
-                hydro[0] = ln_p[a];
-                for j in 1..=(b - a) {
-                    hydro[j] = integrate_ln_p(
-                        heights[a + j - 1],
-                        hydro[j - 1],
-                        heights[a + j],
-                        max_step,
-                        &tv_provisional,
-                    );
-                }
-                let mismatch = ln_p[b] - hydro[b - a];
-                let span = heights[b] - heights[a];
-                for j in 1..(b - a) {
-                    ln_p[a + j] = hydro[j] + mismatch * (heights[a + j] - heights[a]) / span;
-                }
-            }
-            let (last, _) = anchors[anchors.len() - 1];
-            for i in last + 1..n {
-                ln_p[i] = integrate_ln_p(
-                    heights[i - 1],
-                    ln_p[i - 1],
-                    heights[i],
-                    max_step,
-                    &tv_provisional,
-                );
-            }
-        }
+        let (ln_p, is_measured) =
+            pressure_knots(levels, &heights, options, surface_height_m, &tv_provisional);
         let single_lnp_slope = -G_OVER_R / tv_provisional(top_m, ln_p[n - 1].exp());
         let ln_pressure = Curve::new(&heights, &ln_p, single_lnp_slope);
         if ln_p.iter().any(|v| !v.is_finite()) {
@@ -521,6 +441,135 @@ impl Profile {
     pub fn source(&self) -> &std::path::Path {
         &self.source
     }
+}
+
+/// Pressure above which the pressure residual is smoothed with `smooth_m` itself (Pa).
+const PRESSURE_WINDOW_REFERENCE_PA: f64 = 100_000.0;
+
+/// How much wider than `smooth_m` the pressure residual is smoothed (at 1000 hPa) where levels
+/// are dense. The residual has no fine structure of its own (the layering of P comes through the
+/// fitted T in the hydrostatic part), so a wide window costs nothing physical; 5 keeps dP/dh of
+/// 1-second soundings within ≈1 % of hydrostatic despite the 0.1 hPa reporting steps.
+const PRESSURE_WINDOW_FACTOR: f64 = 5.0;
+
+/// Number of measured levels inside the widened pressure window from which the data count as
+/// dense (1-second soundings have hundreds there; significant-level soundings a few).
+const DENSE_LEVELS: usize = 10;
+
+/// Integration step limit (m) for the hydrostatic knots.
+const HYDROSTATIC_STEP_M: f64 = 10.0;
+
+/// ln P at every level, and whether it carries a measured pressure.
+///
+/// ln P_i = H_i + R_i, where H is d(ln P)/dh = −g₀/(R_d·T_v) integrated level to level through
+/// the fitted T and e, and R is the residual ln P_measured − H at the levels with a pressure:
+/// smoothed (local-linear, tricube) with a half-width of 5·`smooth_m`·max(1, 1000 hPa / P)
+/// where at least ten measured levels fall inside that window (else `smooth_m`), linear in
+/// height between measured levels and constant beyond the first and last. So measured
+/// pressures are met (exactly where no other measured level is inside the window), gaps are
+/// hydrostatic and anchored at both ends, and dP/dh stays close to hydrostatic. The window is
+/// wide because the residual has no structure of its own, and widens as 1/P because sondes
+/// report P at a fixed absolute resolution (0.1 hPa): at 14 hPa a 0.1 hPa step is 0.7 %, ten
+/// times the change of ln P between 1-second levels, and a 20 m window would turn that
+/// staircase into ±50 % noise on dP/dh. Measured pressures that would not decrease with height
+/// are treated as missing.
+fn pressure_knots(
+    levels: &[crate::sounding::Level],
+    heights: &[f64],
+    options: &FitOptions,
+    surface_height_m: f64,
+    tv: &dyn Fn(f64, f64) -> f64,
+) -> (Vec<f64>, Vec<bool>) {
+    let n = heights.len();
+    let first_measured = levels.iter().position(|l| l.pressure_pa.is_some());
+    // Hydrostatic H, anchored at the first measured pressure (or the surface guess).
+    let (start, start_ln_p) = match first_measured {
+        Some(i) => (i, levels[i].pressure_pa.unwrap_or(1.0).ln()),
+        None => {
+            let p0 = options.surface_pressure_pa.unwrap_or_else(|| {
+                StandardAtmosphere::default()
+                    .air_at(surface_height_m)
+                    .pressure_pa
+            });
+            (0, p0.ln())
+        }
+    };
+    let mut hydro = vec![0.0; n];
+    hydro[start] = start_ln_p;
+    for i in (0..start).rev() {
+        hydro[i] = integrate_ln_p(
+            heights[i + 1],
+            hydro[i + 1],
+            heights[i],
+            HYDROSTATIC_STEP_M,
+            tv,
+        );
+    }
+    for i in start + 1..n {
+        hydro[i] = integrate_ln_p(
+            heights[i - 1],
+            hydro[i - 1],
+            heights[i],
+            HYDROSTATIC_STEP_M,
+            tv,
+        );
+    }
+    let measured: Vec<(usize, f64)> = levels
+        .iter()
+        .enumerate()
+        .filter_map(|(i, l)| l.pressure_pa.map(|p| (i, p)))
+        .collect();
+    if measured.is_empty() {
+        return (hydro, vec![false; n]);
+    }
+    let mx: Vec<f64> = measured.iter().map(|m| heights[m.0]).collect();
+    let residual: Vec<f64> = measured.iter().map(|&(i, p)| p.ln() - hydro[i]).collect();
+    // Widen the window as 1/P only where the data are dense enough for the reporting
+    // resolution to matter (at least DENSE_LEVELS measured levels inside the widened window);
+    // sparse levels keep `smooth_m` and so pass through their measurements.
+    let half_width = |k: usize| {
+        let wide = options.smooth_m
+            * PRESSURE_WINDOW_FACTOR
+            * (PRESSURE_WINDOW_REFERENCE_PA / measured[k].1).max(1.0);
+        let lo = mx.partition_point(|&h| h <= mx[k] - wide);
+        let hi = mx.partition_point(|&h| h < mx[k] + wide);
+        if hi - lo >= DENSE_LEVELS {
+            wide
+        } else {
+            options.smooth_m
+        }
+    };
+    let smoothed = local_linear_varying(&mx, &residual, &half_width);
+    // Anchors: measured levels whose smoothed ln P keeps decreasing with height.
+    let mut anchors: Vec<(usize, f64)> = Vec::with_capacity(measured.len());
+    for (k, &(i, _)) in measured.iter().enumerate() {
+        let ln_p = hydro[i] + smoothed[k];
+        if anchors.last().is_none_or(|&(j, r)| ln_p < hydro[j] + r) {
+            anchors.push((i, smoothed[k]));
+        }
+    }
+    let mut ln_p = vec![0.0; n];
+    let mut is_measured = vec![false; n];
+    let mut next = 0;
+    for i in 0..n {
+        while next < anchors.len() && anchors[next].0 < i {
+            next += 1;
+        }
+        let r = if next < anchors.len() && anchors[next].0 == i {
+            is_measured[i] = true;
+            anchors[next].1
+        } else if next == 0 {
+            anchors[0].1
+        } else if next == anchors.len() {
+            anchors[anchors.len() - 1].1
+        } else {
+            let (a, ra) = anchors[next - 1];
+            let (b, rb) = anchors[next];
+            ra + (rb - ra) * (heights[i] - heights[a]) / (heights[b] - heights[a])
+        };
+        ln_p[i] = hydro[i] + r;
+    }
+    (ln_p, is_measured)
 }
 
 fn check_options(options: &FitOptions) -> Result<(), ProfileError> {

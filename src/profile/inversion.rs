@@ -19,10 +19,15 @@ pub struct InversionOptions {
     pub grid_step_m: f64,
     /// Smallest temperature increase (K) a layer must have to be reported. Default **1.0 K**:
     /// twice the largest noise-level wiggle (+0.5 K in the raw data of the Ny-Ålesund 2024-02-26
-    /// 11 UTC RS41 sounding, ≈0.45 K after the default smoothing) and ten reporting steps of
+    /// 11 UTC RS41 sounding, 0.38 K after the default smoothing) and ten reporting steps of
     /// 0.1 K; the weakest real layers of the test soundings (+3.5 K Bjørnøya) are well above it.
+    /// (Ny-Ålesund does have real weak layers higher up, +1.0 K at 1.3–1.5 km and +2.0 K at
+    /// 2.0–2.15 km, spread over 30–40 levels each; they are reported.)
     pub min_delta_t_k: f64,
-    /// Thickest non-inversion gap (m) across which two layers are merged. Default 30 m.
+    /// Thickest non-inversion gap (m) across which two layers are merged. Default 10 m: it
+    /// joins fragments that residual noise splits (after the default 20 m smoothing the noise is
+    /// correlated over ≈10 m) but keeps the paper's Fata Morgana layers, whose gap is ≈15 m,
+    /// apart.
     pub max_gap_m: f64,
     /// Largest cooling (K) inside such a gap that still allows the merge. Default 0.3 K.
     pub max_gap_cooling_k: f64,
@@ -36,7 +41,7 @@ impl Default for InversionOptions {
         InversionOptions {
             grid_step_m: 1.0,
             min_delta_t_k: 1.0,
-            max_gap_m: 30.0,
+            max_gap_m: 10.0,
             max_gap_cooling_k: 0.3,
             surface_tolerance_m: 10.0,
         }

@@ -22,22 +22,28 @@
 /// Smooth `values` (at `heights`, strictly increasing) with the tricube local-linear regression
 /// of half-width `half_width_m`. A half-width ≤ 0 (or non-finite) returns the input unchanged.
 pub(crate) fn local_linear(heights: &[f64], values: &[f64], half_width_m: f64) -> Vec<f64> {
+    local_linear_varying(heights, values, &|_| half_width_m)
+}
+
+/// As [`local_linear`], with a half-width that may differ per level (`half_width_m(i)` for the
+/// estimate at level `i`).
+pub(crate) fn local_linear_varying(
+    heights: &[f64],
+    values: &[f64],
+    half_width_m: &dyn Fn(usize) -> f64,
+) -> Vec<f64> {
     debug_assert_eq!(heights.len(), values.len());
     let n = heights.len();
-    if !(half_width_m > 0.0 && half_width_m.is_finite()) || n < 2 {
-        return values.to_vec();
-    }
     let mut out = Vec::with_capacity(n);
-    let mut lo = 0;
     for i in 0..n {
+        let half_width_m = half_width_m(i);
+        if !(half_width_m > 0.0 && half_width_m.is_finite()) {
+            out.push(values[i]);
+            continue;
+        }
         let x0 = heights[i];
-        while heights[lo] <= x0 - half_width_m {
-            lo += 1;
-        }
-        let mut hi = i + 1;
-        while hi < n && heights[hi] < x0 + half_width_m {
-            hi += 1;
-        }
+        let lo = heights.partition_point(|&h| h <= x0 - half_width_m);
+        let hi = heights.partition_point(|&h| h < x0 + half_width_m);
         if hi - lo <= 1 {
             out.push(values[i]);
             continue;

@@ -28,7 +28,7 @@
 //! temperature follows the shape of US1976, shifted to join continuously. `background = "us1976"`
 //! is US1976's shape shifted to the surface temperature. Step layers are C^∞; a constant-gradient
 //! layer is continuous in T with a jump in dT/dh at its ends (as the paper's layer is meant).
-//! Pressure: d(ln P)/dh = −g₀/(R_d·T_v) integrated once at construction (RK4, 0.5 m steps up to
+//! Pressure: d(ln P)/dh = −g₀/(R_d·T_v) integrated once at construction (RK4, 0.25 m nodes up to
 //! 500 m above the highest layer, 10 m above) and interpolated in ln P by a cubic Hermite with
 //! the exact hydrostatic slopes at the nodes. Vapour: e = RH·e_s(T) (Magnus, `units.rs`).
 
@@ -380,7 +380,7 @@ impl SyntheticAtmosphere {
             surface_height_m,
             atmosphere.surface_pressure_pa,
             MODEL_TOP_M,
-            &[(fine_top, 0.5), (f64::INFINITY, 10.0)],
+            &[(fine_top, 0.25), (f64::INFINITY, 10.0)],
             &tv,
         );
         atmosphere.pressure = table;
