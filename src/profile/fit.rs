@@ -631,3 +631,81 @@ impl AirColumn for Profile {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sounding::{HeightSource, Level, SoundingFormat};
+
+    fn sounding(levels: &[(f64, f64, Option<f64>, Option<f64>)]) -> Sounding {
+        Sounding {
+            source: PathBuf::from("unit"),
+            format: SoundingFormat::NormalizedCsv,
+            metadata: Default::default(),
+            levels: levels
+                .iter()
+                .enumerate()
+                .map(|(i, &(h, t, p, e))| Level {
+                    height_m: h,
+                    pressure_pa: p,
+                    temperature_k: t,
+                    vapour_pressure_pa: e,
+                    height_source: HeightSource::Measured,
+                    line: i + 1,
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn top_join_is_c1_even_inside_an_inversion() {
+        // A TEMP-like sounding that ends inside a strong inversion: the blend must still join
+        // with value and slope, and the slope-matching bump stays bounded.
+        let s = sounding(&[
+            (10.0, 250.0, Some(101_000.0), Some(100.0)),
+            (200.0, 255.0, Some(98_700.0), Some(120.0)),
+            (400.0, 262.0, Some(96_300.0), Some(90.0)),
+        ]);
+        let p = Profile::from_sounding(&s, &FitOptions::default()).unwrap();
+        let (a, b) = (p.air_at(400.0 - 1e-7), p.air_at(400.0 + 1e-7));
+        assert!((a.temperature_k - b.temperature_k).abs() < 1e-6);
+        assert!((a.dtemperature_dh_k_per_m - b.dtemperature_dh_k_per_m).abs() < 1e-6);
+        assert!((a.dpressure_dh_pa_per_m / b.dpressure_dh_pa_per_m - 1.0).abs() < 1e-6);
+        assert!((a.dvapour_pressure_dh_pa_per_m - b.dvapour_pressure_dh_pa_per_m).abs() < 1e-9);
+        // T_top = 262 K is 23.5 K colder than US1976 at 400 m. Above, T relaxes towards the
+        // (cooling) standard — that alone peaks at ≈264.9 K about 1.2 km above the top — and
+        // the slope-matching bump adds at most 5 K, so T stays below 270 K and above 200 K.
+        let mut h = 400.0;
+        while h < 20_000.0 {
+            let t = p.air_at(h).temperature_k;
+            assert!(t < 270.0 && t > 200.0, "{h}: {t}");
+            h += 10.0;
+        }
+    }
+
+    #[test]
+    fn missing_pressures_are_hydrostatic_and_anchored() {
+        // Isothermal 260 K, dry: ln P is linear in h, so a pressure withheld in the middle is
+        // recovered exactly (up to the RK4 error) from its neighbours.
+        let g = G_OVER_R / 260.0;
+        let p = |h: f64| 100_000.0 * (-g * h).exp();
+        let s = sounding(&[
+            (0.0, 260.0, Some(p(0.0)), None),
+            (300.0, 260.0, None, None),
+            (700.0, 260.0, Some(p(700.0)), None),
+        ]);
+        let fit = Profile::from_sounding(&s, &FitOptions::default()).unwrap();
+        assert!((fit.air_at(300.0).pressure_pa / p(300.0) - 1.0).abs() < 1e-12);
+        assert!(!fit.levels()[1].pressure_measured && fit.levels()[2].pressure_measured);
+        // No pressure at all: from the given surface pressure.
+        let s = sounding(&[(0.0, 260.0, None, None), (500.0, 260.0, None, None)]);
+        let options = FitOptions {
+            surface_pressure_pa: Some(100_000.0),
+            ..FitOptions::default()
+        };
+        let fit = Profile::from_sounding(&s, &options).unwrap();
+        assert!((fit.air_at(500.0).pressure_pa / p(500.0) - 1.0).abs() < 1e-12);
+        // Dry sounding: no vapour.
+        assert_eq!(fit.air_at(250.0).vapour_pressure_pa, 0.0);
+    }
+}

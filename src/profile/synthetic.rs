@@ -270,8 +270,21 @@ impl SyntheticAtmosphere {
             (100.0, 1100.0),
             "hPa",
         )?;
-        let background = match &raw.background {
-            Some(b) if matches!(b.get_ref(), RawBackground::Us1976) => {
+        // None = "us1976", Some(lapse) otherwise (default −0.0065 K/m).
+        let lapse = match &raw.background {
+            Some(b) => match b.get_ref() {
+                RawBackground::Us1976 => None,
+                RawBackground::Lapse(v) => Some(rep.within(
+                    &Spanned::new(b.span(), *v),
+                    "background",
+                    (-0.0342, 0.03),
+                    "K/m",
+                )?),
+            },
+            None => Some(-0.0065),
+        };
+        let background = match lapse {
+            None => {
                 if let Some(t) = &raw.tropopause_m {
                     return Err(rep.at(
                         t.span().start,
@@ -280,19 +293,7 @@ impl SyntheticAtmosphere {
                 }
                 Background::Us1976
             }
-            other => {
-                let lapse = match other {
-                    Some(b) => match b.get_ref() {
-                        RawBackground::Lapse(v) => rep.within(
-                            &Spanned::new(b.span(), *v),
-                            "background",
-                            (-0.0342, 0.03),
-                            "K/m",
-                        )?,
-                        RawBackground::Us1976 => unreachable!("handled above"),
-                    },
-                    None => -0.0065,
-                };
+            Some(lapse_rate_k_per_m) => {
                 let tropopause_m = match &raw.tropopause_m {
                     Some(t) => rep.within(
                         t,
@@ -303,7 +304,7 @@ impl SyntheticAtmosphere {
                     None => 11_000.0f64.max(surface_height_m + 1000.0),
                 };
                 Background::Lapse {
-                    lapse_rate_k_per_m: lapse,
+                    lapse_rate_k_per_m,
                     tropopause_m,
                 }
             }
@@ -579,5 +580,82 @@ impl AirColumn for SyntheticAtmosphere {
             vapour_pressure_pa: e,
             dvapour_pressure_dh_pa_per_m: de,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> SyntheticAtmosphere {
+        SyntheticAtmosphere::from_toml_str(text, Path::new("test")).unwrap()
+    }
+
+    #[test]
+    fn step_layer_follows_the_tanh_formula() {
+        let a = parse(
+            "surface_temperature_c = 0\nsurface_pressure_hpa = 1000\nbackground = 0\n\
+             [[layers]]\nbase_m = 50\nthickness_m = 20\ndelta_t_k = 8\n",
+        );
+        // base 50 m + L/2 → centre 60 m; scale L/4 = 5 m.
+        for h in [40.0, 55.0, 60.0, 63.0, 90.0] {
+            let z: f64 = (h - 60.0) / 5.0;
+            let offset = 4.0 * (1.0 + (-12.0f64).tanh());
+            let expected = 273.15 + 4.0 * (1.0 + z.tanh()) - offset;
+            let s = a.air_at(h);
+            assert!((s.temperature_k - expected).abs() < 1e-12, "{h}");
+            let slope = 8.0 * 0.5 * (1.0 - z.tanh().powi(2)) / 5.0;
+            assert!((s.dtemperature_dh_k_per_m - slope).abs() < 1e-12, "{h}");
+        }
+        // 96 % of the change lies inside the layer (tanh(2) = 0.964).
+        let inside = a.air_at(70.0).temperature_k - a.air_at(50.0).temperature_k;
+        assert!((inside / 8.0 - 2.0f64.tanh()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn gradient_layer_and_tropopause() {
+        let a = parse(
+            "surface_temperature_c = -10\nsurface_pressure_hpa = 1000\ntropopause_m = 9000\n\
+             [[layers]]\nfrom_m = 0\nto_m = 50\ngradient_k_per_m = 0.1\n",
+        );
+        let t0 = 263.15;
+        assert!((a.air_at(20.0).temperature_k - (t0 + 20.0 * 0.0935)).abs() < 1e-12);
+        assert!((a.air_at(20.0).dtemperature_dh_k_per_m - 0.0935).abs() < 1e-15);
+        assert!((a.air_at(100.0).temperature_k - (t0 + 5.0 - 0.65)).abs() < 1e-12);
+        // Above the tropopause: the US1976 shape (isothermal from 11 km geopotential).
+        let above = a.air_at(10_000.0);
+        let trop = t0 + 5.0 - 0.0065 * 9000.0;
+        let shape = us1976(10_000.0).temperature_k - us1976(9000.0).temperature_k;
+        assert!((above.temperature_k - (trop + shape)).abs() < 1e-9);
+        assert!(matches!(
+            a.background(),
+            Background::Lapse { tropopause_m, .. } if tropopause_m == 9000.0
+        ));
+        assert_eq!(a.layers().len(), 1);
+    }
+
+    #[test]
+    fn implausible_columns_are_rejected() {
+        // A −0.03 K/m lapse from −80 °C reaches far below 100 K by 11 km.
+        let e = SyntheticAtmosphere::from_toml_str(
+            "surface_temperature_c = -80\nsurface_pressure_hpa = 1000\nbackground = -0.03\n",
+            Path::new("cold"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("plausible"), "{e}");
+        let e = SyntheticAtmosphere::from_toml_str(
+            "surface_temperature_c = 0\nsurface_pressure_hpa = 1000\nbackground = \"us1976\"\n\
+             tropopause_m = 9000\n",
+            Path::new("t"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("tropopause_m"), "{e}");
+        let e = SyntheticAtmosphere::from_toml_str(
+            "surface_temperature_c = 0\nsurface_pressure_hpa = 1000\n\
+             [[layers]]\ncentre_m = -100\nthickness_m = 10\ndelta_t_k = 3\n",
+            Path::new("t"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("below the surface"), "{e}");
     }
 }

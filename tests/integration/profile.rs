@@ -131,6 +131,7 @@ fn tanh_step_inversion(delta_t: f64, thickness: f64, lapse: f64) -> (f64, f64) {
 fn a_15_m_layer_survives_noise_and_noise_makes_no_layers() {
     // Brief (a): 5 m sampling, 0.1 K white noise, a +3 K step 15 m thick at 300 m over −6.5 K/km.
     let (half, true_dt) = tanh_step_inversion(3.0, 15.0, -0.0065);
+    let (mut dt_min, mut dt_max) = (f64::INFINITY, f64::NEG_INFINITY);
     for seed in 1..=20u64 {
         let mut noise = Noise(seed);
         let levels: Vec<_> = (0..=600)
@@ -151,6 +152,8 @@ fn a_15_m_layer_survives_noise_and_noise_makes_no_layers() {
             "seed {seed}: ΔT {} vs {true_dt}",
             l.delta_t_k
         );
+        dt_min = dt_min.min(l.delta_t_k);
+        dt_max = dt_max.max(l.delta_t_k);
         assert!(l.base_m < 300.0 && l.top_m > 300.0, "{l:?}");
         assert!(
             l.base_m > 300.0 - half - 30.0 && l.top_m < 300.0 + half + 30.0,
@@ -178,6 +181,7 @@ fn a_15_m_layer_survives_noise_and_noise_makes_no_layers() {
             "{raw_runs} {smooth_runs}"
         );
     }
+    println!("15 m layer in noise, 20 seeds: ΔT {dt_min:.3}…{dt_max:.3} K (true {true_dt:.3} K)");
 }
 
 #[test]
@@ -206,6 +210,7 @@ fn bjornoya_low_elevated_inversion() {
     let s = load("Bjornoya-01028_2024022611.csv");
     let profile = fit(&s);
     let layers = layers_below(&profile, 1000.0);
+    println!("Bjørnøya below 1 km: {layers:?}");
     assert_eq!(layers.len(), 1, "{layers:?}");
     let l = &layers[0];
     assert!((l.base_m - 86.0).abs() <= 15.0, "{l:?}");
@@ -221,6 +226,7 @@ fn trois_rivieres_warm_nose() {
     let s = load("TroisRivieres-UQAM_2022022222.csv");
     let profile = fit(&s);
     let layers = layers_below(&profile, 1000.0);
+    println!("Trois-Rivières below 1 km: {layers:?}");
     assert_eq!(layers.len(), 1, "{layers:?}");
     let l = &layers[0];
     assert!((l.base_m - 416.0).abs() <= 15.0, "{l:?}");
@@ -257,6 +263,30 @@ fn sparse_soundings_are_not_smoothed_and_extrema_sit_on_levels() {
         "{l:?}"
     );
     assert!((l.delta_t_k - 1.7).abs() < 1e-6, "{l:?}");
+    // IGRA2-derived Utqiagvik 2014-09-10 (97 levels, no humidity): every level with no
+    // neighbour closer than 20 m is a knot; README: +4.1 °C from 652 m (−3.45) to 853 m (+0.65).
+    let s = load("Utqiagvik-70026_2014091012.csv");
+    let profile = fit(&s);
+    for (i, level) in s.levels.iter().enumerate() {
+        let isolated = (i == 0 || level.height_m - s.levels[i - 1].height_m >= 20.0)
+            && (i + 1 == s.levels.len() || s.levels[i + 1].height_m - level.height_m >= 20.0);
+        if isolated {
+            let a = profile.air_at(level.height_m);
+            assert!(
+                (a.temperature_k - level.temperature_k).abs() < 1e-9,
+                "{level:?}"
+            );
+            assert_eq!(a.vapour_pressure_pa, 0.0);
+        }
+    }
+    let layers = layers_below(&profile, 1500.0);
+    println!("Utqiagvik 2014 below 1.5 km: {layers:?}");
+    assert!(
+        layers
+            .iter()
+            .any(|l| (l.base_m - 652.0).abs() <= 1.0 && (l.delta_t_k - 4.1).abs() < 0.05),
+        "{layers:?}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
