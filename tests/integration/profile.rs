@@ -844,3 +844,51 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn sparse_real_soundings_match_the_readme() {
+    // Expected layers from shared/soundings/README.md (read off the data there, not from this
+    // code). Sparse levels: extrema sit exactly on levels, so base/top are exact.
+    let check = |name: &str, base: f64, top: f64, dt: f64, kind: InversionKind| {
+        let s = load(name);
+        let p = fit(&s);
+        let layers = layers_below(&p, top + 500.0);
+        assert!(
+            layers.iter().any(|l| (l.base_m - base).abs() < 1.0
+                && (l.top_m - top).abs() < 1.0
+                && (l.delta_t_k - dt).abs() < 0.051
+                && l.kind == kind),
+            "{name}: {layers:?}"
+        );
+    };
+    // Marine-layer capping inversion +10.8 °C: 12.6 °C at 590 m to 23.4 °C at 961 m MSL.
+    check(
+        "SanDiego-72293_2023063012.csv",
+        590.0,
+        961.0,
+        10.8,
+        InversionKind::Elevated,
+    );
+    // Valley inversion +5.5 °C: −0.1 °C at 874 m (surface) to 5.4 °C at 1133 m.
+    check(
+        "Boise-72681_2010120912.csv",
+        874.0,
+        1133.0,
+        5.5,
+        InversionKind::Surface,
+    );
+    // Deep surface inversion: −34.1 °C at the surface to −16.1 °C at 1354 m (+18.0).
+    let cherskiy = load("Cherskiy-25123_2026020600.csv");
+    let surface = cherskiy.levels[0].height_m;
+    check(
+        "Cherskiy-25123_2026020600.csv",
+        surface,
+        1354.0,
+        18.0,
+        InversionKind::Surface,
+    );
+    // Ordinary warm-season lapse profile: nothing in the lowest 3 km.
+    let norman = load("Norman-72357_1999050400.csv");
+    let p = fit(&norman);
+    assert!(layers_below(&p, p.surface_height_m() + 3000.0).is_empty());
+}
