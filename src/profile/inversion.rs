@@ -48,6 +48,9 @@ impl Default for InversionOptions {
     }
 }
 
+/// Most grid intervals sampled (bounds memory and time for tiny steps or huge spans).
+const MAX_INTERVALS: usize = 1_000_000;
+
 /// A candidate layer: grid indices of base and top.
 #[derive(Debug, Clone, Copy)]
 struct Run {
@@ -57,7 +60,7 @@ struct Run {
 
 /// The inversion layers of `column` between its surface and `top_m` (m above mean sea level),
 /// lowest first. Non-finite or non-positive options, a `top_m` at or below the surface, or
-/// non-finite temperatures give an empty list (never a panic). At most 10⁷ grid points are
+/// non-finite temperatures give an empty list (never a panic). At most 10⁶ grid intervals are
 /// sampled (the step is widened if needed).
 pub fn detect_inversions(
     column: &dyn AirColumn,
@@ -72,11 +75,16 @@ pub fn detect_inversions(
         return Vec::new();
     }
     let span = top_m - surface;
-    let intervals = ((span / options.grid_step_m).ceil() as usize).clamp(1, 10_000_000);
+    let intervals = ((span / options.grid_step_m).ceil() as usize).clamp(1, MAX_INTERVALS);
     let step = span / intervals as f64;
     let heights: Vec<f64> = (0..=intervals).map(|i| surface + step * i as f64).collect();
-    let samples: Vec<_> = heights.iter().map(|&h| column.air_at(h)).collect();
-    let t: Vec<f64> = samples.iter().map(|s| s.temperature_k).collect();
+    let (t, gradient): (Vec<f64>, Vec<f64>) = heights
+        .iter()
+        .map(|&h| {
+            let air = column.air_at(h);
+            (air.temperature_k, air.dtemperature_dh_k_per_m)
+        })
+        .unzip();
     if t.iter().any(|v| !v.is_finite()) {
         return Vec::new();
     }
@@ -124,9 +132,9 @@ pub fn detect_inversions(
             }
             let base_m = heights[run.base];
             let top_m = heights[run.top];
-            let max_gradient_k_per_m = samples[run.base..=run.top]
+            let max_gradient_k_per_m = gradient[run.base..=run.top]
                 .iter()
-                .map(|s| s.dtemperature_dh_k_per_m)
+                .copied()
                 .fold(f64::NEG_INFINITY, f64::max);
             let base_agl_m = base_m - surface;
             Some(InversionLayer {
