@@ -6,7 +6,8 @@
 //! Heights are treated as geopotential with constant standard gravity g₀ (radiosonde heights are
 //! geopotential in most formats; the difference to geometric height is below 0.3 % of dP/dh under
 //! 20 km). Integration is classical Runge–Kutta (4th order) in ln P; for dry air it reduces to
-//! Simpson's rule.
+//! Simpson's rule. Written by hand: a fixed-step RK4 of one scalar equation is a dozen lines, and
+//! the Hermite storage reuses the `splines`-based cubic of `monotone.rs`.
 
 use super::monotone::MonotoneCubic;
 use crate::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, EPSILON_WATER_DRY, STANDARD_GRAVITY_M_S2};
