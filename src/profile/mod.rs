@@ -3,7 +3,25 @@
 //! derivatives, blended into the U.S. Standard Atmosphere 1976 above the data, plus the inversion
 //! layers and refractive regimes found in it.
 
+mod error;
+mod fit;
+mod hydrostatic;
+mod inversion;
+mod monotone;
+mod smooth;
+mod standard;
+mod synthetic;
 pub mod us1976;
+
+pub use error::ProfileError;
+pub use fit::{FitOptions, Profile, ProfileKnot};
+pub use inversion::{InversionOptions, detect_inversions};
+pub use standard::StandardAtmosphere;
+pub use synthetic::{Background, SyntheticAtmosphere, SyntheticLayer};
+
+/// Highest height any column here models (m): the top of the U.S. Standard Atmosphere 1976
+/// (86 km geometric). Above it every column returns its 86 km air.
+pub const MODEL_TOP_M: f64 = 86_000.0;
 
 /// The state of the air at one height, with height derivatives (SI).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -20,6 +38,21 @@ pub struct AirSample {
     pub vapour_pressure_pa: f64,
     /// de/dh (Pa m⁻¹).
     pub dvapour_pressure_dh_pa_per_m: f64,
+}
+
+impl AirSample {
+    /// A sample whose every field is NaN: what the columns here return for a NaN height, so that
+    /// the caller's NaN check sees it (they never panic on one).
+    pub fn nan() -> Self {
+        AirSample {
+            temperature_k: f64::NAN,
+            dtemperature_dh_k_per_m: f64::NAN,
+            pressure_pa: f64::NAN,
+            dpressure_dh_pa_per_m: f64::NAN,
+            vapour_pressure_pa: f64::NAN,
+            dvapour_pressure_dh_pa_per_m: f64::NAN,
+        }
+    }
 }
 
 /// A column of air: anything that gives T, P, e and their derivatives by height above mean sea

@@ -1,0 +1,188 @@
+//! Stage 2 — fit: the monotone-safe cubic used for every fitted quantity. In: knots (strictly
+//! increasing heights, finite values). Out: a C¹ curve through every knot with its analytic
+//! derivative, that never leaves the range of the two knots around it (no new extrema, so it
+//! never invents an inversion).
+//!
+//! The curve is PCHIP: a piecewise cubic Hermite with Fritsch–Butland (weighted harmonic mean)
+//! tangents inside and SciPy's shape-preserving three-point rule at the ends. It is stored in the
+//! `splines` crate as `Interpolation::StrokeBezier` keys, whose Bézier controls are exactly the
+//! Hermite tangents: `out_k = y_k + h_k·m_k/3`, `in_{k+1} = y_{k+1} − h_k·m_{k+1}/3` (h_k = the
+//! segment's width). `splines` has no derivative, so it is computed here from the same segment's
+//! controls, which keeps value and slope consistent. The tangent rule is written by hand because
+//! no crate offers PCHIP tangents over `splines` keys.
+
+use splines::{Interpolation, Key, Spline};
+
+/// A PCHIP curve through knots, value and slope by height.
+#[derive(Debug, Clone)]
+pub(crate) struct MonotoneCubic {
+    spline: Spline<f64, f64>,
+    /// (height, value, slope) of the first and last knot, for the ends the spline does not serve.
+    first: (f64, f64, f64),
+    last: (f64, f64, f64),
+}
+
+/// PCHIP tangents (Fritsch–Butland inside, SciPy's three-point shape-preserving rule at the ends).
+/// `x` strictly increasing, `x.len() == y.len() >= 2`.
+pub(crate) fn pchip_slopes(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    debug_assert!(n >= 2 && y.len() == n);
+    let h: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    let d: Vec<f64> = (0..n - 1).map(|k| (y[k + 1] - y[k]) / h[k]).collect();
+    if n == 2 {
+        return vec![d[0], d[0]];
+    }
+    let mut m = vec![0.0; n];
+    for k in 1..n - 1 {
+        if d[k - 1] * d[k] > 0.0 {
+            let w1 = 2.0 * h[k] + h[k - 1];
+            let w2 = h[k] + 2.0 * h[k - 1];
+            m[k] = (w1 + w2) / (w1 / d[k - 1] + w2 / d[k]);
+        }
+    }
+    m[0] = end_slope(h[0], h[1], d[0], d[1]);
+    m[n - 1] = end_slope(h[n - 2], h[n - 3], d[n - 2], d[n - 3]);
+    m
+}
+
+/// One-sided three-point slope, limited so the end segment keeps the data's shape.
+fn end_slope(h0: f64, h1: f64, d0: f64, d1: f64) -> f64 {
+    let m = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1);
+    if sign(m) != sign(d0) {
+        0.0
+    } else if sign(d0) != sign(d1) && m.abs() > 3.0 * d0.abs() {
+        3.0 * d0
+    } else {
+        m
+    }
+}
+
+/// −1, 0 or +1 (unlike `f64::signum`, zero maps to zero).
+fn sign(v: f64) -> i8 {
+    if v > 0.0 {
+        1
+    } else if v < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+impl MonotoneCubic {
+    /// PCHIP through `(x, y)`. Callers guarantee at least two knots, strictly increasing finite
+    /// heights and finite values (checked in debug builds).
+    pub(crate) fn new(x: &[f64], y: &[f64]) -> Self {
+        let m = pchip_slopes(x, y);
+        Self::with_slopes(x, y, &m)
+    }
+
+    /// A cubic Hermite through `(x, y)` with the given slopes (used with exact hydrostatic
+    /// slopes for ln P).
+    pub(crate) fn with_slopes(x: &[f64], y: &[f64], m: &[f64]) -> Self {
+        let n = x.len();
+        debug_assert!(n >= 2 && y.len() == n && m.len() == n);
+        debug_assert!(x.windows(2).all(|w| w[1] > w[0]));
+        let keys = (0..n)
+            .map(|k| {
+                let h_in = if k > 0 { x[k] - x[k - 1] } else { 0.0 };
+                let h_out = if k + 1 < n { x[k + 1] - x[k] } else { 0.0 };
+                Key::new(
+                    x[k],
+                    y[k],
+                    Interpolation::StrokeBezier(
+                        y[k] - h_in * m[k] / 3.0,
+                        y[k] + h_out * m[k] / 3.0,
+                    ),
+                )
+            })
+            .collect();
+        MonotoneCubic {
+            spline: Spline::from_vec(keys),
+            first: (x[0], y[0], m[0]),
+            last: (x[n - 1], y[n - 1], m[n - 1]),
+        }
+    }
+
+    /// Value and d/dh at `h`. Outside the knots the end value is held with the end slope reported
+    /// (callers handle the outside themselves); a NaN height gives NaN (never a panic: the
+    /// `splines` search would panic on NaN, so it is never called with one).
+    pub(crate) fn value_slope(&self, h: f64) -> (f64, f64) {
+        if h.is_nan() {
+            return (f64::NAN, f64::NAN);
+        }
+        if h <= self.first.0 {
+            return (self.first.1, self.first.2);
+        }
+        if h >= self.last.0 {
+            return (self.last.1, self.last.2);
+        }
+        let Some(sampled) = self.spline.sample_with_key(h) else {
+            // Unreachable for first < h < last; hold the nearer end rather than panic.
+            return (self.last.1, self.last.2);
+        };
+        let keys = self.spline.keys();
+        let k0 = &keys[sampled.key];
+        let k1 = &keys[sampled.key + 1];
+        let (a, b) = (k0.value, k1.value);
+        let u = match k0.interpolation {
+            Interpolation::StrokeBezier(_, out) => out,
+            _ => a,
+        };
+        let v = match k1.interpolation {
+            Interpolation::StrokeBezier(inp, _) => inp,
+            _ => b,
+        };
+        let width = k1.t - k0.t;
+        let s = (h - k0.t) / width;
+        let r = 1.0 - s;
+        let slope = 3.0 * ((u - a) * r * r + 2.0 * (v - u) * r * s + (b - v) * s * s) / width;
+        (sampled.value, slope)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn matches_scipy_pchip_tangents() {
+        // Expected slopes worked by hand from the published Fritsch–Butland rule and SciPy's
+        // documented end rule (not from this code's output). Interior k=1: d0 = 1, d1 = 0.5, h0 = 1, h1 = 2 → w1 = 5, w2 = 4 → m = 9/(5/1 + 4/0.5) = 9/13.
+        let x = [0.0, 1.0, 3.0, 4.0];
+        let y = [0.0, 1.0, 2.0, 1.0];
+        let m = pchip_slopes(&x, &y);
+        assert!((m[1] - 9.0 / 13.0).abs() < 1e-15);
+        // k=2: d1 = 0.5, d2 = −1: sign change → 0 (the local maximum sits on the knot).
+        assert_eq!(m[2], 0.0);
+        // start: ((2·1+2)·1 − 1·0.5)/3 = 3.5/3, same sign as d0, d0 and d1 same sign → kept.
+        assert!((m[0] - 3.5 / 3.0).abs() < 1e-15);
+        // end: h0 = 1 (last), h1 = 2, d0 = −1, d1 = 0.5: ((2+2)(−1) − 0.5)/3 = −1.5; sign flip
+        // of d and |m| ≤ 3|d0| → kept.
+        assert!((m[3] + 1.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn hermite_reproduces_a_cubic_with_exact_slopes() {
+        // y = x³ − 2x, y' = 3x² − 2: a cubic Hermite with exact slopes is exact.
+        let x: Vec<f64> = (0..6).map(|i| i as f64 * 0.7 - 1.0).collect();
+        let y: Vec<f64> = x.iter().map(|t| t * t * t - 2.0 * t).collect();
+        let m: Vec<f64> = x.iter().map(|t| 3.0 * t * t - 2.0).collect();
+        let c = MonotoneCubic::with_slopes(&x, &y, &m);
+        for i in 0..500 {
+            let t = -1.0 + 3.5 * i as f64 / 499.0;
+            let (v, s) = c.value_slope(t);
+            assert!((v - (t * t * t - 2.0 * t)).abs() < 1e-12, "{t}");
+            assert!((s - (3.0 * t * t - 2.0)).abs() < 1e-11, "{t}");
+        }
+    }
+
+    #[test]
+    fn nan_and_ends_do_not_panic() {
+        let c = MonotoneCubic::new(&[0.0, 1.0], &[2.0, 3.0]);
+        assert!(c.value_slope(f64::NAN).0.is_nan());
+        assert_eq!(c.value_slope(1.0), (3.0, 1.0));
+        assert_eq!(c.value_slope(-5.0), (2.0, 1.0));
+        let (v, s) = c.value_slope(0.25);
+        assert!((v - 2.25).abs() < 1e-15 && (s - 1.0).abs() < 1e-14);
+    }
+}
