@@ -17,6 +17,8 @@
 pub mod output;
 pub mod profile;
 pub mod refractivity;
+pub mod render;
+pub mod scene;
 pub mod sounding;
 pub mod tracer;
 pub mod units;
