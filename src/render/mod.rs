@@ -23,7 +23,7 @@ use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::scene::camera::CameraFrame;
-use crate::scene::{Scene, Sea, Sky, Sun, Texture, samples_per_pixel_root};
+use crate::scene::{Scene, Sky, Sun, Texture, samples_per_pixel_root};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use fan::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 
@@ -111,11 +111,47 @@ struct ViewCard<'a> {
     texture: &'a Texture,
 }
 
+/// A smooth function of one angle, tabulated uniformly and interpolated linearly (the sky and the
+/// sea are evaluated per sample; a table replaces a `powf` and three `exp` by one lookup).
+struct AngleTable {
+    start: f64,
+    inv_step: f64,
+    values: Vec<[f64; 3]>,
+}
+
+impl AngleTable {
+    /// Entries: sky and sea vary on scales of a degree near the horizon; 8192 entries over at most
+    /// 180° keep the linear-interpolation error below 1e-4 of the value.
+    const ENTRIES: usize = 8192;
+
+    fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3]) -> Self {
+        let n = Self::ENTRIES;
+        let step = ((hi - lo) / (n - 1) as f64).max(1e-300);
+        Self {
+            start: lo,
+            inv_step: 1.0 / step,
+            values: (0..n).map(|i| f(lo + i as f64 * step)).collect(),
+        }
+    }
+
+    #[inline]
+    fn at(&self, x: f64) -> [f64; 3] {
+        let last = self.values.len() - 1;
+        let p = ((x - self.start) * self.inv_step).clamp(0.0, last as f64);
+        let p = if p.is_nan() { 0.0 } else { p };
+        let i = (p as usize).min(last - 1);
+        let t = p - i as f64;
+        let (a, b) = (self.values[i], self.values[i + 1]);
+        [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t)
+    }
+}
+
 /// Everything shading needs, resolved once per frame.
 struct Shader<'a> {
     cards: Vec<ViewCard<'a>>,
     sky: Sky,
-    sea: Sea,
+    sky_table: AngleTable,
+    sea_table: AngleTable,
     sun: Option<Sun>,
     fallback: [f64; 3],
 }
@@ -141,7 +177,10 @@ impl Shader<'_> {
             if h < card.base_m || h > card.top_m {
                 continue;
             }
-            let offset = wrap_pi(azimuth - card.azimuth_rad);
+            let mut offset = azimuth - card.azimuth_rad;
+            if offset.abs() > std::f64::consts::PI {
+                offset = wrap_pi(offset);
+            }
             if offset.abs() > card.half_width_rad {
                 continue;
             }
@@ -157,9 +196,9 @@ impl Shader<'_> {
             }
         }
         let background = match end {
-            FanEnd::Ground { grazing_rad, .. } => self.sea.radiance(grazing_rad, &self.sky),
+            FanEnd::Ground { grazing_rad, .. } => self.sea_table.at(grazing_rad),
             FanEnd::Sky { elevation_rad } => {
-                let mut l = self.sky.radiance(alpha);
+                let mut l = self.sky_table.at(alpha);
                 if let Some(sun) = &self.sun {
                     let disc = sun.disc(azimuth, elevation_rad);
                     if disc > 0.0 {
@@ -306,10 +345,13 @@ pub fn render_scene(
             texture: &c.texture,
         });
     }
+    let elevations = elevation_range(&frame, width, height, pixel_rad);
+    let (sky, sea) = (scene.sky, scene.sea);
     let shader = Shader {
         cards,
-        sky: scene.sky,
-        sea: scene.sea,
+        sky,
+        sky_table: AngleTable::new(elevations.0, elevations.1, |e| sky.radiance(e)),
+        sea_table: AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| sea.radiance(g, &sky)),
         sun: scene.sun,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),
@@ -332,7 +374,7 @@ pub fn render_scene(
                 let r = 0.5 * s.angular_diameter_rad + 2.0 * pixel_rad;
                 (s.elevation_rad - r, s.elevation_rad + r)
             }),
-            elevation_range_rad: elevation_range(&frame, width, height, pixel_rad),
+            elevation_range_rad: elevations,
             pixel_rad,
             tolerance_px: options.tolerance_px,
             max_depth: options.max_refine_depth,
@@ -438,6 +480,19 @@ mod tests {
         );
         assert!((wrap_pi(-0.1) + 0.1).abs() < 1e-15);
         assert_eq!(wrap_pi(f64::NAN), 0.0);
+    }
+
+    #[test]
+    fn angle_table_interpolates_the_sky_closely() {
+        let sky = Sky::default();
+        let table = AngleTable::new(-0.1, 1.5, |e| sky.radiance(e));
+        for i in 0..1000 {
+            let e = -0.1 + 1.6 * (i as f64 + 0.37) / 1000.0;
+            let (a, b) = (table.at(e), sky.radiance(e));
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() <= 1e-4 * b[c], "{e}: {a:?} {b:?}");
+            }
+        }
     }
 
     #[test]

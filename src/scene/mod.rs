@@ -538,7 +538,7 @@ impl Scene {
                 )?,
                 intensity: c.range(
                     "sun.intensity",
-                    rs.intensity.unwrap_or(60.0),
+                    rs.intensity.unwrap_or(10.0),
                     0.0,
                     1e9,
                     "0…1e9",

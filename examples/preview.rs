@@ -1,0 +1,65 @@
+//! Render a scene with the closed-form constant-curvature rays (no real atmosphere) to PNG/EXR —
+//! a development preview of the renderer:
+//! `cargo run --release --example preview -- SCENE.toml OUT.png [k] [--exact] [--spp N]`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use ghostship::output::{exr, png, write_atomic};
+use ghostship::render::{ConstantCurvatureRays, RenderOptions, render_scene};
+use ghostship::scene::Scene;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let scene_path = PathBuf::from(args.first().expect("scene path"));
+    let out = PathBuf::from(args.get(1).expect("output path"));
+    let k: f64 = args
+        .get(2)
+        .filter(|a| !a.starts_with("--"))
+        .map(|a| a.parse())
+        .transpose()?
+        .unwrap_or(0.17);
+    let exact = args.iter().any(|a| a == "--exact");
+    let spp = args
+        .iter()
+        .position(|a| a == "--spp")
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse())
+        .transpose()?;
+    let scene = Scene::from_file(&scene_path)?;
+    let k = if scene.atmosphere.straight { 0.0 } else { k };
+    let tracer = ConstantCurvatureRays::new(k, scene.earth_radius_m)?;
+    let options = RenderOptions {
+        exact,
+        samples_per_pixel: spp,
+        quiet: true,
+        ..RenderOptions::default()
+    };
+    let t = Instant::now();
+    let film = render_scene(&scene, &tracer, &options)?;
+    let dt = t.elapsed();
+    eprintln!(
+        "{}: {}x{} in {:.1} ms, {:?}",
+        scene_path.display(),
+        film.width,
+        film.height,
+        dt.as_secs_f64() * 1e3,
+        film.stats
+    );
+    let bytes = if out.extension().is_some_and(|e| e == "exr") {
+        exr::encode_exr(
+            &film,
+            &exr::ExrMetadata {
+                scene_hash: scene.hash_hex.clone(),
+                observer_height_m: scene.camera.height_m,
+                wavelength_nm: scene.atmosphere.wavelength_nm,
+                tolerance_px: (!exact).then_some(options.tolerance_px),
+                extra: vec![("tracer".into(), format!("constant curvature k={k}"))],
+            },
+        )?
+    } else {
+        png::encode_png(&film, png::DEFAULT_EXPOSURE)?
+    };
+    write_atomic(&out, &bytes)?;
+    Ok(())
+}
