@@ -112,6 +112,9 @@ impl Sun {
     #[inline]
     pub fn disc(&self, azimuth_rad: f64, elevation_rad: f64) -> f64 {
         let radius = 0.5 * self.angular_diameter_rad;
+        if !(elevation_rad.is_finite() && azimuth_rad.is_finite()) {
+            return 0.0;
+        }
         // Quick reject on elevation (cheap), then the haversine distance on the sphere.
         if (elevation_rad - self.elevation_rad).abs() > radius {
             return 0.0;
