@@ -5,8 +5,9 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use ghostship::output::{exr, png, write_atomic};
-use ghostship::render::{ConstantCurvatureRays, RenderOptions, render_scene};
+use ghostship::output::film::write_film;
+use ghostship::output::png;
+use ghostship::render::{ConstantCurvatureRays, RenderOptions, provenance, render_scene};
 use ghostship::scene::Scene;
 
 fn main() -> anyhow::Result<()> {
@@ -46,20 +47,9 @@ fn main() -> anyhow::Result<()> {
         dt.as_secs_f64() * 1e3,
         film.stats
     );
-    let bytes = if out.extension().is_some_and(|e| e == "exr") {
-        exr::encode_exr(
-            &film,
-            &exr::ExrMetadata {
-                scene_hash: scene.hash_hex.clone(),
-                observer_height_m: scene.camera.height_m,
-                wavelength_nm: scene.atmosphere.wavelength_nm,
-                tolerance_px: (!exact).then_some(options.tolerance_px),
-                extra: vec![("tracer".into(), format!("constant curvature k={k}"))],
-            },
-        )?
-    } else {
-        png::encode_png(&film, png::DEFAULT_EXPOSURE)?
-    };
-    write_atomic(&out, &bytes)?;
+    let mut meta = provenance(&scene, &options);
+    meta.extra
+        .push(("tracer".into(), format!("constant curvature k={k}")));
+    write_film(&film, &out, &meta, png::DEFAULT_EXPOSURE)?;
     Ok(())
 }

@@ -3,6 +3,7 @@
 //! partly written output behind.
 
 pub mod exr;
+pub mod film;
 pub mod png;
 
 use std::io::Write;

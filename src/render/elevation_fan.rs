@@ -131,12 +131,17 @@ impl ElevationFan {
         let n_base = (((hi - lo) / step).ceil() as usize).max(1) + 1;
         let spacing = (hi - lo) / (n_base - 1) as f64;
         let trace = |alpha: f64| {
-            tracer.trace(
+            let mut ray = tracer.trace(
                 spec.camera_height_m,
                 alpha,
                 &spec.distances_m,
                 spec.need_sky_direction,
-            )
+            );
+            // Guard against a tracer that breaks the contract: the fan is indexed by the
+            // requested elevation and one height per distance.
+            ray.elevation_rad = alpha;
+            ray.heights_m.resize(spec.distances_m.len(), None);
+            ray
         };
         let mut rays: Vec<FanRay> = (0..n_base)
             .into_par_iter()

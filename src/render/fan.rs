@@ -54,6 +54,12 @@ pub enum FanEnd {
 }
 
 /// What the renderer needs of a ray tracer: one call per apparent elevation.
+///
+/// Contract: `heights_m` has one entry per requested distance (the renderer pads or truncates
+/// otherwise); non-finite values are tolerated: a NaN height hits no card, a NaN sky direction
+/// sees no sun, a NaN grazing angle shades the sea at grazing 0, and any sample whose shading
+/// would still not be finite gets the fallback colour and is counted in
+/// [`RenderStats::non_finite_samples`](super::RenderStats). No NaN reaches the film.
 pub trait RayTracer: Sync {
     /// Trace from camera height `camera_height_m` (above the surface) at apparent elevation
     /// `elevation_rad`. `distances_m` are ascending ground distances (the cards' distances) at

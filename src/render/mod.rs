@@ -283,6 +283,28 @@ fn azimuth_span(frame: &CameraFrame, width: u32, height: u32, heading: f64) -> O
     Some((lo, hi))
 }
 
+/// Provenance for an EXR of `scene` rendered with `options` (scene hash, observer height,
+/// wavelength, fan tolerance or "exact", samples per pixel).
+pub fn provenance(scene: &Scene, options: &RenderOptions) -> crate::output::exr::ExrMetadata {
+    let spp = options
+        .samples_per_pixel
+        .unwrap_or(scene.camera.samples_per_pixel);
+    crate::output::exr::ExrMetadata {
+        scene_hash: scene.hash_hex.clone(),
+        observer_height_m: scene.camera.height_m,
+        wavelength_nm: scene.atmosphere.wavelength_nm,
+        tolerance_px: (!options.exact).then_some(options.tolerance_px),
+        extra: vec![
+            ("samples_per_pixel".into(), spp.to_string()),
+            (
+                "straight_rays".into(),
+                scene.atmosphere.straight.to_string(),
+            ),
+            ("earth_radius_m".into(), scene.earth_radius_m.to_string()),
+        ],
+    }
+}
+
 /// Render `scene` through `tracer`.
 pub fn render_scene(
     scene: &Scene,
@@ -427,14 +449,10 @@ pub fn render_scene(
                             shader.shade(alpha, azimuth, &heights, end)
                         }
                         None => {
-                            let ray =
+                            let mut ray =
                                 tracer.trace(cam.height_m, alpha, &distances_m, need_sky_direction);
-                            let ok = ray.heights_m.len() == n_dist;
-                            if ok {
-                                shader.shade(alpha, azimuth, &ray.heights_m, ray.end)
-                            } else {
-                                [f64::NAN; 3]
-                            }
+                            ray.heights_m.resize(n_dist, None);
+                            shader.shade(alpha, azimuth, &ray.heights_m, ray.end)
                         }
                     };
                     let c = if c.iter().all(|v| v.is_finite()) {

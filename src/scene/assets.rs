@@ -202,7 +202,7 @@ pub fn ice_cliff() -> RgbaImage {
     top.push((w as f64, 12.0 + 40.0 * unit_hash(i)));
     let mut shapes = vec![Shape {
         poly: top.clone(),
-        rgba: [222, 234, 246, 255],
+        rgba: [175, 198, 222, 255],
     }];
     // Crevasses: thin darker wedges from the bottom, clipped by drawing them under a re-drawn top
     // band would be complicated; they stop 30 px below the lowest possible top edge instead.
@@ -212,13 +212,13 @@ pub fn ice_cliff() -> RgbaImage {
         let y_top = 56.0 + 40.0 * unit_hash(7000 + k);
         shapes.push(Shape {
             poly: vec![(cx - half, h as f64), (cx, y_top), (cx + half, h as f64)],
-            rgba: [150, 185, 215, 255],
+            rgba: [105, 135, 170, 255],
         });
     }
     // A shadowed band at the foot of the cliff.
     shapes.push(Shape {
         poly: rect(0.0, 116.0, w as f64, h as f64),
-        rgba: [120, 150, 180, 255],
+        rgba: [90, 115, 145, 255],
     });
     paint(w, h, &shapes)
 }
