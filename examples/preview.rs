@@ -1,6 +1,7 @@
 //! Render a scene with the closed-form constant-curvature rays (no real atmosphere) to PNG/EXR —
 //! a development preview of the renderer:
-//! `cargo run --release --example preview -- SCENE.toml OUT.png [k] [--exact] [--spp N]`.
+//! `cargo run --release --example preview -- SCENE.toml OUT.png [k] [--exact] [--spp N]
+//! [--repeat N]` (reports the fastest of N renders, excluding encoding)..
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -36,9 +37,20 @@ fn main() -> anyhow::Result<()> {
         quiet: true,
         ..RenderOptions::default()
     };
-    let t = Instant::now();
-    let film = render_scene(&scene, &tracer, &options)?;
-    let dt = t.elapsed();
+    let repeat: usize = args
+        .iter()
+        .position(|a| a == "--repeat")
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(1);
+    let mut film = render_scene(&scene, &tracer, &options)?;
+    let mut dt = std::time::Duration::MAX;
+    for _ in 0..repeat {
+        let t = Instant::now();
+        film = render_scene(&scene, &tracer, &options)?;
+        dt = dt.min(t.elapsed());
+    }
     eprintln!(
         "{}: {}x{} in {:.1} ms, {:?}",
         scene_path.display(),

@@ -650,3 +650,115 @@ fn scene_paths_resolve_against_the_scene_file() {
     );
     let _: &Path = scene.source_path.as_deref().unwrap();
 }
+
+#[test]
+fn card_alpha_lets_farther_cards_show_through() {
+    let dir = tempfile::tempdir().unwrap();
+    // Near card: left half opaque red, right half fully transparent. Far card: opaque blue.
+    let half = image::RgbaImage::from_fn(64, 64, |x, _| {
+        if x < 32 {
+            image::Rgba([255, 0, 0, 255])
+        } else {
+            image::Rgba([0, 255, 0, 0])
+        }
+    });
+    half.save(dir.path().join("half.png")).unwrap();
+    image::RgbaImage::from_pixel(8, 8, image::Rgba([0, 0, 255, 255]))
+        .save(dir.path().join("blue.png"))
+        .unwrap();
+    let text = "[camera]\nheight_m = 10\nhfov_deg = 0.5\nwidth = 200\nheight = 100\n\
+                [atmosphere]\nstraight = true\n\
+                [[cards]]\nimage = \"blue.png\"\ndistance_m = 4000\nwidth_m = 30\nheight_m = 40\n\
+                [[cards]]\nimage = \"half.png\"\ndistance_m = 2000\nwidth_m = 10\nheight_m = 20\n";
+    std::fs::write(dir.path().join("s.toml"), text).unwrap();
+    let scene = Scene::from_file(&dir.path().join("s.toml")).unwrap();
+    let film = render_scene(&scene, &StraightRays::new(R).unwrap(), &quiet()).unwrap();
+    let f = scene.camera.frame().focal_px;
+    // A row through both cards: height 10 m at 2 km (and ~15 m at 4 km) — the camera's own
+    // height, so about the centre row.
+    let y = 49;
+    let column = |az_m_at_2km: f64| (100.0 + f * (az_m_at_2km / 2000.0)) as u32;
+    let left = film.pixel(column(-2.5), y);
+    let right = film.pixel(column(2.5), y);
+    assert!(left[0] > 0.9 && left[2] < 0.05, "left {left:?}");
+    assert!(
+        right[2] > 0.9 && right[0] < 0.05 && right[1] < 0.05,
+        "right {right:?}"
+    );
+}
+
+/// Records what the renderer asks for.
+struct Recorder {
+    inner: StraightRays,
+    calls: std::sync::Mutex<Vec<(Vec<f64>, bool)>>,
+}
+
+impl RayTracer for Recorder {
+    fn trace(&self, h0: f64, alpha: f64, distances: &[f64], need: bool) -> FanRay {
+        self.calls.lock().unwrap().push((distances.to_vec(), need));
+        self.inner.trace(h0, alpha, distances, need)
+    }
+}
+
+#[test]
+fn the_tracer_is_asked_only_for_what_the_scene_needs() {
+    let board = data_dir().join("cards/calibration_board.png");
+    // One card in view (azimuth 0.1°), one far outside (azimuth 40°), no sun.
+    let text = format!(
+        "[camera]\nheight_m = 10\nhfov_deg = 1\nwidth = 40\nheight = 20\n\
+         [[cards]]\nimage = {board:?}\ndistance_m = 9000\nazimuth_deg = 40\nwidth_m = 8\nheight_m = 20\n\
+         [[cards]]\nimage = {board:?}\ndistance_m = 5000\nazimuth_deg = 0.1\nwidth_m = 8\nheight_m = 20\n"
+    );
+    let (_dir, scene) = scene_in_tempdir(&text);
+    for exact in [false, true] {
+        let rec = Recorder {
+            inner: StraightRays::new(R).unwrap(),
+            calls: Default::default(),
+        };
+        let opts = RenderOptions { exact, ..quiet() };
+        let film = render_scene(&scene, &rec, &opts).unwrap();
+        assert_eq!(film.stats.cards_in_view, 1);
+        let calls = rec.calls.into_inner().unwrap();
+        assert!(!calls.is_empty());
+        assert!(
+            calls.iter().all(|(d, need)| d == &[5000.0] && !need),
+            "exact={exact}"
+        );
+        if exact {
+            assert_eq!(calls.len(), 40 * 20);
+        } else {
+            // The fan traces per elevation (≈ one ray per pixel row, plus refinement), never per
+            // column.
+            assert!(calls.len() < 40 * 20 / 4, "{}", calls.len());
+        }
+    }
+}
+
+#[test]
+fn bad_render_options_are_rejected() {
+    let (_dir, scene) =
+        scene_in_tempdir("[camera]\nheight_m = 10\nhfov_deg = 1\nwidth = 4\nheight = 2\n");
+    let t = StraightRays::new(R).unwrap();
+    let opts = RenderOptions {
+        samples_per_pixel: Some(2),
+        ..quiet()
+    };
+    assert!(
+        render_scene(&scene, &t, &opts)
+            .unwrap_err()
+            .to_string()
+            .contains("square")
+    );
+    let opts = RenderOptions {
+        tolerance_px: 0.0,
+        ..quiet()
+    };
+    assert!(render_scene(&scene, &t, &opts).is_err());
+    // 9 samples per pixel (3×3 strata) render.
+    let opts = RenderOptions {
+        samples_per_pixel: Some(9),
+        ..quiet()
+    };
+    let film = render_scene(&scene, &t, &opts).unwrap();
+    assert!(film.pixels.iter().flatten().all(|v| v.is_finite()));
+}
