@@ -232,6 +232,28 @@ impl ElevationFan {
         }
     }
 
+    /// The lowest fan elevation from which every ray up to the top of the fan ends in the sky and
+    /// passes above `max_top_m[k]` (or never reaches) every card distance k: samples at or above
+    /// it see only sky, exactly as interpolation would show them. `+∞` if the top ray is not clear.
+    pub fn clear_sky_from(&self, max_top_m: &[f64]) -> f64 {
+        let d = self.n_distances;
+        let clear = |i: usize| {
+            matches!(self.ends[i], FanEnd::Sky { .. })
+                && self.heights[i * d..(i + 1) * d]
+                    .iter()
+                    .zip(max_top_m)
+                    .all(|(h, top)| h.is_none_or(|h| h > *top))
+        };
+        let mut from = f64::INFINITY;
+        for i in (0..self.alphas.len()).rev() {
+            if !clear(i) {
+                break;
+            }
+            from = self.alphas[i];
+        }
+        from
+    }
+
     /// Number of traced rays in the fan.
     pub fn len(&self) -> usize {
         self.alphas.len()
@@ -358,6 +380,21 @@ mod tests {
             // Straight rays: h(α) at 5 km is almost linear; interpolation error ≪ 1 mm.
             assert!((h[0].unwrap() - exact.unwrap()).abs() < 1e-3);
         }
+    }
+
+    #[test]
+    fn clear_sky_starts_above_the_card_top() {
+        let tracer = StraightRays::new(EARTH_RADIUS_M).unwrap();
+        let s = spec(vec![5_000.0], vec![20.0]);
+        let fan = ElevationFan::build(&tracer, &s);
+        // Straight ray from 10 m reaches 20 m at 5 km when tan α = ((R+20)cos θ − (R+10)) /
+        // ((R+20) sin θ), θ = 5 km / R.
+        let (r, th) = (EARTH_RADIUS_M, 5_000.0 / EARTH_RADIUS_M);
+        let alpha = (((r + 20.0) * th.cos() - (r + 10.0)) / ((r + 20.0) * th.sin())).atan();
+        let from = fan.clear_sky_from(&[20.0]);
+        assert!(from > alpha && from - alpha <= 2e-5, "{from} vs {alpha}");
+        // Nothing is clear when a card reaches above the frame.
+        assert_eq!(fan.clear_sky_from(&[1e6]), f64::INFINITY);
     }
 
     #[test]

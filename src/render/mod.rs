@@ -384,6 +384,9 @@ pub fn render_scene(
         ..RenderStats::default()
     };
 
+    // Samples at or above this elevation see only sky (no sun, above every card): shade them
+    // from the sky table alone — the same result as the full path, without the fan lookup.
+    let mut clear_sky_from = f64::INFINITY;
     let fan = if options.exact {
         None
     } else {
@@ -402,6 +405,9 @@ pub fn render_scene(
             max_depth: options.max_refine_depth,
         };
         let fan = ElevationFan::build(tracer, &spec);
+        if scene.sun.is_none() {
+            clear_sky_from = fan.clear_sky_from(&spec.max_top_m);
+        }
         stats.fan_rays = fan.len();
         stats.fan_depth = fan.max_depth_reached;
         Some(fan)
@@ -444,6 +450,7 @@ pub fn render_scene(
                     };
                     let (azimuth, alpha) = frame.direction(x as f64 + jx, y as f64 + jy);
                     let c = match &fan {
+                        Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
                         Some(fan) => {
                             let end = fan.interpolate(alpha, &mut heights);
                             shader.shade(alpha, azimuth, &heights, end)
