@@ -566,8 +566,21 @@ impl Scene {
         h.update(b"ghostship-scene-v1\0");
         h.update(text.as_bytes());
         h.update(b"\0");
-        // Resolved parameters (JSON of the validated scene; serde_json prints f64 exactly).
-        h.update(serde_json::to_vec(self).unwrap_or_default());
+        // Resolved parameters (JSON of the validated scene; serde_json prints f64 exactly), with
+        // paths reduced to file names so the hash does not depend on where the scene was loaded
+        // from; the card images enter by content below.
+        let mut view = self.clone();
+        let file_name = |p: &Path| PathBuf::from(p.file_name().unwrap_or_default());
+        for card in &mut view.cards {
+            card.image_path = file_name(&card.image_path);
+        }
+        view.atmosphere.source = match &view.atmosphere.source {
+            AtmosphereSpec::Sounding(p) => AtmosphereSpec::Sounding(file_name(p)),
+            AtmosphereSpec::Synthetic(p) => AtmosphereSpec::Synthetic(file_name(p)),
+            AtmosphereSpec::Us1976 => AtmosphereSpec::Us1976,
+        };
+        view.source_path = None;
+        h.update(serde_json::to_vec(&view).unwrap_or_default());
         for card in &self.cards {
             h.update(b"\0");
             h.update(card.texture.width.to_le_bytes());
@@ -657,6 +670,14 @@ mod tests {
             parse(MINIMAL).unwrap().hash_hex,
             parse(MINIMAL).unwrap().hash_hex
         );
+    }
+
+    #[test]
+    fn hash_does_not_depend_on_the_folder() {
+        let text = format!("{MINIMAL}[atmosphere]\nsynthetic = \"fata.toml\"\n");
+        let a = Scene::from_toml_str(&text, Path::new("/one"), Path::new("a.toml")).unwrap();
+        let b = Scene::from_toml_str(&text, Path::new("two/three"), Path::new("b.toml")).unwrap();
+        assert_eq!(a.hash_hex, b.hash_hex);
     }
 
     #[test]
