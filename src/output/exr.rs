@@ -3,7 +3,7 @@
 //! ZIP compression in increasing line order (`Encoding::SMALL_LOSSLESS`), so the same film gives
 //! byte-identical files whatever the thread count.
 //!
-//! Provenance: `software` = "ghostship <version>", `comments` = the scene hash, and ONE extra
+//! Provenance: `software` = `"ghostship VERSION"`, `comments` = the scene hash, and ONE extra
 //! attribute `ghostship` (a string vector of `key=value` lines: program version, scene sha256,
 //! observer height, wavelength, fan tolerance, …). One attribute, because `exr` keeps extra
 //! attributes in a `HashMap` and writes them in its (per-process random) iteration order: several
