@@ -308,11 +308,16 @@ fn fan_interpolation_error_stays_within_the_stated_bound_on_a_fold() {
 
 /// Calibration boards at 10 and 20 km, seen through `tracer`, rendered by the fan and exactly.
 fn boards_scene() -> (tempfile::TempDir, Scene) {
+    boards_scene_with("")
+}
+
+fn boards_scene_with(extra: &str) -> (tempfile::TempDir, Scene) {
     let board = data_dir().join("cards/calibration_board.png");
     let text = format!(
         "[camera]\nheight_m = 10\nhfov_deg = 0.5\nwidth = 200\nheight = 120\n\
          [[cards]]\nimage = {board:?}\ndistance_m = 10000\nazimuth_deg = -0.08\nwidth_m = 20\nheight_m = 20\n\
-         [[cards]]\nimage = {board:?}\ndistance_m = 20000\nazimuth_deg = 0.08\nwidth_m = 40\nheight_m = 20\n"
+         [[cards]]\nimage = {board:?}\ndistance_m = 20000\nazimuth_deg = 0.08\nwidth_m = 40\nheight_m = 20\n\
+         {extra}"
     );
     scene_in_tempdir(&text)
 }
@@ -323,21 +328,39 @@ fn max_channel_difference(a: [f32; 4], b: [f32; 4]) -> f32 {
 
 #[test]
 fn fan_render_matches_exact_render_except_at_edges() {
-    let (_dir, scene) = boards_scene();
-    for (name, tracer) in [
-        ("fold", Box::new(fold()) as Box<dyn RayTracer>),
+    // The sun (radius 0.27°) sits just above the boards; with the fold tracer its final sky
+    // directions are folded too (g(α) is not monotone), like a Novaya Zemlya sun.
+    let (_dir1, plain) = boards_scene();
+    let (_dir2, sunny) = boards_scene_with("[sun]\nelevation_deg = 0.05\nazimuth_deg = -0.1\n");
+    for (name, scene, tracer) in [
+        ("fold", &plain, Box::new(fold()) as Box<dyn RayTracer>),
         (
             "k=0.17",
+            &plain,
             Box::new(ConstantCurvatureRays::new(0.17, R).unwrap()),
         ),
+        ("fold+sun", &sunny, Box::new(fold())),
+        (
+            "straight+sun",
+            &sunny,
+            Box::new(StraightRays::new(R).unwrap()),
+        ),
     ] {
-        let fast = render_scene(&scene, tracer.as_ref(), &quiet()).unwrap();
+        let fast = render_scene(scene, tracer.as_ref(), &quiet()).unwrap();
         let exact_opts = RenderOptions {
             exact: true,
             ..quiet()
         };
-        let exact = render_scene(&scene, tracer.as_ref(), &exact_opts).unwrap();
+        let exact = render_scene(scene, tracer.as_ref(), &exact_opts).unwrap();
         assert!(fast.stats.fan_rays > 0 && exact.stats.fan_rays == 0);
+        if name.ends_with("+sun") {
+            let sky = scene.sky.radiance(0.0)[0] as f32;
+            let lit = exact.pixels.iter().filter(|p| p[0] > sky + 0.05).count();
+            assert!(
+                lit > 100,
+                "{name}: the sun should be in the frame ({lit} px)"
+            );
+        }
         let (w, h) = (exact.width, exact.height);
         let threshold = 0.02;
         let mut differing = 0;
