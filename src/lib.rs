@@ -20,6 +20,8 @@ pub mod pipeline;
 pub mod profile;
 pub mod refractivity;
 pub mod report;
+pub mod render;
+pub mod scene;
 pub mod sounding;
 pub mod tracer;
 pub mod units;

@@ -2,6 +2,10 @@
 //! them atomically (temporary file in the same folder, then rename), so a failed run never leaves a
 //! partly written output behind.
 
+pub mod exr;
+pub mod film;
+pub mod png;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 

@@ -2,4 +2,5 @@
 mod ingest;
 mod profile;
 mod refractivity;
+mod render;
 mod tracer;

@@ -1,0 +1,113 @@
+//! Output — a rendered film to a file. In: a [`Film`], a path whose extension picks the format
+//! (`.exr`: linear f32 EXR with provenance; `.png`: 8-bit sRGB), provenance and exposure.
+//! Out: the file, written atomically.
+
+use std::path::Path;
+
+use super::exr::{ExrError, ExrMetadata, encode_exr};
+use super::png::encode_png;
+use super::{WriteError, write_atomic};
+use crate::render::Film;
+
+/// An image file format for films.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FilmFormat {
+    /// OpenEXR, linear f32 RGBA.
+    Exr,
+    /// PNG, 8-bit sRGB.
+    Png,
+}
+
+impl FilmFormat {
+    /// The format named by `path`'s extension (case-insensitive), if known.
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "exr" => Some(Self::Exr),
+            "png" => Some(Self::Png),
+            _ => None,
+        }
+    }
+}
+
+/// A film could not be exported.
+#[derive(Debug, thiserror::Error)]
+pub enum FilmExportError {
+    /// The extension names no supported format.
+    #[error("{0}: unknown image format (use .exr or .png)")]
+    UnknownFormat(std::path::PathBuf),
+    /// EXR encoding failed.
+    #[error(transparent)]
+    Exr(#[from] ExrError),
+    /// PNG encoding failed.
+    #[error("cannot encode PNG: {0}")]
+    Png(#[from] image::ImageError),
+    /// Writing failed.
+    #[error(transparent)]
+    Write(#[from] WriteError),
+}
+
+/// Encode `film` in `format` (`exposure` applies to PNG only; EXR stays scene-linear).
+pub fn encode_film(
+    film: &Film,
+    format: FilmFormat,
+    meta: &ExrMetadata,
+    exposure: f64,
+) -> Result<Vec<u8>, FilmExportError> {
+    Ok(match format {
+        FilmFormat::Exr => encode_exr(film, meta)?,
+        FilmFormat::Png => encode_png(film, exposure)?,
+    })
+}
+
+/// Encode `film` in the format named by `path`'s extension and write it atomically.
+pub fn write_film(
+    film: &Film,
+    path: &Path,
+    meta: &ExrMetadata,
+    exposure: f64,
+) -> Result<(), FilmExportError> {
+    let format =
+        FilmFormat::from_path(path).ok_or_else(|| FilmExportError::UnknownFormat(path.into()))?;
+    let bytes = encode_film(film, format, meta, exposure)?;
+    write_atomic(path, &bytes)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn format_from_extension() {
+        assert_eq!(
+            FilmFormat::from_path(Path::new("a/b.EXR")),
+            Some(FilmFormat::Exr)
+        );
+        assert_eq!(
+            FilmFormat::from_path(Path::new("b.png")),
+            Some(FilmFormat::Png)
+        );
+        assert_eq!(FilmFormat::from_path(Path::new("b.jpg")), None);
+        assert_eq!(FilmFormat::from_path(Path::new("b")), None);
+    }
+
+    #[test]
+    fn writes_both_formats_and_rejects_unknown_ones() {
+        let film = Film {
+            width: 3,
+            height: 2,
+            pixels: vec![[0.5, 0.25, 0.125, 1.0]; 6],
+            stats: Default::default(),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let meta = ExrMetadata::default();
+        for name in ["x.exr", "x.png"] {
+            let p = dir.path().join(name);
+            write_film(&film, &p, &meta, 1.0).unwrap();
+            assert!(std::fs::metadata(&p).unwrap().len() > 0);
+        }
+        let err = write_film(&film, &dir.path().join("x.tif"), &meta, 1.0).unwrap_err();
+        assert!(err.to_string().contains("x.tif"));
+    }
+}

@@ -1,0 +1,143 @@
+//! Scene — the pinhole camera. In: camera parameters (height, heading, pitch, field of view,
+//! resolution). Out: for a point on the film, the viewing direction as (azimuth, apparent
+//! elevation) in the observer's local frame (east, north, up).
+//!
+//! With a spherically symmetric atmosphere the ray depends only on its apparent elevation; the
+//! azimuth only selects where on the cards (and relative to the sun) it lands.
+
+use serde::Serialize;
+
+/// A pinhole camera at `height_m` above the surface. Film coordinates: x to the right in
+/// `[0, width]`, y down in `[0, height]`; pixel (i, j) covers `[i, i+1] × [j, j+1]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Camera {
+    /// Height of the camera above the surface (m).
+    pub height_m: f64,
+    /// Azimuth of the optical axis (rad, clockwise from north).
+    pub heading_rad: f64,
+    /// Elevation of the optical axis (rad, positive up).
+    pub pitch_rad: f64,
+    /// Horizontal field of view (rad).
+    pub hfov_rad: f64,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Samples per pixel (a square number n²: n×n stratified jitter).
+    pub samples_per_pixel: u32,
+}
+
+/// The camera's orthonormal basis in east–north–up coordinates, and its focal length in pixels.
+#[derive(Debug, Clone, Copy)]
+pub struct CameraFrame {
+    forward: [f64; 3],
+    right: [f64; 3],
+    up: [f64; 3],
+    /// Focal length in pixels: (width / 2) / tan(hfov / 2).
+    pub focal_px: f64,
+    half_w: f64,
+    half_h: f64,
+}
+
+impl Camera {
+    /// The camera's frame (basis and focal length).
+    pub fn frame(&self) -> CameraFrame {
+        let (sh, ch) = self.heading_rad.sin_cos();
+        let (sp, cp) = self.pitch_rad.sin_cos();
+        CameraFrame {
+            forward: [sh * cp, ch * cp, sp],
+            right: [ch, -sh, 0.0],
+            up: [-sh * sp, -ch * sp, cp],
+            focal_px: 0.5 * self.width as f64 / (0.5 * self.hfov_rad).tan(),
+            half_w: 0.5 * self.width as f64,
+            half_h: 0.5 * self.height as f64,
+        }
+    }
+
+    /// Angular size of one pixel at the image centre (rad): 1 / focal length in pixels. Pixels
+    /// away from the centre subtend less.
+    pub fn pixel_angle_rad(&self) -> f64 {
+        1.0 / self.frame().focal_px
+    }
+}
+
+impl CameraFrame {
+    /// Direction through film point (`x`, `y`) (pixels, y down) as (azimuth, elevation) in
+    /// radians; the azimuth is clockwise from north, in (−π, π].
+    #[inline]
+    pub fn direction(&self, x: f64, y: f64) -> (f64, f64) {
+        let u = (x - self.half_w) / self.focal_px;
+        let v = (self.half_h - y) / self.focal_px;
+        let d = [
+            self.forward[0] + u * self.right[0] + v * self.up[0],
+            self.forward[1] + u * self.right[1] + v * self.up[1],
+            self.forward[2] + u * self.right[2] + v * self.up[2],
+        ];
+        let horizontal = d[0].hypot(d[1]);
+        (d[0].atan2(d[1]), d[2].atan2(horizontal))
+    }
+
+    /// Film point (x, y) (pixels, y down) where direction `d` (east, north, up) projects, or
+    /// `None` if it points behind the camera.
+    pub fn project(&self, d: [f64; 3]) -> Option<(f64, f64)> {
+        let dot = |a: [f64; 3]| a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+        let z = dot(self.forward);
+        if z <= 0.0 {
+            return None;
+        }
+        Some((
+            self.half_w + self.focal_px * dot(self.right) / z,
+            self.half_h - self.focal_px * dot(self.up) / z,
+        ))
+    }
+
+    /// Film y coordinate (pixels, down) at which the centre column (x = width/2) sees apparent
+    /// elevation `elevation_rad`, for a camera with this frame's pitch.
+    pub fn centre_row_of_elevation(&self, elevation_rad: f64, pitch_rad: f64) -> f64 {
+        self.half_h - self.focal_px * (elevation_rad - pitch_rad).tan()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam(heading_deg: f64, pitch_deg: f64) -> Camera {
+        Camera {
+            height_m: 10.0,
+            heading_rad: heading_deg.to_radians(),
+            pitch_rad: pitch_deg.to_radians(),
+            hfov_rad: 60f64.to_radians(),
+            width: 400,
+            height: 200,
+            samples_per_pixel: 1,
+        }
+    }
+
+    #[test]
+    fn centre_looks_along_the_axis_and_edges_at_half_fov() {
+        let c = cam(90.0, 5.0);
+        let f = c.frame();
+        let (az, el) = f.direction(200.0, 100.0);
+        assert!((az - 90f64.to_radians()).abs() < 1e-12);
+        assert!((el - 5f64.to_radians()).abs() < 1e-12);
+        let c = cam(0.0, 0.0);
+        let (az, el) = c.frame().direction(400.0, 100.0);
+        assert!((az - 30f64.to_radians()).abs() < 1e-12, "{az}");
+        assert!(el.abs() < 1e-12);
+        // Top edge of the centre column: elevation atan(tan(30°)·100/200).
+        let (az, el) = c.frame().direction(200.0, 0.0);
+        assert!(az.abs() < 1e-12);
+        assert!((el - (30f64.to_radians().tan() * 0.5).atan()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn centre_row_inverts_direction() {
+        let c = cam(10.0, -2.0);
+        let f = c.frame();
+        for y in [3.5, 50.0, 100.0, 177.25] {
+            let (_, el) = f.direction(200.0, y);
+            assert!((f.centre_row_of_elevation(el, c.pitch_rad) - y).abs() < 1e-9);
+        }
+    }
+}

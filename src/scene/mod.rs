@@ -1,0 +1,691 @@
+//! Stage 5a — scene. In: a scene file (TOML) and the card images it names. Out: a validated
+//! [`Scene`] in SI units (camera, atmosphere choice, Earth, sky, sea, cards with decoded textures,
+//! optional sun) and its reproducibility hash.
+//!
+//! A scene file (every section but `[camera]` optional; paths relative to the scene file):
+//!
+//! ```toml
+//! [camera]
+//! height_m = 10.0            # above the surface
+//! heading_deg = 0.0          # azimuth of the optical axis, clockwise from north
+//! pitch_deg = 0.0            # elevation of the optical axis
+//! hfov_deg = 1.0             # horizontal field of view
+//! width = 400                # pixels
+//! height = 200
+//! samples_per_pixel = 4      # a square number: n×n stratified jitter
+//!
+//! [atmosphere]               # exactly one of sounding / synthetic / standard (default us1976)
+//! synthetic = "../superior_mirage.toml"   # or sounding = "x.csv", or standard = "us1976"
+//! wavelength_nm = 550.0
+//! straight = false           # true: n ≡ 1 (straight rays)
+//! smooth_m = 0.0             # optional smoothing length for soundings
+//!
+//! [earth]
+//! radius_m = 6371000.0
+//!
+//! [sky]                      # see scene::sky
+//! brightness = 1.0
+//! rayleigh_optical_depth = 0.0975
+//! aerosol_optical_depth = 0.02
+//!
+//! [sea]                      # see scene::sea
+//! water_rgb = [0.004, 0.012, 0.018]
+//! refractive_index = 1.333
+//! wave_slope_deg = 3.0
+//!
+//! [[cards]]
+//! image = "../cards/ship.png"
+//! distance_m = 20000.0       # ground distance
+//! azimuth_deg = 0.0          # of the card's centre
+//! width_m = 80.0
+//! height_m = 20.0
+//! base_m = 0.0               # bottom edge above the surface
+//!
+//! [sun]
+//! elevation_deg = -2.0       # TRUE elevation of the centre; may be below 0
+//! azimuth_deg = 0.0
+//! angular_diameter_deg = 0.533   # default from 1 392 000 km at 149.6e6 km
+//! limb_darkening = 0.6
+//! intensity = 60.0           # disc-centre radiance above the atmosphere, 1 = horizon sky
+//! ```
+
+pub mod assets;
+pub mod camera;
+pub mod card;
+pub mod sea;
+pub mod sky;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+pub use camera::Camera;
+pub use card::{Card, Texture};
+pub use sea::Sea;
+pub use sky::{Sky, Sun};
+
+/// A scene file could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("cannot read scene {path}: {source}")]
+    Read {
+        /// The scene file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not match the schema (the message has line and column).
+    #[error("invalid scene {path}: {source}")]
+    Parse {
+        /// The scene file.
+        path: PathBuf,
+        /// The TOML error, with line and column.
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("invalid scene {path}: {key}: {message}")]
+    Invalid {
+        /// The scene file.
+        path: PathBuf,
+        /// The offending key, e.g. `camera.hfov_deg` or `cards[2].distance_m`.
+        key: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// A card image could not be read.
+    #[error("invalid scene {path}: {source}")]
+    Texture {
+        /// The scene file.
+        path: PathBuf,
+        /// The image error.
+        #[source]
+        source: card::TextureError,
+    },
+}
+
+/// Where the atmosphere comes from; the scene only names it, the caller resolves it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum AtmosphereSpec {
+    /// A radiosonde sounding file (resolved path).
+    Sounding(PathBuf),
+    /// A synthetic layered atmosphere (TOML; resolved path).
+    Synthetic(PathBuf),
+    /// The U.S. Standard Atmosphere 1976.
+    Us1976,
+}
+
+/// The atmosphere section of a scene.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AtmosphereSettings {
+    /// The source of the air column.
+    pub source: AtmosphereSpec,
+    /// Wavelength for the refractive index (nm).
+    pub wavelength_nm: f64,
+    /// Trace straight rays (n ≡ 1) instead.
+    pub straight: bool,
+    /// Optional smoothing length for soundings (m).
+    pub smooth_m: Option<f64>,
+}
+
+/// A validated scene in SI units.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scene {
+    /// The scene file it came from (if any).
+    pub source_path: Option<PathBuf>,
+    /// The camera.
+    pub camera: Camera,
+    /// The atmosphere choice.
+    pub atmosphere: AtmosphereSettings,
+    /// Earth radius (m).
+    pub earth_radius_m: f64,
+    /// The clear sky.
+    pub sky: Sky,
+    /// The sea surface.
+    pub sea: Sea,
+    /// Cards, in file order.
+    pub cards: Vec<Card>,
+    /// The sun, if the scene has one.
+    pub sun: Option<Sun>,
+    /// sha256 (hex) of the scene file content, the resolved parameters and the card images.
+    #[serde(skip)]
+    pub hash_hex: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    camera: RawCamera,
+    #[serde(default)]
+    atmosphere: RawAtmosphere,
+    #[serde(default)]
+    earth: RawEarth,
+    #[serde(default)]
+    sky: RawSky,
+    #[serde(default)]
+    sea: RawSea,
+    #[serde(default)]
+    cards: Vec<RawCard>,
+    sun: Option<RawSun>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    height_m: f64,
+    #[serde(default)]
+    heading_deg: f64,
+    #[serde(default)]
+    pitch_deg: f64,
+    hfov_deg: f64,
+    width: u32,
+    height: u32,
+    #[serde(default = "one")]
+    samples_per_pixel: u32,
+}
+
+fn one() -> u32 {
+    1
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAtmosphere {
+    sounding: Option<PathBuf>,
+    synthetic: Option<PathBuf>,
+    standard: Option<String>,
+    wavelength_nm: Option<f64>,
+    #[serde(default)]
+    straight: bool,
+    smooth_m: Option<f64>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEarth {
+    radius_m: Option<f64>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSky {
+    brightness: Option<f64>,
+    rayleigh_optical_depth: Option<f64>,
+    aerosol_optical_depth: Option<f64>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSea {
+    water_rgb: Option<[f64; 3]>,
+    refractive_index: Option<f64>,
+    wave_slope_deg: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCard {
+    image: PathBuf,
+    distance_m: f64,
+    #[serde(default)]
+    azimuth_deg: f64,
+    width_m: f64,
+    height_m: f64,
+    #[serde(default)]
+    base_m: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSun {
+    elevation_deg: f64,
+    #[serde(default)]
+    azimuth_deg: f64,
+    angular_diameter_deg: Option<f64>,
+    limb_darkening: Option<f64>,
+    intensity: Option<f64>,
+}
+
+/// Largest supported card distance (m): beyond a few hundred km the ray model is pointless.
+pub const MAX_CARD_DISTANCE_M: f64 = 1_000_000.0;
+
+struct Checker<'a> {
+    path: &'a Path,
+}
+
+impl Checker<'_> {
+    fn range(
+        &self,
+        key: &str,
+        value: f64,
+        lo: f64,
+        hi: f64,
+        what: &str,
+    ) -> Result<f64, SceneError> {
+        if value.is_finite() && value >= lo && value <= hi {
+            Ok(value)
+        } else {
+            Err(self.invalid(key, format!("must be {what}, got {value}")))
+        }
+    }
+
+    fn positive(&self, key: &str, value: f64, hi: f64) -> Result<f64, SceneError> {
+        if value.is_finite() && value > 0.0 && value <= hi {
+            Ok(value)
+        } else {
+            Err(self.invalid(key, format!("must be > 0 and ≤ {hi}, got {value}")))
+        }
+    }
+
+    fn invalid(&self, key: &str, message: String) -> SceneError {
+        SceneError::Invalid {
+            path: self.path.to_path_buf(),
+            key: key.to_string(),
+            message,
+        }
+    }
+}
+
+/// Check that `spp` is a square number ≥ 1 and return its root.
+pub fn samples_per_pixel_root(spp: u32) -> Option<u32> {
+    let n = (spp as f64).sqrt().round() as u32;
+    (spp >= 1 && n * n == spp).then_some(n)
+}
+
+impl Scene {
+    /// Load a scene file; paths inside are relative to its folder.
+    pub fn from_file(path: &Path) -> Result<Self, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let mut scene = Self::from_toml_str(&text, base, path)?;
+        scene.source_path = Some(path.to_path_buf());
+        Ok(scene)
+    }
+
+    /// Parse scene text; relative paths are resolved against `base_dir`; `name` is used in errors.
+    pub fn from_toml_str(text: &str, base_dir: &Path, name: &Path) -> Result<Self, SceneError> {
+        let raw: RawScene = toml::from_str(text).map_err(|source| SceneError::Parse {
+            path: name.to_path_buf(),
+            source,
+        })?;
+        let c = Checker { path: name };
+        let resolve = |p: &Path| {
+            if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                base_dir.join(p)
+            }
+        };
+
+        let rc = &raw.camera;
+        let spp = rc.samples_per_pixel;
+        if samples_per_pixel_root(spp).is_none() {
+            return Err(c.invalid(
+                "camera.samples_per_pixel",
+                format!("must be a square number (1, 4, 9, 16, …), got {spp}"),
+            ));
+        }
+        for (key, v) in [("camera.width", rc.width), ("camera.height", rc.height)] {
+            if !(1..=16_384).contains(&v) {
+                return Err(c.invalid(key, format!("must be 1…16384 pixels, got {v}")));
+            }
+        }
+        let camera = Camera {
+            height_m: c.range(
+                "camera.height_m",
+                rc.height_m,
+                0.01,
+                100_000.0,
+                "0.01…100000 m",
+            )?,
+            heading_rad: c
+                .range(
+                    "camera.heading_deg",
+                    rc.heading_deg,
+                    -360.0,
+                    360.0,
+                    "−360…360°",
+                )?
+                .to_radians(),
+            pitch_rad: c
+                .range("camera.pitch_deg", rc.pitch_deg, -90.0, 90.0, "−90…90°")?
+                .to_radians(),
+            hfov_rad: c
+                .range(
+                    "camera.hfov_deg",
+                    rc.hfov_deg,
+                    1e-4,
+                    179.0,
+                    "between 0.0001° and 179°",
+                )?
+                .to_radians(),
+            width: rc.width,
+            height: rc.height,
+            samples_per_pixel: spp,
+        };
+
+        let ra = &raw.atmosphere;
+        let source = match (&ra.sounding, &ra.synthetic, &ra.standard) {
+            (Some(p), None, None) => AtmosphereSpec::Sounding(resolve(p)),
+            (None, Some(p), None) => AtmosphereSpec::Synthetic(resolve(p)),
+            (None, None, Some(s)) if s.eq_ignore_ascii_case("us1976") => AtmosphereSpec::Us1976,
+            (None, None, Some(s)) => {
+                return Err(c.invalid(
+                    "atmosphere.standard",
+                    format!("the only standard atmosphere is \"us1976\", got {s:?}"),
+                ));
+            }
+            (None, None, None) => AtmosphereSpec::Us1976,
+            _ => {
+                return Err(c.invalid(
+                    "atmosphere",
+                    "give only one of `sounding`, `synthetic` or `standard`".into(),
+                ));
+            }
+        };
+        let atmosphere = AtmosphereSettings {
+            source,
+            wavelength_nm: c.range(
+                "atmosphere.wavelength_nm",
+                ra.wavelength_nm.unwrap_or(550.0),
+                300.0,
+                1100.0,
+                "300…1100 nm",
+            )?,
+            straight: ra.straight,
+            smooth_m: ra
+                .smooth_m
+                .map(|s| c.range("atmosphere.smooth_m", s, 0.0, 10_000.0, "0…10000 m"))
+                .transpose()?,
+        };
+
+        let earth_radius_m = c.positive(
+            "earth.radius_m",
+            raw.earth.radius_m.unwrap_or(crate::units::EARTH_RADIUS_M),
+            1e9,
+        )?;
+
+        let d = Sky::default();
+        let sky = Sky {
+            brightness: c.range(
+                "sky.brightness",
+                raw.sky.brightness.unwrap_or(d.brightness),
+                0.0,
+                1e6,
+                "0…1e6",
+            )?,
+            rayleigh_optical_depth: c.range(
+                "sky.rayleigh_optical_depth",
+                raw.sky
+                    .rayleigh_optical_depth
+                    .unwrap_or(d.rayleigh_optical_depth),
+                0.0,
+                10.0,
+                "0…10",
+            )?,
+            aerosol_optical_depth: c.range(
+                "sky.aerosol_optical_depth",
+                raw.sky
+                    .aerosol_optical_depth
+                    .unwrap_or(d.aerosol_optical_depth),
+                0.0,
+                10.0,
+                "0…10",
+            )?,
+        };
+
+        let d = Sea::default();
+        let water_rgb = raw.sea.water_rgb.unwrap_or(d.water_rgb);
+        for v in water_rgb {
+            c.range("sea.water_rgb", v, 0.0, 1e6, "each 0…1e6")?;
+        }
+        let sea = Sea {
+            water_rgb,
+            refractive_index: c.range(
+                "sea.refractive_index",
+                raw.sea.refractive_index.unwrap_or(d.refractive_index),
+                1.0,
+                3.0,
+                "1…3",
+            )?,
+            wave_slope_rad: c
+                .range(
+                    "sea.wave_slope_deg",
+                    raw.sea
+                        .wave_slope_deg
+                        .unwrap_or(d.wave_slope_rad.to_degrees()),
+                    0.0,
+                    45.0,
+                    "0…45°",
+                )?
+                .to_radians(),
+        };
+
+        let mut cards = Vec::with_capacity(raw.cards.len());
+        for (i, rc) in raw.cards.iter().enumerate() {
+            let key = |k: &str| format!("cards[{i}].{k}");
+            let image_path = resolve(&rc.image);
+            let texture =
+                Texture::from_file(&image_path).map_err(|source| SceneError::Texture {
+                    path: name.to_path_buf(),
+                    source,
+                })?;
+            cards.push(Card {
+                image_path,
+                distance_m: c.positive(&key("distance_m"), rc.distance_m, MAX_CARD_DISTANCE_M)?,
+                azimuth_rad: c
+                    .range(
+                        &key("azimuth_deg"),
+                        rc.azimuth_deg,
+                        -360.0,
+                        360.0,
+                        "−360…360°",
+                    )?
+                    .to_radians(),
+                width_m: c.positive(&key("width_m"), rc.width_m, 100_000.0)?,
+                height_m: c.positive(&key("height_m"), rc.height_m, 100_000.0)?,
+                base_m: c.range(
+                    &key("base_m"),
+                    rc.base_m,
+                    -1_000.0,
+                    100_000.0,
+                    "−1000…100000 m",
+                )?,
+                texture: Arc::new(texture),
+            });
+        }
+
+        let sun = match &raw.sun {
+            None => None,
+            Some(rs) => Some(Sun {
+                elevation_rad: c
+                    .range(
+                        "sun.elevation_deg",
+                        rs.elevation_deg,
+                        -90.0,
+                        90.0,
+                        "−90…90°",
+                    )?
+                    .to_radians(),
+                azimuth_rad: c
+                    .range(
+                        "sun.azimuth_deg",
+                        rs.azimuth_deg,
+                        -360.0,
+                        360.0,
+                        "−360…360°",
+                    )?
+                    .to_radians(),
+                angular_diameter_rad: match rs.angular_diameter_deg {
+                    Some(v) => c
+                        .range("sun.angular_diameter_deg", v, 1e-4, 20.0, "0.0001…20°")?
+                        .to_radians(),
+                    None => sky::sun_angular_diameter_rad(),
+                },
+                limb_darkening: c.range(
+                    "sun.limb_darkening",
+                    rs.limb_darkening.unwrap_or(0.6),
+                    0.0,
+                    1.0,
+                    "0…1",
+                )?,
+                intensity: c.range(
+                    "sun.intensity",
+                    rs.intensity.unwrap_or(10.0),
+                    0.0,
+                    1e9,
+                    "0…1e9",
+                )?,
+            }),
+        };
+
+        let mut scene = Scene {
+            source_path: None,
+            camera,
+            atmosphere,
+            earth_radius_m,
+            sky,
+            sea,
+            cards,
+            sun,
+            hash_hex: String::new(),
+        };
+        scene.hash_hex = scene.compute_hash(text);
+        Ok(scene)
+    }
+
+    fn compute_hash(&self, text: &str) -> String {
+        let mut h = Sha256::new();
+        h.update(b"ghostship-scene-v1\0");
+        h.update(text.as_bytes());
+        h.update(b"\0");
+        // Resolved parameters (JSON of the validated scene; serde_json prints f64 exactly), with
+        // paths reduced to file names so the hash does not depend on where the scene was loaded
+        // from; the card images enter by content below.
+        let mut view = self.clone();
+        let file_name = |p: &Path| PathBuf::from(p.file_name().unwrap_or_default());
+        for card in &mut view.cards {
+            card.image_path = file_name(&card.image_path);
+        }
+        view.atmosphere.source = match &view.atmosphere.source {
+            AtmosphereSpec::Sounding(p) => AtmosphereSpec::Sounding(file_name(p)),
+            AtmosphereSpec::Synthetic(p) => AtmosphereSpec::Synthetic(file_name(p)),
+            AtmosphereSpec::Us1976 => AtmosphereSpec::Us1976,
+        };
+        view.source_path = None;
+        h.update(serde_json::to_vec(&view).unwrap_or_default());
+        for card in &self.cards {
+            h.update(b"\0");
+            h.update(card.texture.width.to_le_bytes());
+            h.update(card.texture.height.to_le_bytes());
+            for t in &card.texture.texels {
+                for v in t {
+                    h.update(v.to_le_bytes());
+                }
+            }
+        }
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = "[camera]\nheight_m = 10\nhfov_deg = 1\nwidth = 40\nheight = 20\n";
+
+    fn parse(text: &str) -> Result<Scene, SceneError> {
+        Scene::from_toml_str(text, Path::new("/base"), Path::new("test.toml"))
+    }
+
+    #[test]
+    fn defaults_fill_in() {
+        let s = parse(MINIMAL).unwrap();
+        assert_eq!(s.atmosphere.source, AtmosphereSpec::Us1976);
+        assert_eq!(s.atmosphere.wavelength_nm, 550.0);
+        assert_eq!(s.earth_radius_m, 6_371_000.0);
+        assert_eq!(s.camera.samples_per_pixel, 1);
+        assert!(s.sun.is_none() && s.cards.is_empty());
+        assert_eq!(s.hash_hex.len(), 64);
+    }
+
+    #[test]
+    fn unknown_fields_report_line_and_column() {
+        let text = format!("{MINIMAL}pich_deg = 3\n");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("line 6") && err.contains("column 1"), "{err}");
+        assert!(err.contains("pich_deg"), "{err}");
+    }
+
+    #[test]
+    fn invalid_values_name_the_key() {
+        let text = MINIMAL.replace("hfov_deg = 1", "hfov_deg = 200");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(
+            err.contains("camera.hfov_deg") && err.contains("200"),
+            "{err}"
+        );
+        let text = format!("{MINIMAL}samples_per_pixel = 3\n");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("square"), "{err}");
+        let text = format!("{MINIMAL}[atmosphere]\nsounding = \"a.csv\"\nstandard = \"us1976\"\n");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("only one"), "{err}");
+        let text = format!("{MINIMAL}[sun]\nelevation_deg = -95\n");
+        assert!(
+            parse(&text)
+                .unwrap_err()
+                .to_string()
+                .contains("sun.elevation_deg")
+        );
+    }
+
+    #[test]
+    fn atmosphere_paths_are_relative_to_the_scene() {
+        let text =
+            format!("{MINIMAL}[atmosphere]\nsynthetic = \"../fata.toml\"\nstraight = true\n");
+        let s = parse(&text).unwrap();
+        assert_eq!(
+            s.atmosphere.source,
+            AtmosphereSpec::Synthetic(PathBuf::from("/base/../fata.toml"))
+        );
+        assert!(s.atmosphere.straight);
+    }
+
+    #[test]
+    fn sun_defaults_and_hash_depends_on_content() {
+        let text = format!("{MINIMAL}[sun]\nelevation_deg = -2\n");
+        let s = parse(&text).unwrap();
+        let sun = s.sun.unwrap();
+        assert!((sun.angular_diameter_rad.to_degrees() - 0.533).abs() < 1e-3);
+        assert_ne!(s.hash_hex, parse(MINIMAL).unwrap().hash_hex);
+        assert_eq!(
+            parse(MINIMAL).unwrap().hash_hex,
+            parse(MINIMAL).unwrap().hash_hex
+        );
+    }
+
+    #[test]
+    fn hash_does_not_depend_on_the_folder() {
+        let text = format!("{MINIMAL}[atmosphere]\nsynthetic = \"fata.toml\"\n");
+        let a = Scene::from_toml_str(&text, Path::new("/one"), Path::new("a.toml")).unwrap();
+        let b = Scene::from_toml_str(&text, Path::new("two/three"), Path::new("b.toml")).unwrap();
+        assert_eq!(a.hash_hex, b.hash_hex);
+    }
+
+    #[test]
+    fn missing_card_image_is_a_clear_error() {
+        let text = format!(
+            "{MINIMAL}[[cards]]\nimage = \"nope.png\"\ndistance_m = 1000\nwidth_m = 10\nheight_m = 5\n"
+        );
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("nope.png"), "{err}");
+    }
+}
