@@ -54,3 +54,41 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
     }
 }
+
+/// The error and its causes on one line, `outer: inner: …` (like anyhow's `{:#}`), leaving out a
+/// cause whose text the message so far already ends with: several stage errors print their
+/// source inside their own message *and* expose it as the source, which would repeat it.
+pub fn error_chain(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot read x: {source}")]
+    struct Repeats {
+        #[source]
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn chain_drops_repeated_causes_only() {
+        let io = || std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        let err = anyhow::Error::new(Repeats { source: io() }).context("loading");
+        assert_eq!(error_chain(&err), "loading: cannot read x: gone");
+        let err = anyhow::Error::new(io()).context("loading");
+        assert_eq!(error_chain(&err), "loading: gone");
+    }
+}

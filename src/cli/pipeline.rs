@@ -83,7 +83,7 @@ fn trace_options(job: &TraceJob) -> anyhow::Result<TraceOptions> {
         job.observer_height_m,
         &job.elevation_deg,
         job.distances_m.clone(),
-        vec![20.0],
+        job.target_heights_m.clone(),
         tracer,
         1_000_000.0,
         false,

@@ -195,6 +195,8 @@ fn profile_errors_name_the_file() {
     let missing = dir.path().join("nowhere.csv");
     let r = fails(&["profile", missing.to_str().unwrap()]);
     assert!(r.stderr.contains("nowhere.csv"), "{}", r.stderr);
+    // The operating system's reason is given once, not repeated by every layer of the chain.
+    assert_eq!(r.stderr.matches("(os error").count(), 1, "{}", r.stderr);
     // A TOML with an unknown field on line 2.
     let toml = dir.path().join("odd.toml");
     std::fs::write(
