@@ -445,3 +445,26 @@ fn help_mentions_units_and_usage_errors_exit_2() {
     let r = run(&["profile"]);
     assert_eq!(r.code, Some(2), "{}", r.stderr);
 }
+
+#[test]
+fn profile_writes_to_out_profile_stem_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ghostship()
+        .current_dir(dir.path())
+        .args(["profile", "us1976", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let folder = dir.path().join("out").join("profile").join("us1976");
+    for f in ["profile.csv", "layers.json", "profile.png"] {
+        assert!(folder.join(f).is_file(), "{f} not in {}", folder.display());
+    }
+    // US1976 at sea level: 288.15 K, 1013.25 hPa, dry (the standard's defining values).
+    let (_, rows) = read_profile_csv(&folder.join("profile.csv"));
+    assert!((rows[0][1] - 288.15).abs() < 1e-9 && (rows[0][2] - 1013.25).abs() < 1e-9);
+    assert_eq!(rows[0][3], 0.0);
+}
