@@ -256,22 +256,23 @@ fn sounding_description(sounding: &Sounding) -> String {
         .map(|s| s.split(';').take(2).collect::<Vec<_>>().join(";"))
         .map(|s| s.trim().to_string())
         .filter(|s| !s.is_empty());
-    let time = m
-        .get("launch_time_utc")
-        .or_else(|| m.get("nominal_time_utc"))
-        .map(|s| s.split('(').next().unwrap_or("").trim().to_string())
-        .filter(|s| !s.is_empty())
-        .map(|t| {
-            if t.contains("UTC") {
-                t
-            } else {
-                format!("{t} UTC")
-            }
-        });
+    let time = |key: &str| {
+        m.get(key)
+            .map(|s| s.split('(').next().unwrap_or("").trim().to_string())
+            .filter(|s| !s.is_empty())
+            .map(|t| {
+                if t.contains("UTC") {
+                    t
+                } else {
+                    format!("{t} UTC")
+                }
+            })
+    };
     let name = station.unwrap_or_else(|| format!("sounding {}", sounding.source.display()));
-    match time {
-        Some(t) => format!("{name}, launched {t}"),
-        None => name,
+    match (time("launch_time_utc"), time("nominal_time_utc")) {
+        (Some(t), _) => format!("{name}, launched {t}"),
+        (None, Some(t)) => format!("{name}, {t} (nominal)"),
+        (None, None) => name,
     }
 }
 

@@ -12,8 +12,10 @@ use ghostship::pipeline::{ProfileJob, ResolvedPipeline, TraceJob};
 use ghostship::tracer::TracerConfig;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::profile::{ProfileOptions, profile_products, write_profile};
-use super::trace::{TraceOptions, trace_products};
+use super::profile::{
+    DEFAULT_LAYERS_TOP_M, DEFAULT_PLOT_TOP_M, ProfileOptions, profile_products, write_profile,
+};
+use super::trace::{DEFAULT_TRAP_DISTANCE_M, TraceOptions, trace_products};
 
 /// Arguments of `ghostship pipeline`.
 #[derive(Debug, clap::Args)]
@@ -62,8 +64,8 @@ fn profile_job(job: &ProfileJob, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let options = ProfileOptions {
         source: AtmosphereSource::parse(&job.atmosphere),
         atmosphere: atmosphere_options(job.wavelength_nm, job.smooth_m),
-        plot_top_agl_m: 1500.0,
-        layers_top_agl_m: 10_000.0,
+        plot_top_agl_m: DEFAULT_PLOT_TOP_M,
+        layers_top_agl_m: DEFAULT_LAYERS_TOP_M,
     };
     let atm = load_atmosphere(&options.source, &options.atmosphere)?;
     let products = profile_products(&atm, &options)?;
@@ -85,7 +87,7 @@ fn trace_options(job: &TraceJob) -> anyhow::Result<TraceOptions> {
         job.distances_m.clone(),
         job.target_heights_m.clone(),
         tracer,
-        1_000_000.0,
+        DEFAULT_TRAP_DISTANCE_M,
         false,
     )
 }

@@ -15,6 +15,11 @@ use ghostship::report::{
     summary_json, summary_text,
 };
 
+/// Default top of profile.png's height axis (m above the surface): where mirage layers live.
+pub const DEFAULT_PLOT_TOP_M: f64 = 1_500.0;
+/// Default top of the layer search (m above the surface).
+pub const DEFAULT_LAYERS_TOP_M: f64 = 10_000.0;
+
 /// How the summary is printed on stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SummaryFormat {
@@ -50,11 +55,11 @@ pub struct ProfileArgs {
     #[arg(long, value_enum, default_value_t = SummaryFormat::Table)]
     pub format: SummaryFormat,
     /// Top of profile.png's height axis, in metres above the surface.
-    #[arg(long, value_name = "M", default_value_t = 1500.0)]
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_PLOT_TOP_M)]
     pub plot_top_m: f64,
     /// Inversions, ducts and refractive layers are searched from the surface up to this many
     /// metres above it (and never above the highest sounding level).
-    #[arg(long, value_name = "M", default_value_t = 10_000.0)]
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_LAYERS_TOP_M)]
     pub layers_top_m: f64,
 }
 

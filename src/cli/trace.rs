@@ -16,6 +16,9 @@ use ghostship::tracer::{StratifiedIndex, TracerConfig};
 /// Most rays a fan may have.
 pub const MAX_RAYS: usize = 100_000;
 
+/// Default distance beyond which rays still in the air count as trapped (m).
+pub const DEFAULT_TRAP_DISTANCE_M: f64 = 1_000_000.0;
+
 /// How the report is printed on stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum TraceFormat {
@@ -63,7 +66,7 @@ pub struct TraceArgs {
     pub top_m: f64,
     /// Rays still in the air (neither escaped nor on the ground) at this ground distance, in
     /// metres, are reported as trapped.
-    #[arg(long, value_name = "M", default_value_t = 1_000_000.0)]
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_TRAP_DISTANCE_M)]
     pub trap_distance_m: f64,
     /// Straight rays: refractive index 1 everywhere (no refraction), for comparison.
     #[arg(long)]

@@ -468,3 +468,41 @@ fn profile_writes_to_out_profile_stem_by_default() {
     assert!((rows[0][1] - 288.15).abs() < 1e-9 && (rows[0][2] - 1013.25).abs() < 1e-9);
     assert_eq!(rows[0][3], 0.0);
 }
+
+#[test]
+fn igra2_time_chooses_the_sounding() {
+    let raw = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+    ));
+    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let dir = tempfile::tempdir().unwrap();
+    let surface_hpa = |time: Option<&str>| {
+        let mut args = vec![
+            "profile",
+            raw.to_str().unwrap(),
+            "--format",
+            "json",
+            "--quiet",
+            "--out",
+            dir.path().to_str().unwrap(),
+        ];
+        if let Some(t) = time {
+            args.extend(["--igra2-time", t]);
+        }
+        let v: serde_json::Value = serde_json::from_str(&ok(&args).stdout).unwrap();
+        v["surface"]["pressure_hpa"].as_f64().unwrap()
+    };
+    // The raw file's surface records: PRESS 100980 Pa at 00 UTC, 100840 Pa at 12 UTC.
+    assert!((surface_hpa(None) - 1009.80).abs() < 1e-6);
+    assert!((surface_hpa(Some("2010-06-01 12")) - 1008.40).abs() < 1e-6);
+    let r = fails(&[
+        "profile",
+        raw.to_str().unwrap(),
+        "--igra2-time",
+        "2010-06-03 00",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
+}
