@@ -506,3 +506,56 @@ fn igra2_time_chooses_the_sounding() {
     ]);
     assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
 }
+
+#[test]
+fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
+    let pipeline = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/pipelines/soundings.toml"
+    ));
+    assert!(pipeline.exists(), "{} is missing", pipeline.display());
+    let dir = tempfile::tempdir().unwrap();
+    ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--quiet",
+    ]);
+    for job in [
+        "utqiagvik",
+        "danmarkshavn",
+        "bjornoya",
+        "superior_mirage",
+        "inferior_mirage",
+        "fata_morgana",
+        "novaya_zemlya",
+    ] {
+        for f in ["profile.csv", "layers.json", "profile.png"] {
+            assert!(dir.path().join(job).join(f).is_file(), "{job}/{f}");
+        }
+    }
+    let trace = |name: &str| {
+        assert!(dir.path().join(format!("{name}_transfer.png")).is_file());
+        json_file(&dir.path().join(format!("{name}_transfer.json")))
+    };
+    // Fata Morgana: stacked layers fold the transfer curve, so some image is inverted.
+    let fm = trace("fata_morgana");
+    assert!(
+        fm["images"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|i| i["erect"] == false),
+        "no inverted image in the Fata Morgana trace"
+    );
+    // Novaya Zemlya: the critical-gradient ground inversion traps rays (a duct).
+    let nz = trace("novaya_zemlya");
+    assert!(!nz["trapped_elevations_deg"].as_array().unwrap().is_empty());
+    // The other two traces exist and cover every distance.
+    for name in ["superior_mirage", "inferior_mirage"] {
+        let t = trace(name);
+        assert_eq!(t["distances_m"].as_array().unwrap().len(), 5, "{name}");
+    }
+}
