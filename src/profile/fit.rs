@@ -646,6 +646,7 @@ mod tests {
             source: PathBuf::from("unit"),
             format: SoundingFormat::NormalizedCsv,
             metadata: Default::default(),
+            warnings: Vec::new(),
             levels: levels
                 .iter()
                 .enumerate()
@@ -658,7 +659,6 @@ mod tests {
                     line: i + 1,
                 })
                 .collect(),
-            warnings: Vec::new(),
         }
     }
 

@@ -8,67 +8,20 @@ use ghostship::profile::{
     AirColumn, AirSample, FitOptions, InversionKind, InversionLayer, InversionOptions, Profile,
     ProfileError, StandardAtmosphere, SyntheticAtmosphere, detect_inversions,
 };
-use ghostship::sounding::{HeightSource, Level, Sounding, SoundingFormat};
+use ghostship::sounding::{
+    HeightSource, Level, ReadOptions, Sounding, SoundingFormat, read_sounding,
+};
+use ghostship::units::saturation_vapour_pressure_pa;
 use ghostship::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
-use ghostship::units::{celsius_to_kelvin, hpa_to_pa, saturation_vapour_pressure_pa};
 use proptest::prelude::*;
 
-/// Read one of the normalised CSVs in shared/soundings (`#` comment lines, header
-/// `pressure_hpa,height_m,temperature_c,dewpoint_c`, empty = missing). Test-only stand-in for the
-/// ingest stage: a level whose height does not increase is skipped, as ingest would reject it.
+/// Read one of the real soundings in shared/soundings through the ingest stage.
 fn load(name: &str) -> Sounding {
     let path =
         PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings/")).join(name);
-    let text = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("missing test sounding {}: {e}", path.display()));
-    let mut levels: Vec<Level> = Vec::new();
-    let mut header_seen = false;
-    for (index, line) in text.lines().enumerate() {
-        if line.starts_with('#') || line.trim().is_empty() {
-            continue;
-        }
-        if !header_seen {
-            assert_eq!(
-                line.trim(),
-                "pressure_hpa,height_m,temperature_c,dewpoint_c"
-            );
-            header_seen = true;
-            continue;
-        }
-        let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 4, "{name}:{}: {line}", index + 1);
-        let num = |s: &str| -> Option<f64> {
-            let s = s.trim();
-            if s.is_empty() {
-                None
-            } else {
-                Some(s.parse().unwrap())
-            }
-        };
-        let (Some(height_m), Some(t_c)) = (num(f[1]), num(f[2])) else {
-            continue;
-        };
-        if levels.last().is_some_and(|l| l.height_m >= height_m) {
-            continue;
-        }
-        levels.push(Level {
-            height_m,
-            pressure_pa: num(f[0]).map(hpa_to_pa),
-            temperature_k: celsius_to_kelvin(t_c),
-            vapour_pressure_pa: num(f[3])
-                .map(|td| saturation_vapour_pressure_pa(celsius_to_kelvin(td))),
-            height_source: HeightSource::Measured,
-            line: index + 1,
-        });
-    }
-    assert!(levels.len() >= 2, "{name}: too few levels");
-    Sounding {
-        source: path,
-        format: SoundingFormat::NormalizedCsv,
-        metadata: BTreeMap::new(),
-        levels,
-        warnings: Vec::new(),
-    }
+    assert!(path.exists(), "missing test sounding {}", path.display());
+    read_sounding(&path, &ReadOptions::default())
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
 
 /// Deterministic Gaussian noise (64-bit LCG + Box–Muller), independent of the code under test.
@@ -94,6 +47,7 @@ fn sounding(levels: &[(f64, f64, Option<f64>, Option<f64>)]) -> Sounding {
         source: PathBuf::from("in-memory"),
         format: SoundingFormat::NormalizedCsv,
         metadata: BTreeMap::new(),
+        warnings: Vec::new(),
         levels: levels
             .iter()
             .enumerate()
@@ -106,7 +60,6 @@ fn sounding(levels: &[(f64, f64, Option<f64>, Option<f64>)]) -> Sounding {
                 line: i + 1,
             })
             .collect(),
-        warnings: Vec::new(),
     }
 }
 
