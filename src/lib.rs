@@ -15,6 +15,7 @@
 #![warn(missing_docs)]
 
 pub mod analysis;
+pub mod atmosphere;
 pub mod output;
 pub mod pipeline;
 pub mod profile;

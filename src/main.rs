@@ -1,4 +1,5 @@
-//! The `ghostship` command: parse the arguments, run the command, report errors once as a chain.
+//! The `ghostship` command: parse the arguments, run the command, report errors once as a chain
+//! (`error: outer: inner: …`, non-zero exit; clap's usage errors exit with 2).
 
 use std::process::ExitCode;
 
@@ -9,7 +10,7 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", cli::error_chain(&err));
             ExitCode::FAILURE
         }
     }

@@ -16,6 +16,7 @@
 //! observer_height_m = 10.0
 //! elevation_deg = "-0.3:0.5:0.002"
 //! distances_m = [5000.0, 15000.0, 26000.0]
+//! target_heights_m = [40.0]           # optional; default [20.0]
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -92,6 +93,7 @@ struct TraceJobFile {
     observer_height_m: f64,
     elevation_deg: String,
     distances_m: Vec<f64>,
+    target_heights_m: Option<Vec<f64>>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
     tolerance_m: Option<f64>,
@@ -148,6 +150,8 @@ pub struct TraceJob {
     pub elevation_deg: String,
     /// Target ground distances (m).
     pub distances_m: Vec<f64>,
+    /// Heights of the targets standing at every distance (m); default `[20.0]`.
+    pub target_heights_m: Vec<f64>,
     /// Wavelength (nm).
     pub wavelength_nm: Option<f64>,
     /// Smoothing scale (m).
@@ -283,12 +287,22 @@ impl ResolvedPipeline {
             if job.distances_m.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
                 return Err(invalid(format!("{at}: distances_m must be finite and > 0")));
             }
+            let target_heights_m = job.target_heights_m.unwrap_or_else(|| vec![20.0]);
+            if target_heights_m
+                .iter()
+                .any(|h| !(h.is_finite() && *h > 0.0))
+            {
+                return Err(invalid(format!(
+                    "{at}: target_heights_m must be finite and > 0"
+                )));
+            }
             traces.push(TraceJob {
                 name,
                 atmosphere: resolve_atmosphere(&job.atmosphere),
                 observer_height_m: job.observer_height_m,
                 elevation_deg: job.elevation_deg,
                 distances_m: job.distances_m,
+                target_heights_m,
                 wavelength_nm: job.wavelength_nm,
                 smooth_m: job.smooth_m,
                 tolerance_m: job.tolerance_m,
@@ -378,6 +392,7 @@ distances_m = [1000.0]
         );
         assert_eq!(p.traces[0].atmosphere, "us1976");
         assert_eq!(p.traces[0].name, "us1976_transfer");
+        assert_eq!(p.traces[0].target_heights_m, vec![20.0]);
     }
 
     #[test]
@@ -407,6 +422,10 @@ distances_m = [1000.0]
                 "plain file name",
             ),
             ("name = \"x\"\n", "no jobs"),
+            (
+                "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 1\nelevation_deg = \"0:1:0.1\"\ndistances_m = [1.0]\ntarget_heights_m = [0.0]\n",
+                "target_heights_m",
+            ),
             (
                 "[[render]]\nscene = \"a.toml\"\n[[render]]\nscene = \"b/a.toml\"\n",
                 "two jobs",

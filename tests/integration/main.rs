@@ -1,4 +1,5 @@
 //! One integration-test binary (keeps link time low); each file is a module.
+mod cli;
 mod ingest;
 mod profile;
 mod refractivity;

@@ -1,0 +1,401 @@
+//! Stages 1–3 in one call — the atmosphere resolver every command uses. In: what the user named
+//! (a sounding file, a synthetic atmosphere TOML or `us1976`) and the options that shape it
+//! (smoothing scale, wavelength, IGRA2 launch time). Out: a [`LoadedAtmosphere`] holding the
+//! sounding (if any), the air column and the [`RefractiveAtmosphere`] built on it, or one
+//! [`AtmosphereError`] whose chain names the file and the place in it.
+//!
+//! Also here: [`UniformIndex`], air of constant index n ≡ 1, for straight-ray (no refraction)
+//! geometry through the same tracer and analysis as real air.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
+use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
+use crate::sounding::{ReadOptions, Sounding, read_sounding};
+use crate::tracer::StratifiedIndex;
+
+/// What the user named: a sounding file, a synthetic atmosphere TOML, or the standard atmosphere.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AtmosphereSource {
+    /// A radiosonde sounding (normalised CSV, Wyoming, IGRA2; the format is read from the content).
+    Sounding(PathBuf),
+    /// A synthetic layered atmosphere (`.toml`).
+    Synthetic(PathBuf),
+    /// The U.S. Standard Atmosphere 1976 (dry, surface at sea level).
+    Us1976,
+}
+
+impl AtmosphereSource {
+    /// `us1976` (any case) → [`Us1976`](Self::Us1976); a name ending in `.toml` (any case) →
+    /// [`Synthetic`](Self::Synthetic); anything else → [`Sounding`](Self::Sounding).
+    pub fn parse(text: &str) -> Self {
+        let trimmed = text.trim();
+        if trimmed.eq_ignore_ascii_case("us1976") {
+            return AtmosphereSource::Us1976;
+        }
+        let path = PathBuf::from(text);
+        let is_toml = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        if is_toml {
+            AtmosphereSource::Synthetic(path)
+        } else {
+            AtmosphereSource::Sounding(path)
+        }
+    }
+
+    /// The file behind the source, if any.
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            AtmosphereSource::Sounding(p) | AtmosphereSource::Synthetic(p) => Some(p),
+            AtmosphereSource::Us1976 => None,
+        }
+    }
+
+    /// A short name for output folders: the file stem, or `us1976`.
+    pub fn stem(&self) -> String {
+        match self.path() {
+            Some(p) => p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .filter(|s| !s.is_empty())
+                .unwrap_or_else(|| "atmosphere".into()),
+            None => "us1976".into(),
+        }
+    }
+}
+
+impl std::fmt::Display for AtmosphereSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.path() {
+            Some(p) => write!(f, "{}", p.display()),
+            None => f.write_str("us1976"),
+        }
+    }
+}
+
+/// How to build the atmosphere.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AtmosphereOptions {
+    /// Smoothing scale of the sounding fit (m); see [`FitOptions::smooth_m`]. Ignored for
+    /// synthetic and standard atmospheres.
+    pub smooth_m: f64,
+    /// Vacuum wavelength the refractive index is computed for (nm, 300–1700).
+    pub wavelength_nm: f64,
+    /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
+    pub igra2_time: Option<String>,
+}
+
+impl Default for AtmosphereOptions {
+    /// The fit's default smoothing (20 m), 550 nm, the first IGRA2 sounding.
+    fn default() -> Self {
+        AtmosphereOptions {
+            smooth_m: FitOptions::default().smooth_m,
+            wavelength_nm: DEFAULT_WAVELENGTH_NM,
+            igra2_time: None,
+        }
+    }
+}
+
+/// An atmosphere ready for the report, the tracer and the renderer.
+pub struct LoadedAtmosphere {
+    /// What it was loaded from.
+    pub source: AtmosphereSource,
+    /// The sounding, for measured atmospheres.
+    pub sounding: Option<Sounding>,
+    /// The air column (fitted profile, synthetic layers or standard atmosphere).
+    pub column: Arc<dyn AirColumn>,
+    /// n(h) and dn/dh on the column.
+    pub refractive: RefractiveAtmosphere,
+    /// Height of the highest sounding level (m above mean sea level); `None` for model
+    /// atmospheres (defined everywhere).
+    pub top_of_data_m: Option<f64>,
+    /// One line saying what this is (station and launch time, the TOML's description, …).
+    pub description: String,
+}
+
+impl std::fmt::Debug for LoadedAtmosphere {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LoadedAtmosphere")
+            .field("source", &self.source)
+            .field("description", &self.description)
+            .field("top_of_data_m", &self.top_of_data_m)
+            .field("refractive", &self.refractive)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Why an atmosphere could not be loaded. The message says which atmosphere; the source (the
+/// stage's own error) says where in the file and what.
+#[derive(Debug, thiserror::Error)]
+pub enum AtmosphereError {
+    /// The options are out of range.
+    #[error("invalid atmosphere option: {0}")]
+    InvalidOption(String),
+    /// The sounding could not be read.
+    #[error("cannot load atmosphere {source_name}")]
+    Sounding {
+        /// The source as the user named it.
+        source_name: String,
+        /// Why (file, line, column).
+        #[source]
+        source: crate::sounding::SoundingError,
+    },
+    /// The sounding could not be fitted, or the synthetic atmosphere is invalid.
+    #[error("cannot load atmosphere {source_name}")]
+    Profile {
+        /// The source as the user named it.
+        source_name: String,
+        /// Why.
+        #[source]
+        source: crate::profile::ProfileError,
+    },
+    /// The refractive index cannot be computed on the column.
+    #[error("cannot compute the refractive index of atmosphere {source_name}")]
+    Refractivity {
+        /// The source as the user named it.
+        source_name: String,
+        /// Why.
+        #[source]
+        source: crate::refractivity::RefractivityError,
+    },
+}
+
+/// Read, fit and refract the atmosphere `source` names.
+pub fn load_atmosphere(
+    source: &AtmosphereSource,
+    options: &AtmosphereOptions,
+) -> Result<LoadedAtmosphere, AtmosphereError> {
+    let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+    if !(options.wavelength_nm >= lo && options.wavelength_nm <= hi) {
+        return Err(AtmosphereError::InvalidOption(format!(
+            "wavelength {} nm is outside {lo}–{hi} nm",
+            options.wavelength_nm
+        )));
+    }
+    if !(options.smooth_m.is_finite() && options.smooth_m >= 0.0) {
+        return Err(AtmosphereError::InvalidOption(format!(
+            "smoothing scale {} m must be finite and ≥ 0",
+            options.smooth_m
+        )));
+    }
+    let source_name = source.to_string();
+    let (sounding, column, top_of_data_m, description): (
+        Option<Sounding>,
+        Arc<dyn AirColumn>,
+        Option<f64>,
+        String,
+    ) = match source {
+        AtmosphereSource::Sounding(path) => {
+            let read = ReadOptions {
+                igra2_time: options.igra2_time.clone(),
+            };
+            let sounding =
+                read_sounding(path, &read).map_err(|source| AtmosphereError::Sounding {
+                    source_name: source_name.clone(),
+                    source,
+                })?;
+            let fit = FitOptions {
+                smooth_m: options.smooth_m,
+                ..FitOptions::default()
+            };
+            let profile = Profile::from_sounding(&sounding, &fit).map_err(|source| {
+                AtmosphereError::Profile {
+                    source_name: source_name.clone(),
+                    source,
+                }
+            })?;
+            let top = profile.top_of_data_m();
+            let description = sounding_description(&sounding);
+            (Some(sounding), Arc::new(profile), Some(top), description)
+        }
+        AtmosphereSource::Synthetic(path) => {
+            let synthetic = SyntheticAtmosphere::from_file(path).map_err(|source| {
+                AtmosphereError::Profile {
+                    source_name: source_name.clone(),
+                    source,
+                }
+            })?;
+            let description = match synthetic.description() {
+                Some(d) if !d.trim().is_empty() => d.trim().to_string(),
+                _ => format!("synthetic atmosphere {}", path.display()),
+            };
+            (None, Arc::new(synthetic), None, description)
+        }
+        AtmosphereSource::Us1976 => (
+            None,
+            Arc::new(StandardAtmosphere::default()),
+            None,
+            "U.S. Standard Atmosphere 1976 (dry, surface at sea level)".to_string(),
+        ),
+    };
+    let refractive =
+        RefractiveAtmosphere::new(column.clone(), options.wavelength_nm).map_err(|source| {
+            AtmosphereError::Refractivity {
+                source_name: source_name.clone(),
+                source,
+            }
+        })?;
+    Ok(LoadedAtmosphere {
+        source: source.clone(),
+        sounding,
+        column,
+        refractive,
+        top_of_data_m,
+        description,
+    })
+}
+
+/// "station, launched time" from the sounding's metadata, or the file name. The station keeps
+/// its first two `;`-separated parts (name and WMO number); the time drops parenthesised notes.
+fn sounding_description(sounding: &Sounding) -> String {
+    let m = &sounding.metadata;
+    let station = m
+        .get("station")
+        .map(|s| s.split(';').take(2).collect::<Vec<_>>().join(";"))
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty());
+    let time = |key: &str| {
+        m.get(key)
+            .map(|s| s.split('(').next().unwrap_or("").trim().to_string())
+            .filter(|s| !s.is_empty())
+            .map(|t| {
+                if t.contains("UTC") {
+                    t
+                } else {
+                    format!("{t} UTC")
+                }
+            })
+    };
+    let name = station.unwrap_or_else(|| format!("sounding {}", sounding.source.display()));
+    match (time("launch_time_utc"), time("nominal_time_utc")) {
+        (Some(t), _) => format!("{name}, launched {t}"),
+        (None, Some(t)) => format!("{name}, {t} (nominal)"),
+        (None, None) => name,
+    }
+}
+
+/// Air of constant refractive index n ≡ 1 (dn/dh = 0): rays through it are straight lines, the
+/// paper's Figure 1 geometry. Traced by the same integrator as real air, it reproduces
+/// [`straight_ray`](crate::tracer::straight_ray) to the tracer's tolerance, so every analysis
+/// (images, horizons) works unchanged with refraction switched off.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct UniformIndex;
+
+impl StratifiedIndex for UniformIndex {
+    fn index_and_derivative(&self, _height_m: f64) -> (f64, f64) {
+        (1.0, 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tracer::{Tracer, TracerConfig, straight_ray};
+
+    fn data(name: &str) -> PathBuf {
+        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name)
+    }
+
+    #[test]
+    fn parse_names() {
+        assert_eq!(AtmosphereSource::parse("US1976"), AtmosphereSource::Us1976);
+        assert_eq!(
+            AtmosphereSource::parse("a/b.TOML"),
+            AtmosphereSource::Synthetic("a/b.TOML".into())
+        );
+        assert_eq!(
+            AtmosphereSource::parse("x.csv"),
+            AtmosphereSource::Sounding("x.csv".into())
+        );
+        assert_eq!(AtmosphereSource::parse("x.csv").stem(), "x");
+        assert_eq!(AtmosphereSource::Us1976.stem(), "us1976");
+    }
+
+    #[test]
+    fn loads_each_kind() {
+        let opts = AtmosphereOptions::default();
+        let s = load_atmosphere(
+            &AtmosphereSource::Sounding(data("Utqiagvik-70026_2026020600_all-levels.csv")),
+            &opts,
+        )
+        .unwrap();
+        assert!(s.sounding.is_some());
+        // The data README: surface at 12 m (station elevation).
+        assert!((s.refractive.surface_height_m() - 12.0).abs() < 1e-9);
+        assert!(s.top_of_data_m.unwrap() > 1000.0);
+        let t = load_atmosphere(
+            &AtmosphereSource::Synthetic(data("superior_mirage.toml")),
+            &opts,
+        )
+        .unwrap();
+        assert!(t.sounding.is_none() && t.top_of_data_m.is_none());
+        assert!(
+            t.description.contains("superior mirage"),
+            "{}",
+            t.description
+        );
+        let u = load_atmosphere(&AtmosphereSource::Us1976, &opts).unwrap();
+        // US1976 at sea level: 288.15 K (the standard's defining value).
+        let air = u.column.air_at(0.0);
+        assert!((air.temperature_k - 288.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn errors_name_the_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let bad = dir.path().join("bad.csv");
+        std::fs::write(
+            &bad,
+            "pressure_hpa,height_m,temperature_c,dewpoint_c\n1000,10,abc,\n990,100,-5,\n980,200,-6,\n",
+        )
+        .unwrap();
+        let err = load_atmosphere(
+            &AtmosphereSource::Sounding(bad.clone()),
+            &AtmosphereOptions::default(),
+        )
+        .unwrap_err();
+        let chain = format!("{:#}", anyhow::Error::new(err));
+        assert!(chain.contains("cannot load atmosphere"), "{chain}");
+        assert!(chain.contains("bad.csv"), "{chain}");
+        assert!(chain.contains("line 2"), "{chain}");
+        let err = load_atmosphere(
+            &AtmosphereSource::Sounding(dir.path().join("missing.csv")),
+            &AtmosphereOptions::default(),
+        )
+        .unwrap_err();
+        assert!(format!("{:#}", anyhow::Error::new(err)).contains("missing.csv"));
+        let err = load_atmosphere(
+            &AtmosphereSource::Us1976,
+            &AtmosphereOptions {
+                wavelength_nm: 100.0,
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("wavelength"), "{err}");
+    }
+
+    #[test]
+    fn uniform_index_traces_straight_rays() {
+        // The integrator through n ≡ 1 against the closed-form line–sphere geometry.
+        let cfg = TracerConfig::default();
+        let tracer = Tracer::new(&UniformIndex, cfg.clone()).unwrap();
+        let distances = [5_000.0, 10_000.0, 20_000.0];
+        for elevation_deg in [-0.1_f64, 0.0, 0.05, 0.3] {
+            let a = elevation_deg.to_radians();
+            let traced = tracer.trace(10.0, a, &distances).unwrap();
+            let exact = straight_ray(10.0, a, cfg.earth_radius_m, cfg.top_m, &distances).unwrap();
+            for (t, e) in traced.heights_m.iter().zip(&exact.heights_m) {
+                match (t, e) {
+                    (Some(t), Some(e)) => {
+                        assert!((t - e).abs() < 0.05, "{elevation_deg}: {t} vs {e}")
+                    }
+                    (None, None) => {}
+                    other => panic!("{elevation_deg}: {other:?}"),
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,94 @@
+//! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
+//! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis) and
+//! [`pipeline`] (batch runs of both). Errors go back to `main` as one `anyhow` chain.
+
+pub mod pipeline;
+pub mod profile;
+pub mod trace;
+
+use clap::{Parser, Subcommand};
+
+/// Turn real radiosonde soundings (or synthetic paper-style layers) into the refractive
+/// atmosphere, ray fans and transfer curves behind arctic mirages: superior and inferior
+/// mirages, Fata Morgana, the Novaya Zemlya sun.
+///
+/// An ATMOSPHERE is a sounding file (normalised CSV, University of Wyoming TEXT:LIST or TEXT:CSV,
+/// IGRA2; the format is read from the content), a synthetic layered atmosphere (`*.toml`), or
+/// `us1976` (the U.S. Standard Atmosphere 1976). Units are in the option names: `_m` metres,
+/// `_nm` nanometres, `_deg` degrees.
+#[derive(Debug, Parser)]
+#[command(name = "ghostship", version, about, long_about)]
+pub struct Cli {
+    /// Print nothing but errors and the command's data output (no summaries of written files,
+    /// no progress bars).
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Ingest a sounding (or synthetic atmosphere), fit it, find inversions, ducts and refractive
+    /// layers, and write n(h): prints a summary and writes profile.csv, layers.json, profile.png.
+    Profile(profile::ProfileArgs),
+    /// Trace a fan of rays from an observer: heights at target distances, images of targets,
+    /// apparent horizons, trapped rays (JSON or CSV on stdout, optional plot).
+    Trace(trace::TraceArgs),
+    /// Batch runs described by a pipeline file.
+    Pipeline(pipeline::PipelineArgs),
+}
+
+/// Parse the process arguments (usage errors print clap's message and exit with status 2).
+pub fn parse() -> Cli {
+    Cli::parse()
+}
+
+/// Run one command.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Profile(args) => profile::run(args, cli.quiet),
+        Command::Trace(args) => trace::run(args, cli.quiet),
+        Command::Pipeline(args) => pipeline::run(args, cli.quiet),
+    }
+}
+
+/// The error and its causes on one line, `outer: inner: …` (like anyhow's `{:#}`), leaving out a
+/// cause whose text the message so far already ends with: several stage errors print their
+/// source inside their own message *and* expose it as the source, which would repeat it.
+pub fn error_chain(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot read x: {source}")]
+    struct Repeats {
+        #[source]
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn chain_drops_repeated_causes_only() {
+        let io = || std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        let err = anyhow::Error::new(Repeats { source: io() }).context("loading");
+        assert_eq!(error_chain(&err), "loading: cannot read x: gone");
+        let err = anyhow::Error::new(io()).context("loading");
+        assert_eq!(error_chain(&err), "loading: gone");
+    }
+}

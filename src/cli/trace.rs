@@ -1,0 +1,292 @@
+//! `ghostship trace`: arguments → [`TraceOptions`] (a validated
+//! [`TraceRequest`](ghostship::analysis::TraceRequest)) → load the atmosphere, trace the fan,
+//! print the report (JSON or CSV) and optionally write the fan + transfer plot.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use ghostship::analysis::{TraceReport, TraceRequest, trace_plot_png, trace_report};
+use ghostship::atmosphere::{
+    AtmosphereOptions, AtmosphereSource, LoadedAtmosphere, UniformIndex, load_atmosphere,
+};
+use ghostship::output::write_atomic;
+use ghostship::refractivity::DEFAULT_WAVELENGTH_NM;
+use ghostship::tracer::{StratifiedIndex, TracerConfig};
+
+/// Most rays a fan may have.
+pub const MAX_RAYS: usize = 100_000;
+
+/// Default distance beyond which rays still in the air count as trapped (m).
+pub const DEFAULT_TRAP_DISTANCE_M: f64 = 1_000_000.0;
+
+/// How the report is printed on stdout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TraceFormat {
+    /// The whole report: rays, images, horizons, trapped rays.
+    Json,
+    /// One row per ray of the fan, with its height at every distance.
+    Csv,
+}
+
+/// Arguments of `ghostship trace`.
+#[derive(Debug, clap::Args)]
+pub struct TraceArgs {
+    /// The atmosphere: a sounding file, a synthetic layered atmosphere (*.toml) or `us1976`.
+    #[arg(long, short, value_name = "SOUNDING|ATMOSPHERE.toml|us1976")]
+    pub atmosphere: String,
+    /// Observer (eye) height in metres above the atmosphere's surface level.
+    #[arg(long, value_name = "M")]
+    pub observer_height_m: f64,
+    /// The fan of apparent elevations in degrees, FROM:TO:STEP (e.g. -0.4:0.6:0.001): rays at
+    /// FROM, FROM+STEP, … up to TO; at least 3 and at most 100 000 rays.
+    #[arg(long, value_name = "FROM:TO:STEP", allow_hyphen_values = true)]
+    pub elevation_deg: String,
+    /// Ground distances of the targets in metres, comma-separated (heights of every ray are
+    /// reported there; images are searched there).
+    #[arg(long, value_name = "M,...", value_delimiter = ',', default_values_t = [10_000.0, 20_000.0, 30_000.0])]
+    pub distance_m: Vec<f64>,
+    /// Heights of the targets standing at every distance, in metres, comma-separated: the images
+    /// of [0, H] are found (erect or inverted, with magnification).
+    #[arg(long, value_name = "M,...", value_delimiter = ',', default_values_t = [20.0])]
+    pub target_height_m: Vec<f64>,
+    /// Integration error tolerance on position per step, in metres (the paper used 1 cm).
+    #[arg(long, value_name = "M", default_value_t = 0.01)]
+    pub tolerance_m: f64,
+    /// Vacuum wavelength for the refractive index, in nanometres (300–1700).
+    #[arg(long, value_name = "NM", default_value_t = DEFAULT_WAVELENGTH_NM)]
+    pub wavelength_nm: f64,
+    /// Smoothing scale of the sounding fit, in metres (0 = none). Ignored for .toml and us1976.
+    #[arg(long, value_name = "M", default_value_t = 20.0)]
+    pub smooth_m: f64,
+    /// Which sounding of a multi-sounding IGRA2 file: "YYYY-MM-DD HH" (UTC). Default: the first.
+    #[arg(long, value_name = "YYYY-MM-DD HH")]
+    pub igra2_time: Option<String>,
+    /// Top of the atmosphere in metres above the surface: rays above it have escaped.
+    #[arg(long, value_name = "M", default_value_t = 40_000.0)]
+    pub top_m: f64,
+    /// Rays still in the air (neither escaped nor on the ground) at this ground distance, in
+    /// metres, are reported as trapped.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_TRAP_DISTANCE_M)]
+    pub trap_distance_m: f64,
+    /// Straight rays: refractive index 1 everywhere (no refraction), for comparison.
+    #[arg(long)]
+    pub straight: bool,
+    /// Output on stdout.
+    #[arg(long, value_enum, default_value_t = TraceFormat::Json)]
+    pub format: TraceFormat,
+    /// Also draw the ray fan and the transfer curves into this PNG file.
+    #[arg(long, value_name = "FILE.png")]
+    pub plot: Option<PathBuf>,
+}
+
+/// A fan of elevations: `count` rays from `from_deg` to `to_deg`, evenly spaced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ElevationFan {
+    /// Lowest elevation (deg).
+    pub from_deg: f64,
+    /// Highest elevation (deg): FROM + (count − 1)·STEP, at most TO.
+    pub to_deg: f64,
+    /// Number of rays.
+    pub count: usize,
+}
+
+/// Parse `FROM:TO:STEP` (degrees). STEP > 0, TO > FROM, 3 to [`MAX_RAYS`] rays. When
+/// (TO − FROM)/STEP is not a whole number the fan stops at the last step below TO.
+pub fn parse_elevation_fan(text: &str) -> Result<ElevationFan, String> {
+    let parts: Vec<&str> = text.split(':').collect();
+    let [from, to, step] = parts.as_slice() else {
+        return Err(format!(
+            "elevation fan {text:?} is not FROM:TO:STEP in degrees (e.g. \"-0.4:0.6:0.001\")"
+        ));
+    };
+    let num = |name: &str, s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("elevation fan {text:?}: {name} {s:?} is not a number"))
+    };
+    let (from, to, step) = (num("FROM", from)?, num("TO", to)?, num("STEP", step)?);
+    if step <= 0.0 {
+        return Err(format!("elevation fan {text:?}: STEP must be > 0"));
+    }
+    if to <= from {
+        return Err(format!(
+            "elevation fan {text:?}: TO must be greater than FROM"
+        ));
+    }
+    if from <= -90.0 || to >= 90.0 {
+        return Err(format!(
+            "elevation fan {text:?}: elevations must lie strictly between -90° and 90°"
+        ));
+    }
+    // A relative slack so that 0.6 reached by steps of 0.001 counts despite rounding.
+    let intervals = ((to - from) / step * (1.0 + 1e-9)).floor();
+    if intervals + 1.0 > MAX_RAYS as f64 {
+        return Err(format!(
+            "elevation fan {text:?} has {} rays; at most {MAX_RAYS} are allowed (use a larger STEP)",
+            intervals + 1.0
+        ));
+    }
+    let count = intervals as usize + 1;
+    if count < 3 {
+        return Err(format!(
+            "elevation fan {text:?} has {count} ray(s); at least 3 are needed (use a smaller STEP)"
+        ));
+    }
+    Ok(ElevationFan {
+        from_deg: from,
+        to_deg: from + (count - 1) as f64 * step,
+        count,
+    })
+}
+
+/// Validated options of `trace` (also built by pipeline jobs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TraceOptions {
+    /// What to load.
+    pub source: AtmosphereSource,
+    /// How to load it.
+    pub atmosphere: AtmosphereOptions,
+    /// What to trace.
+    pub request: TraceRequest,
+    /// Trace through n ≡ 1 instead of the atmosphere.
+    pub straight: bool,
+}
+
+impl TraceOptions {
+    /// Build and check the request from its parts; `elevation_deg` is `FROM:TO:STEP`.
+    #[allow(clippy::too_many_arguments)] // one argument per request field
+    pub fn new(
+        source: AtmosphereSource,
+        atmosphere: AtmosphereOptions,
+        observer_height_m: f64,
+        elevation_deg: &str,
+        mut distances_m: Vec<f64>,
+        target_heights_m: Vec<f64>,
+        tracer: TracerConfig,
+        trap_distance_m: f64,
+        straight: bool,
+    ) -> anyhow::Result<Self> {
+        let fan = parse_elevation_fan(elevation_deg).map_err(anyhow::Error::msg)?;
+        if !(observer_height_m.is_finite() && observer_height_m >= 0.0) {
+            anyhow::bail!("observer height {observer_height_m} m must be ≥ 0 m above the surface");
+        }
+        if distances_m.is_empty() {
+            anyhow::bail!("give at least one target distance");
+        }
+        distances_m.sort_by(f64::total_cmp);
+        let request = TraceRequest {
+            observer_height_m,
+            elevation_min_deg: fan.from_deg,
+            elevation_max_deg: fan.to_deg,
+            elevation_count: fan.count,
+            distances_m,
+            target_heights_m,
+            wavelength_nm: atmosphere.wavelength_nm,
+            trap_distance_m,
+            tracer,
+        };
+        request.validate()?;
+        if observer_height_m >= request.tracer.top_m {
+            anyhow::bail!(
+                "observer height {observer_height_m} m is not below the top of the atmosphere ({} m)",
+                request.tracer.top_m
+            );
+        }
+        Ok(TraceOptions {
+            source,
+            atmosphere,
+            request,
+            straight,
+        })
+    }
+}
+
+/// Trace `options.request` through `atm` (or through n ≡ 1 when `options.straight`); with
+/// `plot`, also draw the fan and transfer curves as PNG bytes.
+pub fn trace_products(
+    atm: &LoadedAtmosphere,
+    options: &TraceOptions,
+    plot: bool,
+) -> anyhow::Result<(TraceReport, Option<Vec<u8>>)> {
+    let index: &dyn StratifiedIndex = if options.straight {
+        &UniformIndex
+    } else {
+        &atm.refractive
+    };
+    let report = trace_report(index, &options.request)
+        .with_context(|| format!("cannot trace through {}", atm.source))?;
+    let png = if plot {
+        Some(
+            trace_plot_png(index, &options.request, &report)
+                .with_context(|| format!("cannot plot the trace through {}", atm.source))?,
+        )
+    } else {
+        None
+    };
+    Ok((report, png))
+}
+
+/// Run `ghostship trace`.
+pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
+    let tracer = TracerConfig {
+        tolerance_m: args.tolerance_m,
+        top_m: args.top_m,
+        ..TracerConfig::default()
+    };
+    let options = TraceOptions::new(
+        AtmosphereSource::parse(&args.atmosphere),
+        AtmosphereOptions {
+            smooth_m: args.smooth_m,
+            wavelength_nm: args.wavelength_nm,
+            igra2_time: args.igra2_time,
+        },
+        args.observer_height_m,
+        &args.elevation_deg,
+        args.distance_m,
+        args.target_height_m,
+        tracer,
+        args.trap_distance_m,
+        args.straight,
+    )?;
+    let atm = load_atmosphere(&options.source, &options.atmosphere)?;
+    let (report, png) = trace_products(&atm, &options, args.plot.is_some())?;
+    match args.format {
+        TraceFormat::Json => println!("{}", report.to_json()?),
+        TraceFormat::Csv => print!("{}", String::from_utf8_lossy(&report.rays_csv()?)),
+    }
+    if let (Some(path), Some(png)) = (&args.plot, png) {
+        write_atomic(path, &png)?;
+        if !quiet {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fan_spec() {
+        let f = parse_elevation_fan("-0.4:0.6:0.001").unwrap();
+        assert_eq!(f.count, 1001);
+        assert!((f.to_deg - 0.6).abs() < 1e-12);
+        let f = parse_elevation_fan("0:1:0.3").unwrap();
+        assert_eq!(f.count, 4);
+        assert!((f.to_deg - 0.9).abs() < 1e-12);
+        for bad in [
+            "1:0:0.1",
+            "0:1:0",
+            "0:1:-1",
+            "0:1",
+            "a:1:0.1",
+            "0:1:1",
+            "0:10:0.00001",
+        ] {
+            assert!(parse_elevation_fan(bad).is_err(), "{bad}");
+        }
+    }
+}

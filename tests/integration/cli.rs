@@ -1,0 +1,561 @@
+//! The `ghostship` binary end to end: `profile`, `trace` and `pipeline run` on shipped data, in
+//! temporary folders. Expected values come from the input files themselves (surface temperature,
+//! layer placement), from straight-line geometry over a sphere, or from properties.
+
+use std::path::{Path, PathBuf};
+
+use assert_cmd::cargo::cargo_bin_cmd;
+
+fn data(name: &str) -> PathBuf {
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name);
+    assert!(
+        path.exists(),
+        "shipped data file {} is missing",
+        path.display()
+    );
+    path
+}
+
+fn ghostship() -> assert_cmd::Command {
+    cargo_bin_cmd!("ghostship")
+}
+
+struct Run {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+fn run(args: &[&str]) -> Run {
+    let out = ghostship().args(args).output().expect("binary runs");
+    Run {
+        code: out.status.code(),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+fn ok(args: &[&str]) -> Run {
+    let r = run(args);
+    assert_eq!(
+        r.code,
+        Some(0),
+        "ghostship {args:?} failed:\nstdout: {}\nstderr: {}",
+        r.stdout,
+        r.stderr
+    );
+    r
+}
+
+fn fails(args: &[&str]) -> Run {
+    let r = run(args);
+    assert_eq!(
+        r.code,
+        Some(1),
+        "ghostship {args:?} should fail with status 1: {}",
+        r.stderr
+    );
+    assert!(r.stderr.starts_with("error: "), "{}", r.stderr);
+    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+    r
+}
+
+fn png_size(path: &Path) -> (u32, u32) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    (img.width(), img.height())
+}
+
+/// Rows of profile.csv as (header, rows of numbers).
+fn read_profile_csv(path: &Path) -> (String, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().to_string();
+    let rows = lines
+        .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
+
+fn json_file(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn profile_of_a_sounding_writes_three_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("Utqiagvik-70026_2026020600_all-levels.csv");
+    let out = dir.path().join("utq");
+    let r = ok(&[
+        "profile",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.stdout.contains("Surface"), "{}", r.stdout);
+    assert!(r.stdout.contains("Inversions"), "{}", r.stdout);
+    assert!(r.stderr.contains("profile.csv"), "{}", r.stderr);
+
+    let (header, rows) = read_profile_csv(&out.join("profile.csv"));
+    assert_eq!(header, ghostship::report::CSV_HEADER);
+    let columns = header.split(',').count();
+    assert!(rows.iter().all(|r| r.len() == columns));
+    // data/README.md: −23.7 °C at the 12 m surface, warming to −14.1 °C by ≈1.1 km.
+    let t = header
+        .split(',')
+        .position(|c| c == "temperature_k")
+        .unwrap();
+    assert!(
+        (rows[0][t] - (273.15 - 23.7)).abs() < 1.0,
+        "surface {} K",
+        rows[0][t]
+    );
+    let layers = json_file(&out.join("layers.json"));
+    for key in ["surface", "inversions", "ducts", "regimes", "wavelength_nm"] {
+        assert!(layers.get(key).is_some(), "layers.json lacks {key}");
+    }
+    // The README's surface inversion: some inversion starts at the ground.
+    let inversions = layers["inversions"].as_array().unwrap();
+    assert!(
+        inversions.iter().any(|i| i["kind"] == "surface"),
+        "{inversions:?}"
+    );
+    assert_eq!(png_size(&out.join("profile.png")), (1400, 900));
+}
+
+#[test]
+fn profile_of_a_synthetic_atmosphere_finds_its_layer() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("superior_mirage.toml");
+    let r = ok(&[
+        "profile",
+        input.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--format",
+        "json",
+        "--quiet",
+    ]);
+    assert!(r.stderr.is_empty(), "--quiet: {}", r.stderr);
+    let printed: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    let written = json_file(&dir.path().join("layers.json"));
+    assert_eq!(printed, written);
+    // The TOML: surface 0 °C, 1013.25 hPa; +10 K over 15 m centred at 100 m (96 % of it
+    // between 92.5 and 107.5 m).
+    let surface = &written["surface"];
+    assert!((surface["temperature_k"].as_f64().unwrap() - 273.15).abs() < 1e-6);
+    assert!((surface["pressure_hpa"].as_f64().unwrap() - 1013.25).abs() < 1e-6);
+    let inv = written["inversions"].as_array().unwrap();
+    assert_eq!(inv.len(), 1, "{inv:?}");
+    let base = inv[0]["base_agl_m"].as_f64().unwrap();
+    let top = inv[0]["top_agl_m"].as_f64().unwrap();
+    let delta = inv[0]["delta_t_k"].as_f64().unwrap();
+    assert!(
+        base > 80.0 && base < 95.0 && top > 105.0 && top < 120.0,
+        "{base}–{top}"
+    );
+    assert!(delta > 9.0 && delta < 10.5, "ΔT {delta}");
+    // 0.67 K/m is six times the critical gradient: a duct.
+    assert!(!written["ducts"].as_array().unwrap().is_empty());
+    let (header, rows) = read_profile_csv(&dir.path().join("profile.csv"));
+    assert_eq!(header, ghostship::report::CSV_HEADER);
+    assert!((rows[0][1] - 273.15).abs() < 1e-6, "{:?}", rows[0]);
+    assert_eq!(png_size(&dir.path().join("profile.png")), (1400, 900));
+}
+
+#[test]
+fn profile_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    // Garbage.
+    let garbage = dir.path().join("garbage.csv");
+    std::fs::write(&garbage, b"\x00\x01 this is not a sounding \xff\n").unwrap();
+    let r = fails(&[
+        "profile",
+        garbage.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("garbage.csv"), "{}", r.stderr);
+    // A bad number on line 3.
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "pressure_hpa,height_m,temperature_c,dewpoint_c\n1000,10,-5,-6\n990,100,abc,-7\n980,200,-6,-8\n",
+    )
+    .unwrap();
+    let r = fails(&[
+        "profile",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("bad.csv"), "{}", r.stderr);
+    assert!(r.stderr.contains("line 3"), "{}", r.stderr);
+    assert!(r.stderr.contains("temperature_c"), "{}", r.stderr);
+    // Missing.
+    let missing = dir.path().join("nowhere.csv");
+    let r = fails(&["profile", missing.to_str().unwrap()]);
+    assert!(r.stderr.contains("nowhere.csv"), "{}", r.stderr);
+    // The operating system's reason is given once, not repeated by every layer of the chain.
+    assert_eq!(r.stderr.matches("(os error").count(), 1, "{}", r.stderr);
+    // A TOML with an unknown field on line 2.
+    let toml = dir.path().join("odd.toml");
+    std::fs::write(
+        &toml,
+        "surface_temperature_c = 0.0\nsurface_temprature_k = 3\n",
+    )
+    .unwrap();
+    let r = fails(&[
+        "profile",
+        toml.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("odd.toml"), "{}", r.stderr);
+    assert!(r.stderr.contains("surface_temprature_k"), "{}", r.stderr);
+    // Nothing was written for any of them.
+    assert!(!dir.path().join("profile.csv").exists());
+}
+
+fn trace_json(args: &[&str]) -> serde_json::Value {
+    let r = ok(args);
+    serde_json::from_str(&r.stdout).unwrap_or_else(|e| panic!("{e}: {}", r.stdout))
+}
+
+#[test]
+fn trace_reports_json_with_the_expected_keys() {
+    let v = trace_json(&[
+        "trace",
+        "--atmosphere",
+        "us1976",
+        "--observer-height-m",
+        "10",
+        "--elevation-deg",
+        "-0.2:0.2:0.01",
+        "--distance-m",
+        "5000,20000",
+        "--target-height-m",
+        "30",
+    ]);
+    for key in [
+        "observer_height_m",
+        "tolerance_m",
+        "wavelength_nm",
+        "distances_m",
+        "target_heights_m",
+        "rays",
+        "images",
+        "horizons",
+        "trapped_elevations_deg",
+    ] {
+        assert!(v.get(key).is_some(), "trace JSON lacks {key}");
+    }
+    let rays = v["rays"].as_array().unwrap();
+    assert_eq!(rays.len(), 41);
+    assert_eq!(v["distances_m"], serde_json::json!([5000.0, 20000.0]));
+    assert_eq!(rays[0]["heights_m"].as_array().unwrap().len(), 2);
+    // Horizons: one per distance, then the sea horizon.
+    assert_eq!(v["horizons"].as_array().unwrap().len(), 3);
+    // A 30 m target at 5 km is seen (at least one image) in the standard atmosphere.
+    assert!(!v["images"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn straight_rays_follow_line_sphere_geometry() {
+    let h0 = 10.0;
+    let distances = [5_000.0, 20_000.0];
+    let args = |straight: bool| {
+        let mut a = vec![
+            "trace",
+            "--atmosphere",
+            "us1976",
+            "--observer-height-m",
+            "10",
+            "--elevation-deg",
+            "-0.1:0.1:0.05",
+            "--distance-m",
+            "5000,20000",
+        ];
+        if straight {
+            a.push("--straight");
+        }
+        a.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+    };
+    let run_json = |straight: bool| {
+        let a = args(straight);
+        trace_json(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let straight = run_json(true);
+    let refracted = run_json(false);
+    let r_earth = straight["earth_radius_m"].as_f64().unwrap();
+    for (s, c) in straight["rays"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(refracted["rays"].as_array().unwrap())
+    {
+        let a = s["elevation_deg"].as_f64().unwrap().to_radians();
+        // Straight line in polar form about Earth's centre: r(θ) = (R + h0)·cos α / cos(α + θ).
+        for (j, d) in distances.iter().enumerate() {
+            let theta = d / r_earth;
+            let exact = (r_earth + h0) * a.cos() / (a + theta).cos() - r_earth;
+            match s["heights_m"][j].as_f64() {
+                Some(h) => assert!((h - exact).abs() < 0.05, "α {a}: {h} vs {exact}"),
+                None => assert!(exact < 0.0, "α {a}, D {d}: ray ended but exact {exact}"),
+            }
+            // Standard air bends rays towards the ground: lower than straight.
+            if let (Some(hs), Some(hc)) = (s["heights_m"][j].as_f64(), c["heights_m"][j].as_f64()) {
+                assert!(hc < hs, "α {a}, D {d}: refracted {hc} ≥ straight {hs}");
+            }
+        }
+        if let Some(refr) = s["refraction_deg"].as_f64() {
+            assert!(refr.abs() < 1e-9, "straight ray refracted by {refr}°");
+        }
+    }
+}
+
+#[test]
+fn trace_csv_and_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("fan.png");
+    let input = data("superior_mirage.toml");
+    let r = ok(&[
+        "trace",
+        "--atmosphere",
+        input.to_str().unwrap(),
+        "--observer-height-m",
+        "10",
+        "--elevation-deg",
+        "-0.2:0.3:0.01",
+        "--distance-m",
+        "10000",
+        "--format",
+        "csv",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    let mut lines = r.stdout.lines();
+    let header = lines.next().unwrap();
+    assert!(header.starts_with("elevation_deg,"), "{header}");
+    assert!(header.ends_with("height_m_at_10000"), "{header}");
+    assert_eq!(lines.count(), 51);
+    let (w, h) = png_size(&plot);
+    assert!(w > 100 && h > 100);
+}
+
+#[test]
+fn bad_elevation_specs_are_explained() {
+    for (spec, needle) in [
+        ("0.5:-0.5:0.01", "TO must be greater than FROM"),
+        ("-0.5:0.5:0", "STEP must be > 0"),
+        ("-0.5:0.5", "FROM:TO:STEP"),
+        ("-1:1:0.00001", "at most 100000"),
+        ("x:1:0.1", "not a number"),
+    ] {
+        let r = fails(&[
+            "trace",
+            "--atmosphere",
+            "us1976",
+            "--observer-height-m",
+            "10",
+            "--elevation-deg",
+            spec,
+        ]);
+        assert!(r.stderr.contains(needle), "{spec}: {}", r.stderr);
+    }
+    let r = fails(&[
+        "trace",
+        "--atmosphere",
+        "us1976",
+        "--observer-height-m",
+        "50000",
+        "--elevation-deg",
+        "0:1:0.1",
+    ]);
+    assert!(r.stderr.contains("observer height"), "{}", r.stderr);
+}
+
+#[test]
+fn pipeline_run_writes_every_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let synthetic = data("inferior_mirage.toml");
+    let sounding = data("Danmarkshavn-04320_2026020523_all-levels.csv");
+    let pipeline = dir.path().join("small.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            r#"
+[[profile]]
+atmosphere = {synthetic:?}
+[[profile]]
+atmosphere = {sounding:?}
+name = "dmh"
+[[trace]]
+atmosphere = "us1976"
+observer_height_m = 5.0
+elevation_deg = "-0.1:0.1:0.02"
+distances_m = [3000.0]
+"#
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("results");
+    let r = ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for f in ["profile.csv", "layers.json", "profile.png"] {
+        assert!(out.join("inferior_mirage").join(f).is_file(), "{f}");
+        assert!(out.join("dmh").join(f).is_file(), "{f}");
+    }
+    let trace = json_file(&out.join("us1976_transfer.json"));
+    assert_eq!(trace["rays"].as_array().unwrap().len(), 11);
+    assert!(out.join("us1976_transfer.png").is_file());
+    assert!(r.stdout.contains("us1976_transfer.json"), "{}", r.stdout);
+
+    // Render jobs are refused with a clear message, before anything runs.
+    std::fs::write(&pipeline, "[[render]]\nscene = \"x.toml\"\n").unwrap();
+    let r = fails(&["pipeline", "run", pipeline.to_str().unwrap()]);
+    assert!(r.stderr.contains("renderer"), "{}", r.stderr);
+    // A bad trace job is named.
+    std::fs::write(
+        &pipeline,
+        "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 5.0\nelevation_deg = \"1:0:1\"\ndistances_m = [1.0]\n",
+    )
+    .unwrap();
+    let r = fails(&["pipeline", "run", pipeline.to_str().unwrap()]);
+    assert!(r.stderr.contains("us1976_transfer"), "{}", r.stderr);
+    assert!(r.stderr.contains("small.toml"), "{}", r.stderr);
+}
+
+#[test]
+fn help_mentions_units_and_usage_errors_exit_2() {
+    let r = ok(&["profile", "--help"]);
+    for needle in ["metres", "nanometres", "--out", "out/profile/"] {
+        assert!(r.stdout.contains(needle), "profile --help lacks {needle}");
+    }
+    let r = ok(&["trace", "--help"]);
+    for needle in ["degrees", "metres", "FROM:TO:STEP", "--straight"] {
+        assert!(r.stdout.contains(needle), "trace --help lacks {needle}");
+    }
+    let r = run(&["trace", "--no-such-option"]);
+    assert_eq!(r.code, Some(2), "{}", r.stderr);
+    let r = run(&["profile"]);
+    assert_eq!(r.code, Some(2), "{}", r.stderr);
+}
+
+#[test]
+fn profile_writes_to_out_profile_stem_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ghostship()
+        .current_dir(dir.path())
+        .args(["profile", "us1976", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let folder = dir.path().join("out").join("profile").join("us1976");
+    for f in ["profile.csv", "layers.json", "profile.png"] {
+        assert!(folder.join(f).is_file(), "{f} not in {}", folder.display());
+    }
+    // US1976 at sea level: 288.15 K, 1013.25 hPa, dry (the standard's defining values).
+    let (_, rows) = read_profile_csv(&folder.join("profile.csv"));
+    assert!((rows[0][1] - 288.15).abs() < 1e-9 && (rows[0][2] - 1013.25).abs() < 1e-9);
+    assert_eq!(rows[0][3], 0.0);
+}
+
+#[test]
+fn igra2_time_chooses_the_sounding() {
+    let raw = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+    ));
+    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let dir = tempfile::tempdir().unwrap();
+    let surface_hpa = |time: Option<&str>| {
+        let mut args = vec![
+            "profile",
+            raw.to_str().unwrap(),
+            "--format",
+            "json",
+            "--quiet",
+            "--out",
+            dir.path().to_str().unwrap(),
+        ];
+        if let Some(t) = time {
+            args.extend(["--igra2-time", t]);
+        }
+        let v: serde_json::Value = serde_json::from_str(&ok(&args).stdout).unwrap();
+        v["surface"]["pressure_hpa"].as_f64().unwrap()
+    };
+    // The raw file's surface records: PRESS 100980 Pa at 00 UTC, 100840 Pa at 12 UTC.
+    assert!((surface_hpa(None) - 1009.80).abs() < 1e-6);
+    assert!((surface_hpa(Some("2010-06-01 12")) - 1008.40).abs() < 1e-6);
+    let r = fails(&[
+        "profile",
+        raw.to_str().unwrap(),
+        "--igra2-time",
+        "2010-06-03 00",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
+}
+
+#[test]
+fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
+    let pipeline = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/pipelines/soundings.toml"
+    ));
+    assert!(pipeline.exists(), "{} is missing", pipeline.display());
+    let dir = tempfile::tempdir().unwrap();
+    ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--quiet",
+    ]);
+    for job in [
+        "utqiagvik",
+        "danmarkshavn",
+        "bjornoya",
+        "superior_mirage",
+        "inferior_mirage",
+        "fata_morgana",
+        "novaya_zemlya",
+    ] {
+        for f in ["profile.csv", "layers.json", "profile.png"] {
+            assert!(dir.path().join(job).join(f).is_file(), "{job}/{f}");
+        }
+    }
+    let trace = |name: &str| {
+        assert!(dir.path().join(format!("{name}_transfer.png")).is_file());
+        json_file(&dir.path().join(format!("{name}_transfer.json")))
+    };
+    // Fata Morgana: stacked layers fold the transfer curve, so some image is inverted.
+    let fm = trace("fata_morgana");
+    assert!(
+        fm["images"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|i| i["erect"] == false),
+        "no inverted image in the Fata Morgana trace"
+    );
+    // Novaya Zemlya: the critical-gradient ground inversion traps rays (a duct).
+    let nz = trace("novaya_zemlya");
+    assert!(!nz["trapped_elevations_deg"].as_array().unwrap().is_empty());
+    // The other two traces exist and cover every distance.
+    for name in ["superior_mirage", "inferior_mirage"] {
+        let t = trace(name);
+        assert_eq!(t["distances_m"].as_array().unwrap().len(), 5, "{name}");
+    }
+}
