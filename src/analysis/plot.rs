@@ -6,28 +6,19 @@
 //! recording). Out: PNG bytes (plotters draws into an RGB buffer, `image` encodes it).
 
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 
 use super::AnalysisError;
 use super::report::{TraceReport, TraceRequest};
+use crate::output::plot::PLOT_FONT;
 use crate::tracer::{NoHook, RayPoint, RayRecord, StratifiedIndex, Tracer, TracerConfig};
 
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 const WIDTH: u32 = 1600;
 const HEIGHT: u32 = 700;
 /// Rays drawn in the fan panel.
 const DRAWN_RAYS: usize = 41;
 
 fn register_font() -> Result<(), AnalysisError> {
-    static ONCE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let ok = *ONCE.get_or_init(|| {
-        plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
-    });
-    if ok {
-        Ok(())
-    } else {
-        Err(AnalysisError::Plot("vendored font is invalid".into()))
-    }
+    crate::output::plot::register_plot_font().map_err(AnalysisError::Plot)
 }
 
 fn plot_err<E: std::fmt::Display>(e: E) -> AnalysisError {
@@ -87,7 +78,7 @@ pub fn trace_plot_png(
                     "Ray fan from {} m (vertical scale exaggerated)",
                     request.observer_height_m
                 ),
-                ("sans-serif", 20),
+                (PLOT_FONT, 20),
             )
             .margin(10)
             .x_label_area_size(40)
@@ -98,7 +89,7 @@ pub fn trace_plot_png(
             .configure_mesh()
             .x_desc("ground distance (km)")
             .y_desc("height (m)")
-            .label_style(("sans-serif", 14))
+            .label_style((PLOT_FONT, 14))
             .draw()
             .map_err(plot_err)?;
         for (i, path) in paths.iter().enumerate() {
@@ -140,7 +131,7 @@ pub fn trace_plot_png(
             request.elevation_max_deg * 60.0,
         );
         let mut chart = ChartBuilder::on(&right)
-            .caption("Transfer curves h(D; α)", ("sans-serif", 20))
+            .caption("Transfer curves h(D; α)", (PLOT_FONT, 20))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(55)
@@ -150,7 +141,7 @@ pub fn trace_plot_png(
             .configure_mesh()
             .x_desc("apparent elevation (arcmin)")
             .y_desc("height at distance (m)")
-            .label_style(("sans-serif", 14))
+            .label_style((PLOT_FONT, 14))
             .draw()
             .map_err(plot_err)?;
         for &h in &report.target_heights_m {
@@ -198,15 +189,10 @@ pub fn trace_plot_png(
             .configure_series_labels()
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
-            .label_font(("sans-serif", 14))
+            .label_font((PLOT_FONT, 14))
             .draw()
             .map_err(plot_err)?;
         root.present().map_err(plot_err)?;
     }
-    let img =
-        image::RgbImage::from_raw(WIDTH, HEIGHT, buffer).ok_or_else(|| plot_err("buffer size"))?;
-    let mut png = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(plot_err)?;
-    Ok(png)
+    crate::output::plot::rgb8_to_png(&buffer, WIDTH, HEIGHT).map_err(AnalysisError::Plot)
 }

@@ -4,6 +4,7 @@
 
 pub mod exr;
 pub mod film;
+pub mod plot;
 pub mod png;
 
 use std::io::Write;

@@ -5,11 +5,7 @@
 //! (rays curve upward to its right), refractive layers shaded. Heights on the y axis, above mean
 //! sea level. Drawn with plotters into an RGB buffer, encoded with `image`.
 
-use std::sync::OnceLock;
-
-use image::ImageEncoder;
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 
 use super::ReportError;
 use crate::profile::InversionLayer;
@@ -17,24 +13,10 @@ use crate::refractivity::{RefractiveAtmosphere, RefractiveLayer, RegimeKind};
 use crate::sounding::Level;
 use crate::units::{EARTH_RADIUS_M, kelvin_to_celsius};
 
-const FONT: &str = "sans-serif";
+const FONT: &str = crate::output::plot::PLOT_FONT;
 
-/// The vendored DejaVu Sans, registered with plotters once per process.
 fn register_font() -> Result<(), ReportError> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE.get_or_init(|| {
-        plotters::style::register_font(
-            FONT,
-            FontStyle::Normal,
-            include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-        )
-        .is_ok()
-    });
-    if ok {
-        Ok(())
-    } else {
-        Err(ReportError::Plot("the vendored font does not load".into()))
-    }
+    crate::output::plot::register_plot_font().map_err(ReportError::Plot)
 }
 
 /// What to draw.
@@ -312,9 +294,5 @@ pub fn profile_png(plot: &ProfilePlot<'_>, options: &PlotOptions) -> Result<Vec<
             .map_err(plot_err)?;
         root.present().map_err(plot_err)?;
     }
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(&buffer, w, h, image::ExtendedColorType::Rgb8)
-        .map_err(|e| ReportError::Encode(e.to_string()))?;
-    Ok(png)
+    crate::output::plot::rgb8_to_png(&buffer, w, h).map_err(ReportError::Encode)
 }
