@@ -658,6 +658,7 @@ mod tests {
                     line: i + 1,
                 })
                 .collect(),
+            warnings: Vec::new(),
         }
     }
 

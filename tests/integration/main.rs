@@ -3,3 +3,4 @@ mod ingest;
 mod profile;
 mod refractivity;
 mod tracer;
+mod end_to_end;

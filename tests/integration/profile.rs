@@ -67,6 +67,7 @@ fn load(name: &str) -> Sounding {
         format: SoundingFormat::NormalizedCsv,
         metadata: BTreeMap::new(),
         levels,
+        warnings: Vec::new(),
     }
 }
 
@@ -105,6 +106,7 @@ fn sounding(levels: &[(f64, f64, Option<f64>, Option<f64>)]) -> Sounding {
                 line: i + 1,
             })
             .collect(),
+        warnings: Vec::new(),
     }
 }
 
