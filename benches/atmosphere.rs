@@ -17,7 +17,9 @@ const RAYS: usize = 400;
 const OBSERVER_M: f64 = 10.0;
 
 fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(name)
 }
 
 /// The atmospheres: the paper's three scenes and the Novaya Zemlya layer (TOML), and the
@@ -50,7 +52,11 @@ fn fan() -> Vec<f64> {
         .collect()
 }
 
-fn trace_fan(tracer: &Tracer<'_, RefractiveAtmosphere>, fan: &[f64], record: &mut RayRecord) -> (u64, u64) {
+fn trace_fan(
+    tracer: &Tracer<'_, RefractiveAtmosphere>,
+    fan: &[f64],
+    record: &mut RayRecord,
+) -> (u64, u64) {
     let (mut steps, mut rejected) = (0u64, 0u64);
     for &a in fan {
         tracer
@@ -64,7 +70,9 @@ fn trace_fan(tracer: &Tracer<'_, RefractiveAtmosphere>, fan: &[f64], record: &mu
 
 fn bench_build(c: &mut Criterion) {
     let mut group = c.benchmark_group("atmosphere_build");
-    group.sample_size(10).measurement_time(Duration::from_secs(3));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(3));
     for name in CASES {
         group.bench_with_input(BenchmarkId::from_parameter(name), name, |b, name| {
             b.iter(|| black_box(build(name)))
@@ -76,7 +84,9 @@ fn bench_build(c: &mut Criterion) {
 fn bench_fan(c: &mut Criterion) {
     let fan = fan();
     let mut group = c.benchmark_group("fan_400_rays_30km");
-    group.sample_size(10).measurement_time(Duration::from_secs(5));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(5));
     group.throughput(Throughput::Elements(RAYS as u64));
     for name in CASES {
         let atm = build(name);
