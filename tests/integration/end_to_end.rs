@@ -11,7 +11,7 @@ use ghostship::analysis::{Image, Reach, TransferCurve, find_images};
 use ghostship::profile::{FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::sounding::{ReadOptions, read_sounding};
-use ghostship::tracer::{StratifiedIndex, Termination, Tracer, TracerConfig};
+use ghostship::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig};
 use ghostship::units::ARCMIN_PER_RAD;
 
 const EARTH_RADIUS_M: f64 = 6_371_000.0;
@@ -451,6 +451,14 @@ fn real_soundings_trace_cleanly_and_continuously() {
             records.push(tracer.trace(h0, a, &distances).unwrap());
         }
         let us_per_ray = t.elapsed().as_secs_f64() * 1e6 / elevations.len() as f64;
+        // The same fan through the exact (untabulated) field, for comparison only.
+        let exact = Exact(&atm);
+        let exact_tracer = Tracer::new(&exact, config(tol)).unwrap();
+        let t = Instant::now();
+        for &a in &elevations {
+            exact_tracer.trace(h0, a, &distances).unwrap();
+        }
+        let exact_us_per_ray = t.elapsed().as_secs_f64() * 1e6 / elevations.len() as f64;
         let steps: u64 = records.iter().map(|r| r.steps() as u64).sum();
         let rejected: u64 = records.iter().map(|r| r.rejected_steps as u64).sum();
         let drift = records
@@ -459,7 +467,7 @@ fn real_soundings_trace_cleanly_and_continuously() {
             .fold(0.0, f64::max);
         eprintln!(
             "{name}: build {build_s:.3} s, table exact cells {} (max |Δn| {:.1e}, |Δdn/dh| {:.1e}), \
-             {us_per_ray:.0} µs/ray (1 thread), {:.0} steps/ray, rejected {:.1} %, max drift {drift:.1e}",
+             {us_per_ray:.0} µs/ray (1 thread; exact field {exact_us_per_ray:.0}), {:.0} steps/ray, rejected {:.1} %, max drift {drift:.1e}",
             err.exact_cells(),
             err.max_abs_dn(),
             err.max_abs_ddndh_per_m(),
@@ -507,40 +515,102 @@ fn real_soundings_trace_cleanly_and_continuously() {
             }
         }
         eprintln!("{name}: largest height change from tol {tol} to tol/100: {worst_global:.2e} m");
-        // Continuity: a gap between neighbouring rays much larger than its neighbours' gaps
-        // must close under bisection.
-        let mut flagged = 0;
-        let mut worst: f64 = 0.0;
-        for (j, &d) in distances.iter().enumerate() {
-            let h: Vec<f64> = records
-                .iter()
-                .map(|r| r.heights_m[j].unwrap_or(f64::NAN))
-                .collect();
-            for i in 1..h.len().saturating_sub(2) {
-                let gap = (h[i + 1] - h[i]).abs();
-                let side = (h[i] - h[i - 1]).abs().max((h[i + 2] - h[i + 1]).abs());
-                if !(gap.is_finite() && side.is_finite()) || gap <= 3.0 * side + 5.0 * tol {
-                    continue;
-                }
-                flagged += 1;
-                let left = residual_jump(
-                    &tracer,
-                    h0,
-                    d,
-                    (elevations[i], h[i]),
-                    (elevations[i + 1], h[i + 1]),
-                );
-                worst = worst.max(left);
-                assert!(
-                    left < 5.0 * tol,
-                    "{name}: D {d} m, α {:.5}°…{:.5}°: gap {gap:.3} m (neighbours {side:.3} m) \
-                     leaves {left:.3} m after bisection",
-                    elevations[i].to_degrees(),
-                    elevations[i + 1].to_degrees()
-                );
-            }
-        }
+        let (flagged, worst) =
+            assert_continuous(name, &tracer, h0, &elevations, &distances, &records);
         eprintln!("{name}: {flagged} steep gaps bisected, worst residual {worst:.2e} m");
+    }
+}
+
+/// Continuity of h(D; α) over a traced fan: a gap between neighbouring rays much larger than
+/// its neighbours' gaps (3× plus 5 tolerances) must close under bisection to below 5 tolerances.
+/// Returns the number of gaps bisected and the largest residual.
+fn assert_continuous<S: StratifiedIndex>(
+    name: &str,
+    tracer: &Tracer<'_, S>,
+    h0: f64,
+    elevations: &[f64],
+    distances: &[f64],
+    records: &[RayRecord],
+) -> (usize, f64) {
+    let tol = tracer.config().tolerance_m;
+    let mut flagged = 0;
+    let mut worst: f64 = 0.0;
+    for (j, &d) in distances.iter().enumerate() {
+        let h: Vec<f64> = records
+            .iter()
+            .map(|r| r.heights_m[j].unwrap_or(f64::NAN))
+            .collect();
+        for i in 1..h.len().saturating_sub(2) {
+            let gap = (h[i + 1] - h[i]).abs();
+            let side = (h[i] - h[i - 1]).abs().max((h[i + 2] - h[i + 1]).abs());
+            if !(gap.is_finite() && side.is_finite()) || gap <= 3.0 * side + 5.0 * tol {
+                continue;
+            }
+            flagged += 1;
+            let left = residual_jump(
+                tracer,
+                h0,
+                d,
+                (elevations[i], h[i]),
+                (elevations[i + 1], h[i + 1]),
+            );
+            worst = worst.max(left);
+            assert!(
+                left < 5.0 * tol,
+                "{name}: D {d} m, α {:.5}°…{:.5}°: gap {gap:.3} m (neighbours {side:.3} m) \
+                 leaves {left:.3} m after bisection",
+                elevations[i].to_degrees(),
+                elevations[i + 1].to_degrees()
+            );
+        }
+    }
+    (flagged, worst)
+}
+
+/// Continuity in elevation through the paper atmospheres at the default tolerance (1 cm), from
+/// below the layers (10 m) and between them (80 m).
+///
+/// Not asserted here, measured while writing this (see the report): with the camera *inside*
+/// the Fata Morgana's upper layer (120 m), 1 cm per step leaves up to 9 cm jumps between
+/// neighbouring rays at 34 km (11 gaps in 2001 rays over −0.2…+0.2°), because the vertical step
+/// limit (2 m + 5 % of the height = 8 m at 120 m) lets a step straddle the 15 m layer; they vanish
+/// at 1 mm per step or with the limit held at 2 m. Next to the escape separatrix (α ≈ 0.196°)
+/// the remaining noise is amplified to ≈ 10 tolerances at any tolerance.
+#[test]
+fn paper_fans_are_continuous_in_elevation() {
+    let distances: Vec<f64> = (2..=40).step_by(2).map(|k| k as f64 * 1000.0).collect();
+    let elevations: Vec<f64> = linspace(-0.4, 0.4, 801)
+        .into_iter()
+        .map(f64::to_radians)
+        .collect();
+    let cases = [
+        ("superior_mirage", 10.0, 1e-2),
+        ("superior_mirage", 80.0, 1e-2),
+        ("inferior_mirage", 10.0, 1e-2),
+        ("fata_morgana", 10.0, 1e-2),
+        ("fata_morgana", 80.0, 1e-2),
+    ];
+    for (name, h0, tol) in cases {
+        let atm = paper(name);
+        let tracer = Tracer::new(&atm, config(tol)).unwrap();
+        let records = tracer.trace_fan(h0, &elevations, &distances).unwrap();
+        for r in &records {
+            assert!(
+                matches!(
+                    r.termination,
+                    Some(Termination::Ground | Termination::Escaped | Termination::TargetsDone)
+                ),
+                "{name} from {h0} m: ray {:.4}° ended with {:?}",
+                r.elevation_rad.to_degrees(),
+                r.termination
+            );
+        }
+        let label = format!("{name} from {h0} m");
+        let (flagged, worst) =
+            assert_continuous(&label, &tracer, h0, &elevations, &distances, &records);
+        eprintln!(
+            "{label} (tol {tol} m): {flagged} steep gaps bisected, worst residual {worst:.2e} m"
+        );
     }
 }
 
