@@ -659,6 +659,7 @@ mod tests {
                     line: i + 1,
                 })
                 .collect(),
+            warnings: Vec::new(),
         }
     }
 

@@ -44,10 +44,12 @@ impl AirColumn for LapseRateColumn {
         let t = t0 + gradient * zl;
         // P = P0·exp(−(g/R)∫dz/T): ∫dz/T = ln(T/T0)/Γ in the gradient part (z/T0 when
         // isothermal), plus (z − zt)/T above the tropopause.
+        // ln_1p, not ln(T/T0): for a tiny gradient T/T0 − 1 is ~1e-9 and ln(T/T0) would lose
+        // half its digits, which a finite difference of n over millimetres then shows.
         let lower = if gradient.abs() < 1e-12 {
             zl / t0
         } else {
-            (t / t0).ln() / gradient
+            (gradient * zl / t0).ln_1p() / gradient
         };
         let integral = lower + (z - zl) / t;
         let p = self.surface_pressure_pa * (-G_OVER_R * integral).exp();

@@ -1,5 +1,6 @@
 //! One integration-test binary (keeps link time low); each file is a module.
 mod cli;
+mod end_to_end;
 mod ingest;
 mod profile;
 mod refractivity;
