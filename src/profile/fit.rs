@@ -659,7 +659,6 @@ mod tests {
                     line: i + 1,
                 })
                 .collect(),
-            warnings: Vec::new(),
         }
     }
 
