@@ -69,7 +69,7 @@ pub fn highest_trapping_top_m<S: StratifiedIndex + ?Sized>(
         let h = (i as f64 * TRAPPING_SCAN_STEP_M).min(top_m);
         let (n, dn) = index.index_and_derivative(h);
         let growth = n + (earth_radius_m + h) * dn;
-        if !(growth > 0.0) {
+        if growth.is_nan() || growth <= 0.0 {
             // The layer reaches at least to the next grid point.
             highest = (h + TRAPPING_SCAN_STEP_M).min(top_m);
         }
