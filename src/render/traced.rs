@@ -42,6 +42,12 @@ pub const TRAPPING_SCAN_STEP_M: f64 = 0.25;
 /// they escape, so the limit is generous.
 pub const DEFAULT_TRAP_DISTANCE_M: f64 = 2_000_000.0;
 
+/// Trap distance (m) when no sky direction is needed (no sun): a ray still below the highest
+/// trapping layer this far out is [`FanEnd::Lost`] (shaded as horizon sky). Rays trapped in a
+/// surface duct otherwise bounce for thousands of kilometres before they hit the sea, at a
+/// cost of several hundred steps each; 300 km is ten times the farthest card of the paper.
+pub const NO_SUN_TRAP_DISTANCE_M: f64 = 300_000.0;
+
 /// The tracer settings the renderer uses: [`TracerConfig::default`] (1 cm tolerance, top at
 /// 40 km) over `earth_radius_m`, never stopping at the last card (the renderer needs to know
 /// whether the ray ends in the sea or the sky), trapped after [`DEFAULT_TRAP_DISTANCE_M`].
@@ -128,6 +134,9 @@ thread_local! {
 #[derive(Clone)]
 pub struct CurvedRays<'a, S: StratifiedIndex + ?Sized> {
     tracer: Tracer<'a, S>,
+    /// The same with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`], for rays whose
+    /// final sky direction is not needed.
+    tracer_no_sky: Tracer<'a, S>,
     stop_height_m: f64,
 }
 
@@ -138,9 +147,20 @@ impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
     /// without cards.
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
         let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
+        let capped = TracerConfig {
+            max_distance_m: Some(
+                config
+                    .max_distance_m
+                    .unwrap_or(f64::INFINITY)
+                    .min(NO_SUN_TRAP_DISTANCE_M),
+            ),
+            ..config.clone()
+        };
         let tracer = Tracer::new(index, config)?;
+        let tracer_no_sky = Tracer::new(index, capped)?;
         Ok(Self {
             tracer,
+            tracer_no_sky,
             stop_height_m: trap_top.max(cards_top_m.max(0.0)),
         })
     }
@@ -209,7 +229,7 @@ impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
             let mut hook = StopAboveClimbing {
                 height_m: self.stop_height_m,
             };
-            self.tracer.trace_into(
+            self.tracer_no_sky.trace_into(
                 camera_height_m,
                 elevation_rad,
                 distances_m,
