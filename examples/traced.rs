@@ -129,7 +129,7 @@ fn main() -> anyhow::Result<()> {
                     )
                 };
                 eprintln!(
-                    "image D={} H={} {:.4}..{:.4} deg rows {}..{} erect={} h {:.1}->{:.1}",
+                    "image D={} H={} {:.4}..{:.4} deg rows {}..{} erect={} h {:.1}->{:.1} mag {:.3}",
                     im.distance_m,
                     im.height_m,
                     im.elevation_min_deg,
@@ -138,7 +138,8 @@ fn main() -> anyhow::Result<()> {
                     row(im.elevation_min_deg),
                     im.erect,
                     im.height_at_min_m,
-                    im.height_at_max_m
+                    im.height_at_max_m,
+                    im.magnification
                 );
             }
             for h in &report.horizons {
