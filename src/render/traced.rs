@@ -117,6 +117,18 @@ fn fan_ray(record: &RayRecord, elevation_rad: f64, n_distances: usize) -> FanRay
     }
 }
 
+fn capped_trap_distance(config: &TracerConfig) -> TracerConfig {
+    TracerConfig {
+        max_distance_m: Some(
+            config
+                .max_distance_m
+                .unwrap_or(f64::INFINITY)
+                .min(NO_SUN_TRAP_DISTANCE_M),
+        ),
+        ..config.clone()
+    }
+}
+
 fn lost(elevation_rad: f64, n_distances: usize) -> FanRay {
     FanRay {
         elevation_rad,
@@ -147,15 +159,7 @@ impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
     /// without cards.
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
         let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
-        let capped = TracerConfig {
-            max_distance_m: Some(
-                config
-                    .max_distance_m
-                    .unwrap_or(f64::INFINITY)
-                    .min(NO_SUN_TRAP_DISTANCE_M),
-            ),
-            ..config.clone()
-        };
+        let capped = capped_trap_distance(&config);
         let tracer = Tracer::new(index, config)?;
         let tracer_no_sky = Tracer::new(index, capped)?;
         Ok(Self {
@@ -258,6 +262,8 @@ impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
 pub struct ExactRays<'a, S: StratifiedIndex + ?Sized> {
     field: Spherical<&'a S>,
     config: TracerConfig,
+    /// `config` with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`] (as [`CurvedRays`]).
+    config_no_sky: TracerConfig,
     stop_height_m: f64,
 }
 
@@ -271,6 +277,7 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
                 index,
                 earth_radius_m: config.earth_radius_m,
             },
+            config_no_sky: capped_trap_distance(&config),
             config,
             stop_height_m: trap_top.max(cards_top_m.max(0.0)),
         })
@@ -300,10 +307,15 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         } else {
             &mut stop
         };
+        let config = if need_sky_direction {
+            &self.config
+        } else {
+            &self.config_no_sky
+        };
         trace_field(
             &self.field,
             Ground::Sphere { radius_m: radius },
-            &self.config,
+            config,
             origin,
             direction,
             distances_m,

@@ -3,4 +3,5 @@ mod ingest;
 mod profile;
 mod refractivity;
 mod render;
+mod scenes;
 mod tracer;
