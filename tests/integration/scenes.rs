@@ -523,3 +523,39 @@ fn exact_rays_agree_with_curved_rays_on_a_paper_atmosphere() {
     }
     assert!(compared > 10, "{compared}");
 }
+
+#[test]
+fn prepare_tracer_picks_the_back_end_from_scene_and_options() {
+    use ghostship::render::{FanEnd, PrepareError, StraightRays};
+    let scene = load_scene("fig10_fata_morgana.toml");
+    // Curved rays need an atmosphere.
+    assert!(matches!(
+        prepare_tracer(&scene, None, &options(false)),
+        Err(PrepareError::MissingAtmosphere)
+    ));
+    let atm = atmosphere(&scene);
+    // Fast and exact back-ends trace the same ray through the same air.
+    let fast = prepare_tracer(&scene, Some(&atm), &options(false)).unwrap();
+    let exact = prepare_tracer(&scene, Some(&atm), &options(true)).unwrap();
+    let alpha = 0.13f64.to_radians(); // inside the 60 km mirage
+    let (a, b) = (
+        fast.trace(10.0, alpha, &[60_000.0], false),
+        exact.trace(10.0, alpha, &[60_000.0], false),
+    );
+    let (ha, hb) = (a.heights_m[0].unwrap(), b.heights_m[0].unwrap());
+    assert!((ha - hb).abs() < 0.5, "{ha} vs {hb}");
+    // Straight scenes need none, and give the closed-form straight rays.
+    let straight = load_scene("fig01_horizon_straight.toml");
+    let t = prepare_tracer(&straight, None, &options(false)).unwrap();
+    let want = StraightRays::new(straight.earth_radius_m).unwrap();
+    for alpha in [-0.002, -0.0005, 0.001] {
+        assert_eq!(
+            t.trace(10.0, alpha, &[8_000.0], true),
+            want.trace(10.0, alpha, &[8_000.0], true)
+        );
+    }
+    assert!(matches!(
+        t.trace(10.0, -0.01, &[], true).end,
+        FanEnd::Ground { .. }
+    ));
+}
