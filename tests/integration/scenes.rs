@@ -504,6 +504,7 @@ fn exact_rays_agree_with_curved_rays_on_a_paper_atmosphere() {
     let exact = ExactRays::new(&atm, cfg, 25.0).unwrap();
     let d = [60_000.0, 64_000.0];
     let mut compared = 0;
+    let mut worst = 0.0f64;
     for i in 0..=40 {
         let alpha = (-0.1 + 0.3 * i as f64 / 40.0f64).to_radians();
         let a = fast.trace(10.0, alpha, &d, false);
@@ -515,13 +516,16 @@ fn exact_rays_agree_with_curved_rays_on_a_paper_atmosphere() {
         );
         for (x, y) in a.heights_m.iter().zip(&b.heights_m) {
             if let (Some(x), Some(y)) = (x, y) {
-                // 1 cm per step over ~60 km and ~100 steps: well under a metre.
-                assert!((x - y).abs() < 0.5, "α={alpha}: {x} vs {y}");
+                // Same integrator and error control in two coordinate systems: they agree within
+                // the 1 cm step tolerance (measured: 2e-7 m).
+                assert!((x - y).abs() < 0.01, "α={alpha}: {x} vs {y}");
+                worst = worst.max((x - y).abs());
                 compared += 1;
             }
         }
     }
     assert!(compared > 10, "{compared}");
+    eprintln!("planar vs 3-D heights at 60/64 km: {compared} compared, worst {worst:.3e} m");
 }
 
 #[test]
