@@ -15,6 +15,7 @@
 
 pub mod elevation_fan;
 pub mod fan;
+pub mod traced;
 
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,6 +27,7 @@ use crate::scene::camera::CameraFrame;
 use crate::scene::{Scene, Sky, Sun, Texture, samples_per_pixel_root};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use fan::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
+pub use traced::{CurvedRays, ExactRays, PrepareError, prepare_tracer};
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,4 +5,5 @@ mod ingest;
 mod profile;
 mod refractivity;
 mod render;
+mod scenes;
 mod tracer;

@@ -1,0 +1,616 @@
+//! Stage 5 (render) — the real ray tracers behind the renderer's [`RayTracer`] trait. In: a
+//! stratified refractive index (a [`RefractiveAtmosphere`] or any
+//! [`StratifiedIndex`]), the tracer settings and the highest card top. Out: [`FanRay`]s — heights
+//! at the card distances and how each ray ended.
+//!
+//! * [`CurvedRays`] — the planar fast path of [`Tracer`] (Dormand–Prince in the ray's vertical
+//!   plane, dense-output target crossings). The renderer calls it a few thousand times per frame
+//!   to build its elevation fan.
+//! * [`ExactRays`] — the paper's method: every call integrates the full 3-D ray equation through
+//!   the field ([`trace_field`] over [`Spherical`]). Used by the renderer's exact mode (one trace
+//!   per pixel sample), to validate the fan and as the benchmark baseline.
+//! * [`prepare_tracer`] — picks one of these, or [`StraightRays`], from a scene and options.
+//!
+//! **Early stop.** Without a sun the final sky direction does not matter, so a ray that is above
+//! every card and can never come down again is stopped and reported as [`FanEnd::Sky`]. When can
+//! a climbing ray never come down? Along a ray in spherically stratified air Bouguer's invariant
+//! I = n(r)·r·cos ψ is conserved (ψ the local elevation). A ray climbing (ψ > 0) at radius r₁ has
+//! I < n(r₁)·r₁; it can only turn down at a radius r₂ > r₁ where n(r₂)·r₂ = I, i.e. where n·r has
+//! dropped below its value at r₁. If d(n·r)/dr = n + r·dn/dh > 0 everywhere above r₁ — no
+//! trapping layer (dn/dh < −n/r ≈ −1/R) above it — n·r only grows and the ray climbs until it
+//! leaves the atmosphere. So the stop height is the larger of the highest card top and the top of
+//! the highest trapping layer, found by scanning n + r·dn/dh on a fine grid (0.25 m).
+
+use std::cell::RefCell;
+
+use glam::DVec3;
+
+use super::RenderOptions;
+use super::fan::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
+use crate::refractivity::RefractiveAtmosphere;
+use crate::scene::Scene;
+use crate::tracer::{
+    Ground, NoHook, RayHook, RayRecord, Spherical, StopAboveClimbing, StratifiedIndex, Termination,
+    Tracer, TracerConfig, TracerError, trace_field,
+};
+
+/// Grid step (m) of the scan for trapping layers (see the module docs).
+pub const TRAPPING_SCAN_STEP_M: f64 = 0.25;
+
+/// Default ground distance (m) after which a ray still inside the atmosphere counts as trapped
+/// ([`FanEnd::Lost`]). Novaya Zemlya rays travel a few hundred kilometres in their duct before
+/// they escape, so the limit is generous.
+pub const DEFAULT_TRAP_DISTANCE_M: f64 = 2_000_000.0;
+
+/// Trap distance (m) when no sky direction is needed (no sun): a ray still below the highest
+/// trapping layer this far out is [`FanEnd::Lost`] (shaded as horizon sky). Rays trapped in a
+/// surface duct otherwise bounce for thousands of kilometres before they hit the sea, at a
+/// cost of several hundred steps each; 300 km is ten times the farthest card of the paper.
+pub const NO_SUN_TRAP_DISTANCE_M: f64 = 300_000.0;
+
+/// The tracer settings the renderer uses: [`TracerConfig::default`] (1 cm tolerance, top at
+/// 40 km) over `earth_radius_m`, never stopping at the last card (the renderer needs to know
+/// whether the ray ends in the sea or the sky), trapped after [`DEFAULT_TRAP_DISTANCE_M`].
+pub fn render_tracer_config(earth_radius_m: f64) -> TracerConfig {
+    TracerConfig {
+        earth_radius_m,
+        stop_after_last_target: false,
+        max_distance_m: Some(DEFAULT_TRAP_DISTANCE_M),
+        ..TracerConfig::default()
+    }
+}
+
+/// Height (m above the surface) of the top of the highest trapping layer below `top_m` — where
+/// n + r·dn/dh ≤ 0, r = R + h — scanned every [`TRAPPING_SCAN_STEP_M`]; 0 if there is none.
+/// Non-finite values of the field count as trapping (conservative). A layer thinner than the
+/// step can be missed.
+pub fn highest_trapping_top_m<S: StratifiedIndex + ?Sized>(
+    index: &S,
+    earth_radius_m: f64,
+    top_m: f64,
+) -> f64 {
+    let count = (top_m / TRAPPING_SCAN_STEP_M).ceil().clamp(0.0, 1e8) as usize;
+    let mut highest = 0.0f64;
+    for i in 0..=count {
+        let h = (i as f64 * TRAPPING_SCAN_STEP_M).min(top_m);
+        let (n, dn) = index.index_and_derivative(h);
+        let growth = n + (earth_radius_m + h) * dn;
+        if growth.is_nan() || growth <= 0.0 {
+            // The layer reaches at least to the next grid point.
+            highest = (h + TRAPPING_SCAN_STEP_M).min(top_m);
+        }
+    }
+    highest
+}
+
+/// Turn a traced record into the renderer's [`FanRay`] (non-finite values become `None` /
+/// [`FanEnd::Lost`]).
+fn fan_ray(record: &RayRecord, elevation_rad: f64, n_distances: usize) -> FanRay {
+    let mut heights_m: Vec<Option<f64>> = Vec::with_capacity(n_distances);
+    heights_m.extend(record.heights_m.iter().map(|h| h.filter(|v| v.is_finite())));
+    heights_m.resize(n_distances, None);
+    let end = match record.termination {
+        Some(Termination::Ground) => {
+            let grazing = -record.end.elevation_rad;
+            if grazing.is_finite() && record.end.distance_m.is_finite() {
+                FanEnd::Ground {
+                    distance_m: record.end.distance_m,
+                    grazing_rad: grazing.max(0.0),
+                }
+            } else {
+                FanEnd::Lost
+            }
+        }
+        Some(Termination::Escaped | Termination::LeftRegion)
+            if record.end_observer_elevation_rad.is_finite() =>
+        {
+            FanEnd::Sky {
+                elevation_rad: record.end_observer_elevation_rad,
+            }
+        }
+        _ => FanEnd::Lost,
+    };
+    FanRay {
+        elevation_rad,
+        heights_m,
+        end,
+    }
+}
+
+fn capped_trap_distance(config: &TracerConfig) -> TracerConfig {
+    TracerConfig {
+        max_distance_m: Some(
+            config
+                .max_distance_m
+                .unwrap_or(f64::INFINITY)
+                .min(NO_SUN_TRAP_DISTANCE_M),
+        ),
+        ..config.clone()
+    }
+}
+
+fn lost(elevation_rad: f64, n_distances: usize) -> FanRay {
+    FanRay {
+        elevation_rad,
+        heights_m: vec![None; n_distances],
+        end: FanEnd::Lost,
+    }
+}
+
+thread_local! {
+    /// Per-thread record reused by [`CurvedRays`]: a trace then allocates only the returned Vec.
+    static SCRATCH: RefCell<RayRecord> = RefCell::new(RayRecord::default());
+}
+
+/// The curved-ray tracer (planar fast path) as a renderer back-end.
+#[derive(Clone)]
+pub struct CurvedRays<'a, S: StratifiedIndex + ?Sized> {
+    tracer: Tracer<'a, S>,
+    /// The same with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`], for rays whose
+    /// final sky direction is not needed.
+    tracer_no_sky: Tracer<'a, S>,
+    stop_height_m: f64,
+}
+
+impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
+    /// Trace through `index` with `config` (use [`render_tracer_config`] unless testing
+    /// something else; `stop_after_last_target` should be false, or rays that pass the last card
+    /// end [`FanEnd::Lost`]). `cards_top_m`: the highest card top above the surface (m), 0
+    /// without cards.
+    pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
+        let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
+        let capped = capped_trap_distance(&config);
+        let tracer = Tracer::new(index, config)?;
+        let tracer_no_sky = Tracer::new(index, capped)?;
+        Ok(Self {
+            tracer,
+            tracer_no_sky,
+            stop_height_m: trap_top.max(cards_top_m.max(0.0)),
+        })
+    }
+
+    /// Height (m) above which climbing rays are stopped early when no sky direction is needed.
+    pub fn stop_height_m(&self) -> f64 {
+        self.stop_height_m
+    }
+
+    /// The underlying tracer.
+    pub fn tracer(&self) -> &Tracer<'a, S> {
+        &self.tracer
+    }
+}
+
+impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
+    fn trace(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        SCRATCH.with(|cell| {
+            let Ok(mut record) = cell.try_borrow_mut() else {
+                // Re-entered on this thread (cannot happen through the renderer): no scratch.
+                let mut record = RayRecord::default();
+                return self.trace_with(
+                    &mut record,
+                    camera_height_m,
+                    elevation_rad,
+                    distances_m,
+                    need_sky_direction,
+                );
+            };
+            self.trace_with(
+                &mut record,
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        })
+    }
+}
+
+impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
+    fn trace_with(
+        &self,
+        record: &mut RayRecord,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        let result = if need_sky_direction {
+            self.tracer.trace_into(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                &mut NoHook,
+                record,
+                None,
+            )
+        } else {
+            let mut hook = StopAboveClimbing {
+                height_m: self.stop_height_m,
+            };
+            self.tracer_no_sky.trace_into(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                &mut hook,
+                record,
+                None,
+            )
+        };
+        match result {
+            Ok(()) => fan_ray(record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
+}
+
+/// The paper's method as a renderer back-end: every ray integrated in 3-D through the field
+/// ∇n = dn/dh · r̂ ([`trace_field`] over [`Spherical`]).
+///
+/// The ray is launched towards azimuth 0 (the x axis of an Earth-centred frame whose z axis goes
+/// through the observer), whatever the pixel's azimuth: the field is spherically symmetric, so a
+/// ray launched at another azimuth is this one rotated about the observer's vertical, with the
+/// same heights at the same ground distances and the same end (the integrator's error control is
+/// rotation-invariant up to rounding; a unit test checks this). The renderer takes the pixel's
+/// azimuth into account when it shades (which card the ray meets), so the [`RayTracer`] trait
+/// needs no azimuth.
+pub struct ExactRays<'a, S: StratifiedIndex + ?Sized> {
+    field: Spherical<&'a S>,
+    config: TracerConfig,
+    /// `config` with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`] (as [`CurvedRays`]).
+    config_no_sky: TracerConfig,
+    stop_height_m: f64,
+}
+
+impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
+    /// As [`CurvedRays::new`].
+    pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
+        config.validate()?;
+        let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
+        Ok(Self {
+            field: Spherical {
+                index,
+                earth_radius_m: config.earth_radius_m,
+            },
+            config_no_sky: capped_trap_distance(&config),
+            config,
+            stop_height_m: trap_top.max(cards_top_m.max(0.0)),
+        })
+    }
+
+    /// Trace one ray in 3-D towards `azimuth_rad` (about the observer's vertical, from the frame's
+    /// x axis; any azimuth gives the same ray up to a rotation) and return the full record.
+    pub fn trace_record(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        azimuth_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> Result<RayRecord, TracerError> {
+        let radius = self.config.earth_radius_m;
+        let origin = DVec3::new(0.0, 0.0, radius + camera_height_m);
+        let (sin_e, cos_e) = elevation_rad.sin_cos();
+        let (sin_a, cos_a) = azimuth_rad.sin_cos();
+        let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
+        let mut stop = StopAboveClimbing {
+            height_m: self.stop_height_m,
+        };
+        let mut none = NoHook;
+        let hook: &mut dyn RayHook = if need_sky_direction {
+            &mut none
+        } else {
+            &mut stop
+        };
+        let config = if need_sky_direction {
+            &self.config
+        } else {
+            &self.config_no_sky
+        };
+        trace_field(
+            &self.field,
+            Ground::Sphere { radius_m: radius },
+            config,
+            origin,
+            direction,
+            distances_m,
+            hook,
+            None,
+        )
+    }
+}
+
+impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
+    fn trace(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        match self.trace_record(
+            camera_height_m,
+            elevation_rad,
+            0.0,
+            distances_m,
+            need_sky_direction,
+        ) {
+            Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
+}
+
+/// Why [`prepare_tracer`] could not build a tracer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PrepareError {
+    /// Curved rays need a refractive atmosphere (only `straight = true` scenes work without one).
+    #[error("the scene uses curved rays but no refractive atmosphere was given")]
+    MissingAtmosphere,
+    /// The tracer settings were invalid (e.g. the Earth radius).
+    #[error(transparent)]
+    Tracer(#[from] TracerError),
+    /// The straight-ray model rejected the Earth radius.
+    #[error(transparent)]
+    RayModel(#[from] RayModelError),
+}
+
+/// Highest card top in `scene` (m above the surface; 0 without cards).
+pub fn cards_top_m(scene: &Scene) -> f64 {
+    scene
+        .cards
+        .iter()
+        .map(|c| c.base_m + c.height_m)
+        .fold(0.0, f64::max)
+}
+
+/// The ray tracer for rendering `scene` with `options`:
+///
+/// * `scene.atmosphere.straight` → [`StraightRays`] (no atmosphere needed; `atmosphere` ignored);
+/// * otherwise, `options.exact` → [`ExactRays`] (3-D per sample), else [`CurvedRays`] (fan);
+///   both through `atmosphere` with [`render_tracer_config`]`(scene.earth_radius_m)`.
+pub fn prepare_tracer<'a>(
+    scene: &Scene,
+    atmosphere: Option<&'a RefractiveAtmosphere>,
+    options: &RenderOptions,
+) -> Result<Box<dyn RayTracer + 'a>, PrepareError> {
+    if scene.atmosphere.straight {
+        return Ok(Box::new(StraightRays::new(scene.earth_radius_m)?));
+    }
+    let atmosphere = atmosphere.ok_or(PrepareError::MissingAtmosphere)?;
+    let config = render_tracer_config(scene.earth_radius_m);
+    let top = cards_top_m(scene);
+    if options.exact {
+        Ok(Box::new(ExactRays::new(atmosphere, config, top)?))
+    } else {
+        Ok(Box::new(CurvedRays::new(atmosphere, config, top)?))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::units::EARTH_RADIUS_M;
+
+    /// n = 1 + a·exp(−h/H) with an optional linear layer of gradient g between `lo` and `hi`.
+    struct Layered {
+        g: f64,
+        lo: f64,
+        hi: f64,
+    }
+
+    impl StratifiedIndex for Layered {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            let (a, scale) = (2.8e-4, 8_000.0);
+            let e = (-h / scale).exp();
+            let mut n = 1.0 + a * e;
+            let mut dn = -a * e / scale;
+            if h > self.lo {
+                let top = h.min(self.hi);
+                n += self.g * (top - self.lo);
+                if h < self.hi {
+                    dn += self.g;
+                }
+            }
+            (n, dn)
+        }
+    }
+
+    fn plain() -> Layered {
+        Layered {
+            g: 0.0,
+            lo: 0.0,
+            hi: 0.0,
+        }
+    }
+
+    #[test]
+    fn trapping_scan_finds_the_layer_top() {
+        // −1/R ≈ −1.57e-7 per m: a −3e-7 layer between 80 and 120 m traps.
+        let duct = Layered {
+            g: -3e-7,
+            lo: 80.0,
+            hi: 120.0,
+        };
+        let top = highest_trapping_top_m(&duct, EARTH_RADIUS_M, 40_000.0);
+        assert!(
+            (120.0..=120.0 + TRAPPING_SCAN_STEP_M).contains(&top),
+            "{top}"
+        );
+        assert_eq!(
+            highest_trapping_top_m(&plain(), EARTH_RADIUS_M, 40_000.0),
+            0.0
+        );
+        // A super-refractive but not trapping layer (−1e-7 per m) does not count.
+        let weak = Layered {
+            g: -1e-7,
+            lo: 80.0,
+            hi: 120.0,
+        };
+        assert_eq!(highest_trapping_top_m(&weak, EARTH_RADIUS_M, 40_000.0), 0.0);
+    }
+
+    #[test]
+    fn early_stop_gives_the_same_heights_and_end_kind() {
+        // With a strong duct at 80–120 m (Δn = −4e-5, like +10 K over 15 m), rays from 10 m that
+        // rise above the cards (30 m) up to α ≈ 7 mrad are still bent back to the sea; the early stop must not report them as sky.
+        let duct = Layered {
+            g: -1e-6,
+            lo: 80.0,
+            hi: 120.0,
+        };
+        let rays =
+            CurvedRays::new(&duct, render_tracer_config(EARTH_RADIUS_M), 30.0).expect("tracer");
+        assert!(rays.stop_height_m() >= 120.0);
+        let d = [5_000.0, 15_000.0, 26_000.0];
+        let mut grounds = 0;
+        for i in 0..200 {
+            let alpha = -0.004 + 0.01 * i as f64 / 200.0;
+            let full = rays.trace(10.0, alpha, &d, true);
+            let quick = rays.trace(10.0, alpha, &d, false);
+            assert_eq!(
+                std::mem::discriminant(&full.end),
+                std::mem::discriminant(&quick.end),
+                "α={alpha}: {full:?} vs {quick:?}"
+            );
+            for (a, b) in full.heights_m.iter().zip(&quick.heights_m) {
+                match (a, b) {
+                    (Some(x), Some(y)) => assert_eq!(x, y),
+                    // The quick ray stopped above every card and climbing: it would be higher.
+                    (Some(x), None) => assert!(*x > 30.0, "α={alpha}: {x}"),
+                    (None, None) => {}
+                    (None, Some(y)) => panic!("α={alpha}: quick has {y}, full none"),
+                }
+            }
+            if let (FanEnd::Ground { distance_m: a, .. }, FanEnd::Ground { distance_m: b, .. }) =
+                (full.end, quick.end)
+            {
+                assert_eq!(a, b);
+                if alpha > 0.0 {
+                    grounds += 1;
+                }
+            }
+        }
+        // The duct really does bring rising rays down (the test exercises the early stop).
+        assert!(grounds > 10, "{grounds}");
+    }
+
+    #[test]
+    fn curved_rays_agree_with_the_exact_3d_rays() {
+        let duct = Layered {
+            g: -3e-7,
+            lo: 80.0,
+            hi: 120.0,
+        };
+        let cfg = render_tracer_config(EARTH_RADIUS_M);
+        let fast = CurvedRays::new(&duct, cfg.clone(), 30.0).unwrap();
+        let exact = ExactRays::new(&duct, cfg, 30.0).unwrap();
+        let d = [5_000.0, 15_000.0, 26_000.0];
+        for i in 0..40 {
+            let alpha = -0.003 + 0.008 * i as f64 / 40.0;
+            let a = fast.trace(10.0, alpha, &d, true);
+            let b = exact.trace(10.0, alpha, &d, true);
+            assert_eq!(
+                std::mem::discriminant(&a.end),
+                std::mem::discriminant(&b.end),
+                "α={alpha}"
+            );
+            for (x, y) in a.heights_m.iter().zip(&b.heights_m) {
+                if let (Some(x), Some(y)) = (x, y) {
+                    // Both integrate to 1 cm per step; allow a few centimetres accumulated.
+                    assert!((x - y).abs() < 0.1, "α={alpha}: {x} vs {y}");
+                }
+            }
+            if let (FanEnd::Sky { elevation_rad: x }, FanEnd::Sky { elevation_rad: y }) =
+                (a.end, b.end)
+            {
+                assert!((x - y).abs() < 1e-6, "α={alpha}: {x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn exact_rays_do_not_depend_on_azimuth() {
+        let duct = Layered {
+            g: -3e-7,
+            lo: 80.0,
+            hi: 120.0,
+        };
+        let exact = ExactRays::new(&duct, render_tracer_config(EARTH_RADIUS_M), 30.0).unwrap();
+        let d = [5_000.0, 15_000.0];
+        for &alpha in &[-0.002, 0.0005, 0.003] {
+            let base = exact.trace_record(10.0, alpha, 0.0, &d, true).unwrap();
+            for &az in &[0.7, 2.0, -2.9] {
+                let r = exact.trace_record(10.0, alpha, az, &d, true).unwrap();
+                assert_eq!(r.termination, base.termination);
+                for (x, y) in r.heights_m.iter().zip(&base.heights_m) {
+                    if let (Some(x), Some(y)) = (x, y) {
+                        assert!((x - y).abs() < 1e-3, "α={alpha} az={az}: {x} vs {y}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn straight_field_matches_closed_form() {
+        // n ≡ 1: the tracer must reproduce the straight-ray geometry.
+        struct Vacuum;
+        impl StratifiedIndex for Vacuum {
+            fn index_and_derivative(&self, _h: f64) -> (f64, f64) {
+                (1.0, 0.0)
+            }
+        }
+        let curved = CurvedRays::new(&Vacuum, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
+        let straight = StraightRays::new(EARTH_RADIUS_M).unwrap();
+        let d = [1_000.0, 10_000.0];
+        for &alpha in &[-0.01, -0.0015, 0.0, 0.002] {
+            let a = curved.trace(10.0, alpha, &d, true);
+            let b = straight.trace(10.0, alpha, &d, true);
+            for (x, y) in a.heights_m.iter().zip(&b.heights_m) {
+                match (x, y) {
+                    (Some(x), Some(y)) => assert!((x - y).abs() < 0.02, "{alpha}: {x} {y}"),
+                    (None, None) => {}
+                    _ => panic!("{alpha}: {a:?} {b:?}"),
+                }
+            }
+            match (a.end, b.end) {
+                (
+                    FanEnd::Ground {
+                        distance_m: x,
+                        grazing_rad: gx,
+                    },
+                    FanEnd::Ground {
+                        distance_m: y,
+                        grazing_rad: gy,
+                    },
+                ) => {
+                    assert!((x - y).abs() < 1.0, "{x} {y}");
+                    assert!((gx - gy).abs() < 1e-6, "{gx} {gy}");
+                }
+                (FanEnd::Sky { elevation_rad: x }, FanEnd::Sky { elevation_rad: y }) => {
+                    assert!((x - y).abs() < 1e-7, "{x} {y}")
+                }
+                other => panic!("{alpha}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn bad_input_is_lost_not_nan() {
+        let air = plain();
+        let rays = CurvedRays::new(&air, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
+        let r = rays.trace(-5.0, 0.0, &[1.0, 2.0], false);
+        assert_eq!(r.end, FanEnd::Lost);
+        assert_eq!(r.heights_m, vec![None, None]);
+        let r = rays.trace(10.0, f64::NAN, &[1.0], true);
+        assert_eq!(r.end, FanEnd::Lost);
+        let exact = ExactRays::new(&air, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
+        assert_eq!(exact.trace(10.0, f64::NAN, &[], true).end, FanEnd::Lost);
+    }
+}

@@ -1,0 +1,565 @@
+//! The paper scenes rendered with the real tracer: key geometry of the images against the
+//! transfer-curve analysis (analysis::find_images, an independent code path: fresh traces,
+//! golden-section and bisection refinement, no fan, no camera), against closed-form straight-ray
+//! geometry, fast fan against exact per-pixel 3-D tracing, and determinism across thread counts.
+//!
+//! To read image geometry exactly, every card is given the calibration board's texture (ten bands
+//! of distinct colours, bottom first): the band seen in a pixel tells the height on the card that
+//! the pixel's ray passes, so erect and inverted images show as band orders.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use ghostship::analysis::{Image, Reach, TransferCurve, find_images};
+use ghostship::output::{exr, png};
+use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
+use ghostship::refractivity::RefractiveAtmosphere;
+use ghostship::render::traced::render_tracer_config;
+use ghostship::render::{
+    CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, provenance, render_scene,
+};
+use ghostship::scene::card::srgb_to_linear;
+use ghostship::scene::{AtmosphereSpec, Scene, Texture, assets};
+use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data"))
+}
+
+fn load_scene(name: &str) -> Scene {
+    let path = data_dir().join("scenes").join(name);
+    Scene::from_file(&path).unwrap_or_else(|e| panic!("scene {}: {e}", path.display()))
+}
+
+fn atmosphere(scene: &Scene) -> RefractiveAtmosphere {
+    let column: Arc<dyn AirColumn> = match &scene.atmosphere.source {
+        AtmosphereSpec::Synthetic(p) => Arc::new(
+            SyntheticAtmosphere::from_file(p)
+                .unwrap_or_else(|e| panic!("atmosphere {}: {e}", p.display())),
+        ),
+        AtmosphereSpec::Us1976 => Arc::new(StandardAtmosphere::default()),
+        AtmosphereSpec::Sounding(p) => panic!("test scenes use no soundings: {}", p.display()),
+    };
+    RefractiveAtmosphere::new(column, scene.atmosphere.wavelength_nm).expect("atmosphere")
+}
+
+fn options(exact: bool) -> RenderOptions {
+    RenderOptions {
+        exact,
+        samples_per_pixel: Some(1),
+        quiet: true,
+        ..RenderOptions::default()
+    }
+}
+
+fn render(scene: &Scene, atm: &RefractiveAtmosphere, exact: bool) -> Film {
+    let opts = options(exact);
+    let tracer = prepare_tracer(scene, Some(atm), &opts).expect("tracer");
+    let film = render_scene(scene, tracer.as_ref(), &opts).expect("render");
+    assert_eq!(film.stats.non_finite_samples, 0);
+    film
+}
+
+/// Every card gets the calibration board texture (its geometry stays).
+fn boards(scene: &mut Scene) {
+    let path = data_dir().join("cards/calibration_board.png");
+    let board =
+        Arc::new(Texture::from_file(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())));
+    for c in &mut scene.cards {
+        c.texture = board.clone();
+    }
+}
+
+/// The band (0 = bottom) whose colour a pixel shows, if it is close to one (not a tick mark, an
+/// edge blend, sky or sea).
+fn band_of(p: [f32; 4]) -> Option<usize> {
+    let mut best = (f64::INFINITY, 0);
+    for (i, c) in assets::BOARD_BAND_COLOURS.iter().enumerate() {
+        let d: f64 = (0..3)
+            .map(|k| (p[k] as f64 - srgb_to_linear(c[k] as f64 / 255.0)).powi(2))
+            .sum();
+        if d < best.0 {
+            best = (d, i);
+        }
+    }
+    (best.0 < 0.003).then_some(best.1)
+}
+
+/// Film pixel (column, row) of the direction (azimuth, elevation), if inside the frame.
+fn pixel_of(scene: &Scene, azimuth_rad: f64, elevation_rad: f64) -> Option<(u32, u32)> {
+    let frame = scene.camera.frame();
+    let (se, ce) = elevation_rad.sin_cos();
+    let (sa, ca) = azimuth_rad.sin_cos();
+    let (x, y) = frame.project([sa * ce, ca * ce, se])?;
+    let (w, h) = (scene.camera.width as f64, scene.camera.height as f64);
+    ((0.0..w).contains(&x) && (0.0..h).contains(&y)).then_some((x as u32, y as u32))
+}
+
+/// Transfer curve h(D; α) over the frame's elevations (plus a margin) and its images of [0, H].
+fn predicted_images<S: StratifiedIndex + ?Sized>(
+    index: &S,
+    scene: &Scene,
+    distance_m: f64,
+    height_m: f64,
+) -> Vec<Image> {
+    let cfg = TracerConfig {
+        earth_radius_m: scene.earth_radius_m,
+        ..TracerConfig::default()
+    };
+    let tracer = Tracer::new(index, cfg).unwrap();
+    let cam = &scene.camera;
+    let half = 0.5 * cam.height as f64 / cam.frame().focal_px;
+    let (lo, hi) = (cam.pitch_rad - 1.2 * half, cam.pitch_rad + 1.2 * half);
+    let n = 2001;
+    let elevations_rad: Vec<f64> = (0..n)
+        .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
+        .collect();
+    let reach = elevations_rad
+        .iter()
+        .map(|&a| Reach::from_record(&tracer.trace(cam.height_m, a, &[distance_m]).unwrap(), 0))
+        .collect();
+    let curve = TransferCurve {
+        distance_m,
+        elevations_rad,
+        reach,
+    };
+    find_images(&tracer, cam.height_m, &curve, height_m)
+}
+
+/// Height at `distance_m` of the ray at apparent `alpha` (fresh trace).
+fn height_at<S: StratifiedIndex + ?Sized>(
+    index: &S,
+    scene: &Scene,
+    alpha: f64,
+    distance_m: f64,
+) -> Option<f64> {
+    let cfg = TracerConfig {
+        earth_radius_m: scene.earth_radius_m,
+        ..TracerConfig::default()
+    };
+    let tracer = Tracer::new(index, cfg).unwrap();
+    tracer
+        .trace(scene.camera.height_m, alpha, &[distance_m])
+        .unwrap()
+        .heights_m[0]
+}
+
+/// What was checked of one image.
+#[derive(Debug)]
+struct Checked {
+    erect: bool,
+    rows: u32,
+    bands_seen: usize,
+    /// Elevations at which the rendered band was compared with the transfer curve's.
+    points: usize,
+}
+
+/// Check every image of card `card` that `find_images` predicts and that spans at least
+/// `min_rows` rows: the band order down the image column (erect: heights fall going down;
+/// inverted: they rise) and, at a quarter, half and three quarters of the image, the band the
+/// transfer curve puts there. Returns what was checked.
+fn check_card_images<S: StratifiedIndex + ?Sized>(
+    index: &S,
+    scene: &Scene,
+    film: &Film,
+    card: usize,
+    min_rows: u32,
+) -> Vec<Checked> {
+    let c = &scene.cards[card];
+    let (d, big_h) = (c.distance_m, c.base_m + c.height_m);
+    assert_eq!(c.base_m, 0.0, "cards stand on the sea in these scenes");
+    let band_m = big_h / 10.0;
+    let mut out = Vec::new();
+    for im in predicted_images(index, scene, d, big_h) {
+        let (lo, hi) = (
+            im.elevation_min_deg.to_radians(),
+            im.elevation_max_deg.to_radians(),
+        );
+        let (Some((x, y_top)), Some((_, y_bottom))) = (
+            pixel_of(scene, c.azimuth_rad, hi),
+            pixel_of(scene, c.azimuth_rad, lo),
+        ) else {
+            continue;
+        };
+        if y_bottom < y_top + min_rows {
+            continue;
+        }
+        // Band order down the column, away from the image's edges.
+        let seq: Vec<usize> = (y_top + 1..y_bottom)
+            .filter_map(|y| band_of(film.pixel(x, y)))
+            .collect();
+        let ok = seq
+            .windows(2)
+            .all(|w| if im.erect { w[1] <= w[0] } else { w[1] >= w[0] });
+        assert!(
+            ok,
+            "card {card} at {d} m: image {im:?} rows {y_top}..{y_bottom}: band order {seq:?}"
+        );
+        let mut distinct = seq.clone();
+        distinct.dedup();
+        // The band at three elevations inside the image, from the transfer curve.
+        let mut points = 0;
+        for f in [0.25, 0.5, 0.75] {
+            let alpha = lo + f * (hi - lo);
+            let Some(h) = height_at(index, scene, alpha, d) else {
+                panic!("card {card}: no height at α = {alpha} inside image {im:?}");
+            };
+            let want = ((h / band_m).floor() as usize).min(9);
+            // Too close to a band edge to tell (0.15 band), or on a tick mark: skip.
+            let frac = h / band_m - (h / band_m).floor();
+            if !(0.15..0.85).contains(&frac) {
+                continue;
+            }
+            let (_, y) = pixel_of(scene, c.azimuth_rad, alpha).unwrap();
+            let seen: Vec<Option<usize>> = [y.saturating_sub(1), y, y + 1]
+                .iter()
+                .map(|&yy| band_of(film.pixel(x, yy.min(film.height - 1))))
+                .collect();
+            assert!(
+                seen.contains(&Some(want)),
+                "card {card} at {d} m, α = {:.5}°: transfer curve says h = {h:.2} m (band {want}), \
+                 rows {}±1 show {seen:?}",
+                alpha.to_degrees(),
+                y
+            );
+            points += 1;
+        }
+        out.push(Checked {
+            erect: im.erect,
+            rows: y_bottom - y_top,
+            bands_seen: distinct.len(),
+            points,
+        });
+    }
+    eprintln!("card {card} at {d} m: {out:?}");
+    out
+}
+
+#[test]
+fn inferior_mirage_board_shows_an_inverted_image_where_the_transfer_curve_puts_it() {
+    let mut scene = load_scene("fig08_inferior_mirage.toml");
+    boards(&mut scene);
+    let atm = atmosphere(&scene);
+    let film = render(&scene, &atm, false);
+    // Card 0 is the calibration board at 12 km.
+    let checked = check_card_images(&atm, &scene, &film, 0, 6);
+    let inverted: Vec<&Checked> = checked.iter().filter(|c| !c.erect).collect();
+    assert!(
+        inverted
+            .iter()
+            .any(|c| c.bands_seen >= 2 && c.rows >= 20 && c.points >= 1),
+        "no measurable inverted image: {checked:?}"
+    );
+    // Stacked: erect image above the inverted one (the direct view of the board's top).
+    assert!(checked.iter().any(|c| c.erect), "{checked:?}");
+    // The ship (as a board) at 15 km shows the same structure.
+    let ship = check_card_images(&atm, &scene, &film, 1, 6);
+    assert!(ship.iter().any(|c| !c.erect), "{ship:?}");
+}
+
+#[test]
+fn superior_mirage_ghost_ship_is_inverted_above_the_horizon_where_predicted() {
+    let mut scene = load_scene("fig04_superior_mirage.toml");
+    boards(&mut scene);
+    let atm = atmosphere(&scene);
+    let film = render(&scene, &atm, false);
+    // Card 1: the far ship at 60 km, far beyond the 25 km geometric horizon of a 50 m camera.
+    let radius = scene.earth_radius_m;
+    let geometric_horizon = (2.0 * radius * scene.camera.height_m).sqrt();
+    assert!(scene.cards[1].distance_m > 2.0 * geometric_horizon);
+    let far = check_card_images(&atm, &scene, &film, 1, 4);
+    assert!(
+        far.iter()
+            .any(|c| !c.erect && c.rows >= 10 && c.bands_seen >= 2 && c.points >= 1),
+        "{far:?}"
+    );
+    // The near ship at 26 km: its direct, erect image.
+    let near = check_card_images(&atm, &scene, &film, 0, 4);
+    assert!(
+        near.iter().any(|c| c.erect && c.bands_seen >= 3),
+        "{near:?}"
+    );
+}
+
+#[test]
+fn fata_morgana_shows_stacked_alternating_images_where_predicted() {
+    let mut scene = load_scene("fig10_fata_morgana.toml");
+    boards(&mut scene);
+    let atm = atmosphere(&scene);
+    let film = render(&scene, &atm, false);
+    for card in 0..scene.cards.len() {
+        let checked = check_card_images(&atm, &scene, &film, card, 3);
+        assert!(checked.len() >= 2, "card {card}: {checked:?}");
+        let points: usize = checked.iter().map(|c| c.points).sum();
+        assert!(points >= 2, "card {card}: {checked:?}");
+        assert!(
+            checked.iter().any(|c| c.erect) && checked.iter().any(|c| !c.erect),
+            "card {card}: {checked:?}"
+        );
+    }
+}
+
+/// n ≡ 1: the straight-ray world as a stratified index (for find_images).
+struct Vacuum;
+
+impl StratifiedIndex for Vacuum {
+    fn index_and_derivative(&self, _height_m: f64) -> (f64, f64) {
+        (1.0, 0.0)
+    }
+}
+
+#[test]
+fn straight_rays_show_single_erect_images_and_the_geometric_horizon() {
+    let mut scene = load_scene("fig01_horizon_straight.toml");
+    assert!(scene.atmosphere.straight);
+    boards(&mut scene);
+    let atm = atmosphere(&scene);
+    let film = render(&scene, &atm, false);
+    for card in 0..scene.cards.len() {
+        let images = predicted_images(&Vacuum, &scene, scene.cards[card].distance_m, 25.0);
+        assert_eq!(images.len(), 1, "{images:?}");
+        assert!(images[0].erect);
+        let checked = check_card_images(&Vacuum, &scene, &film, card, 4);
+        assert_eq!(checked.len(), 1, "{checked:?}");
+        assert!(
+            checked[0].erect && checked[0].bands_seen >= 3,
+            "{checked:?}"
+        );
+    }
+    // Horizon: down the frame's last column (no card there) the sea starts at the geometric
+    // dip, acos(R / (R + h)).
+    let r = scene.earth_radius_m;
+    let dip = (r / (r + scene.camera.height_m)).acos();
+    let frame = scene.camera.frame();
+    let x = scene.camera.width - 1;
+    let (azimuth, _) = frame.direction(x as f64 + 0.5, 0.5 * scene.camera.height as f64);
+    let (se, ce) = (-dip).sin_cos();
+    let (sa, ca) = azimuth.sin_cos();
+    let (_, y_dip) = frame.project([sa * ce, ca * ce, se]).unwrap();
+    let lum = |y: u32| {
+        let p = film.pixel(x, y);
+        p[0] + p[1] + p[2]
+    };
+    // The largest brightness step down the column is the sky/sea edge.
+    let edge = (1..film.height)
+        .max_by(|&a, &b| {
+            (lum(a - 1) - lum(a))
+                .abs()
+                .total_cmp(&(lum(b - 1) - lum(b)).abs())
+        })
+        .unwrap();
+    // Row `edge` is the first sea row: its centre lies below the dip, the previous one above.
+    assert!(
+        (edge as f64 + 0.5) > y_dip && (edge as f64 - 0.5) < y_dip,
+        "edge row {edge}, dip row {y_dip}"
+    );
+}
+
+#[test]
+fn novaya_zemlya_sun_is_seen_below_the_horizon_and_not_with_straight_rays() {
+    let scene = load_scene("fig12_novaya_zemlya.toml");
+    let sun = scene.sun.expect("the scene has a sun");
+    // The premise: the whole disc is below the astronomical horizon.
+    assert!(sun.elevation_rad + 0.5 * sun.angular_diameter_rad < 0.0);
+    let atm = atmosphere(&scene);
+    let mut dark = scene.clone();
+    dark.sun = None;
+    let with_sun = render(&scene, &atm, false);
+    let without = render(&dark, &atm, false);
+    let brighter = |a: &Film, b: &Film, y: u32, x: u32| a.pixel(x, y)[0] - b.pixel(x, y)[0];
+    // Where the curved tracer says the ray leaves towards the disc, the sun shows, and only there
+    // (centre column; rays well inside or well outside the disc).
+    let rays = CurvedRays::new(&atm, render_tracer_config(scene.earth_radius_m), 0.0).unwrap();
+    let frame = scene.camera.frame();
+    let x = scene.camera.width / 2;
+    let radius = 0.5 * sun.angular_diameter_rad;
+    let mut lit = 0;
+    for y in 0..scene.camera.height {
+        let (_, alpha) = frame.direction(x as f64 + 0.5, y as f64 + 0.5);
+        let end = rays.trace(scene.camera.height_m, alpha, &[], true).end;
+        let ghostship::render::FanEnd::Sky { elevation_rad } = end else {
+            assert!(brighter(&with_sun, &without, y, x).abs() < 1e-6, "row {y}");
+            continue;
+        };
+        let off = (elevation_rad - sun.elevation_rad).abs();
+        let gain = brighter(&with_sun, &without, y, x);
+        if off < 0.8 * radius {
+            assert!(
+                gain > 0.02,
+                "row {y}: ray ends at {elevation_rad} rad, gain {gain}"
+            );
+            lit += 1;
+        } else if off > 1.2 * radius {
+            assert!(gain.abs() < 1e-6, "row {y}: off the disc, gain {gain}");
+        }
+    }
+    assert!(lit >= 3, "sun strip only {lit} rows tall");
+    // Straight rays: the disc is below the geometric horizon, nothing of it shows.
+    let mut straight = scene.clone();
+    straight.atmosphere.straight = true;
+    let mut straight_dark = straight.clone();
+    straight_dark.sun = None;
+    let a = render(&straight, &atm, false);
+    let b = render(&straight_dark, &atm, false);
+    let max_gain = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(p, q)| (p[0] - q[0]).abs())
+        .fold(0.0f32, f32::max);
+    assert!(max_gain < 1e-6, "{max_gain}");
+}
+
+/// Pixels that differ by more than `threshold` (any channel), and pixels of `film` on an edge
+/// (differing by more than `threshold` from a vertical neighbour).
+fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
+    let differ = |p: [f32; 4], q: [f32; 4]| (0..3).any(|k| (p[k] - q[k]).abs() > threshold);
+    let diff = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .filter(|(p, q)| differ(**p, **q))
+        .count();
+    let mut edges = 0;
+    for y in 0..b.height {
+        for x in 0..b.width {
+            let p = b.pixel(x, y);
+            let up = y > 0 && differ(p, b.pixel(x, y - 1));
+            let down = y + 1 < b.height && differ(p, b.pixel(x, y + 1));
+            if up || down {
+                edges += 1;
+            }
+        }
+    }
+    (diff, edges)
+}
+
+fn fast_vs_exact(name: &str) {
+    let mut scene = load_scene(name);
+    scene.camera.width = 160;
+    scene.camera.height = 80;
+    let atm = atmosphere(&scene);
+    let fast = render(&scene, &atm, false);
+    let exact = render(&scene, &atm, true);
+    assert!(exact.stats.sample_rays > 0 && fast.stats.fan_rays > 0);
+    let (diff, edges) = differing_and_edge_pixels(&fast, &exact, 0.02);
+    // The fan places features within 0.1 px of per-sample tracing (elevation_fan docs), so only
+    // pixels whose centre lies within 0.1 px of an edge can change: at most ~20 % of the edge
+    // pixels (each edge pixel has a 0.2 px window of 1 px). Bound: a quarter of them.
+    eprintln!(
+        "{name}: {diff} differing pixels, {edges} edge pixels of {}",
+        exact.pixels.len()
+    );
+    assert!(
+        diff * 4 <= edges.max(4),
+        "{name}: {diff} pixels differ, {edges} edge pixels"
+    );
+}
+
+#[test]
+fn fast_fan_matches_exact_3d_tracing_superior_mirage() {
+    fast_vs_exact("fig04_superior_mirage.toml");
+}
+
+#[test]
+fn fast_fan_matches_exact_3d_tracing_fata_morgana() {
+    fast_vs_exact("fig10_fata_morgana.toml");
+}
+
+#[test]
+fn real_tracer_renders_are_byte_identical_on_one_and_two_threads() {
+    let scene = load_scene("fig10_fata_morgana.toml");
+    let atm = atmosphere(&scene);
+    let encode = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let opts = RenderOptions {
+                samples_per_pixel: Some(4),
+                quiet: true,
+                ..RenderOptions::default()
+            };
+            let tracer = prepare_tracer(&scene, Some(&atm), &opts).unwrap();
+            let film = render_scene(&scene, tracer.as_ref(), &opts).unwrap();
+            let png = png::encode_png(&film, png::DEFAULT_EXPOSURE).unwrap();
+            let exr = exr::encode_exr(&film, &provenance(&scene, &opts)).unwrap();
+            (png, exr)
+        })
+    };
+    let one = encode(1);
+    let two = encode(2);
+    assert!(one.0 == two.0, "PNG differs between 1 and 2 threads");
+    assert!(one.1 == two.1, "EXR differs between 1 and 2 threads");
+}
+
+#[test]
+fn exact_rays_agree_with_curved_rays_on_a_paper_atmosphere() {
+    // The two back-ends the renderer uses, ray by ray, through the Fata Morgana air.
+    let scene = load_scene("fig10_fata_morgana.toml");
+    let atm = atmosphere(&scene);
+    let cfg = render_tracer_config(scene.earth_radius_m);
+    let fast = CurvedRays::new(&atm, cfg.clone(), 25.0).unwrap();
+    let exact = ExactRays::new(&atm, cfg, 25.0).unwrap();
+    let d = [60_000.0, 64_000.0];
+    let mut compared = 0;
+    let mut worst = 0.0f64;
+    for i in 0..=40 {
+        let alpha = (-0.1 + 0.3 * i as f64 / 40.0f64).to_radians();
+        let a = fast.trace(10.0, alpha, &d, false);
+        let b = exact.trace(10.0, alpha, &d, false);
+        assert_eq!(
+            std::mem::discriminant(&a.end),
+            std::mem::discriminant(&b.end),
+            "α={alpha}"
+        );
+        for (x, y) in a.heights_m.iter().zip(&b.heights_m) {
+            if let (Some(x), Some(y)) = (x, y) {
+                // Same integrator and error control in two coordinate systems: they agree within
+                // the 1 cm step tolerance (measured: 2e-7 m).
+                assert!((x - y).abs() < 0.01, "α={alpha}: {x} vs {y}");
+                worst = worst.max((x - y).abs());
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 10, "{compared}");
+    eprintln!("planar vs 3-D heights at 60/64 km: {compared} compared, worst {worst:.3e} m");
+}
+
+#[test]
+fn prepare_tracer_picks_the_back_end_from_scene_and_options() {
+    use ghostship::render::{FanEnd, PrepareError, StraightRays};
+    let scene = load_scene("fig10_fata_morgana.toml");
+    // Curved rays need an atmosphere.
+    assert!(matches!(
+        prepare_tracer(&scene, None, &options(false)),
+        Err(PrepareError::MissingAtmosphere)
+    ));
+    let atm = atmosphere(&scene);
+    // Fast and exact back-ends trace the same ray through the same air.
+    let fast = prepare_tracer(&scene, Some(&atm), &options(false)).unwrap();
+    let exact = prepare_tracer(&scene, Some(&atm), &options(true)).unwrap();
+    let alpha = 0.13f64.to_radians(); // inside the 60 km mirage
+    let (a, b) = (
+        fast.trace(10.0, alpha, &[60_000.0], false),
+        exact.trace(10.0, alpha, &[60_000.0], false),
+    );
+    let (ha, hb) = (a.heights_m[0].unwrap(), b.heights_m[0].unwrap());
+    assert!((ha - hb).abs() < 0.5, "{ha} vs {hb}");
+    // Straight scenes need none, and give the closed-form straight rays.
+    let straight = load_scene("fig01_horizon_straight.toml");
+    let t = prepare_tracer(&straight, None, &options(false)).unwrap();
+    let want = StraightRays::new(straight.earth_radius_m).unwrap();
+    for alpha in [-0.002, -0.0005, 0.001] {
+        assert_eq!(
+            t.trace(10.0, alpha, &[8_000.0], true),
+            want.trace(10.0, alpha, &[8_000.0], true)
+        );
+    }
+    assert!(matches!(
+        t.trace(10.0, -0.01, &[], true).end,
+        FanEnd::Ground { .. }
+    ));
+}
