@@ -1,9 +1,10 @@
 //! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
 //! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis) and
-//! [`pipeline`] (batch runs of both). Errors go back to `main` as one `anyhow` chain.
+//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three). Errors go back to `main` as one `anyhow` chain.
 
 pub mod pipeline;
 pub mod profile;
+pub mod render;
 pub mod trace;
 
 use clap::{Parser, Subcommand};
@@ -37,6 +38,9 @@ pub enum Command {
     /// Trace a fan of rays from an observer: heights at target distances, images of targets,
     /// apparent horizons, trapped rays (JSON or CSV on stdout, optional plot).
     Trace(trace::TraceArgs),
+    /// Render what a camera sees through the scene's atmosphere: horizon, sea, sky, cards and
+    /// sun, to PNG and/or EXR.
+    Render(render::RenderArgs),
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
 }
@@ -51,6 +55,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Profile(args) => profile::run(args, cli.quiet),
         Command::Trace(args) => trace::run(args, cli.quiet),
+        Command::Render(args) => render::run(args, cli.quiet),
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
     }
 }

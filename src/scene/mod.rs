@@ -46,8 +46,15 @@
 //! azimuth_deg = 0.0
 //! angular_diameter_deg = 0.533   # default from 1 392 000 km at 149.6e6 km
 //! limb_darkening = 0.6
-//! intensity = 60.0           # disc-centre radiance above the atmosphere, 1 = horizon sky
+//! intensity = 100.0          # disc-centre radiance above the atmosphere, 1 = horizon sky (default 100)
 //! ```
+
+/// Default radiance of the sun's disc centre above the atmosphere, in film units (1 = the white
+/// horizon sky). The real ratio is about 1e5; 100 keeps the disc far brighter than the sky (so the
+/// reddened low sun still reads orange after the PNG's hue-preserving highlight compression) while
+/// a pixel only partly covered by the disc stays below white, so flattened strips keep their
+/// shape instead of blooming. EXR files carry the linear values as rendered.
+pub const DEFAULT_SUN_INTENSITY: f64 = 100.0;
 
 pub mod assets;
 pub mod camera;
@@ -538,7 +545,7 @@ impl Scene {
                 )?,
                 intensity: c.range(
                     "sun.intensity",
-                    rs.intensity.unwrap_or(10.0),
+                    rs.intensity.unwrap_or(DEFAULT_SUN_INTENSITY),
                     0.0,
                     1e9,
                     "0…1e9",

@@ -478,9 +478,12 @@ fn png_is_srgb_encoded() {
     };
     let bytes = png::encode_png(&film, 1.0).unwrap();
     let img = image::load_from_memory(&bytes).unwrap().to_rgb8();
-    // 0.625 linear → 207 (crates.md §1.5); 0.18 → 118; 0.002 → 7 (linear segment); clipping.
+    // 0.625 linear → 207 (crates.md §1.5); 1.0 → 255.
     assert_eq!(img.get_pixel(0, 0).0, [207, 0, 255]);
-    assert_eq!(img.get_pixel(1, 0).0, [118, 7, 255]);
+    // Brighter than white: the whole colour is scaled so its largest channel is 1 (hue kept):
+    // [0.18, 0.002, 2.0] → [0.09, 0.001, 1.0] → sRGB 0.3318 → 85, 12.92·0.001 → 3 (linear
+    // segment), 255.
+    assert_eq!(img.get_pixel(1, 0).0, [85, 3, 255]);
     // Exposure scales linear values before encoding.
     let bytes = png::encode_png(&film, 0.5).unwrap();
     let img = image::load_from_memory(&bytes).unwrap().to_rgb8();
