@@ -1,20 +1,26 @@
-//! `ghostship pipeline run`: a pipeline file → [`ResolvedPipeline`] → its profile and trace jobs,
-//! one after another (each parallel inside), into `out/<pipeline name>/` or `--out DIR`, with a
-//! progress bar over the jobs; then the list of files written.
+//! `ghostship pipeline run`: a pipeline file → [`ResolvedPipeline`] → its profile, trace and
+//! render jobs, one after another (each parallel inside), into `out/<pipeline name>/` or
+//! `--out DIR`, with a progress bar over the jobs; then the list of files written. Render jobs
+//! write `<name>_<W>x<H>.png/.exr` per size, or `<name>.png/.exr` at the scene's own size.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
+use ghostship::output::film::write_film;
+use ghostship::output::png::DEFAULT_EXPOSURE;
 use ghostship::output::write_atomic;
-use ghostship::pipeline::{ProfileJob, ResolvedPipeline, TraceJob};
+use ghostship::pipeline::{ImageFormat, ProfileJob, RenderJob, ResolvedPipeline, TraceJob};
+use ghostship::render::{RenderOptions, provenance};
+use ghostship::scene::Scene;
 use ghostship::tracer::TracerConfig;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::profile::{
     DEFAULT_LAYERS_TOP_M, DEFAULT_PLOT_TOP_M, ProfileOptions, profile_products, write_profile,
 };
+use super::render::render_film;
 use super::trace::{DEFAULT_TRAP_DISTANCE_M, TraceOptions, trace_products};
 
 /// Arguments of `ghostship pipeline`.
@@ -108,21 +114,40 @@ fn trace_job(job: &TraceJob, options: &TraceOptions, out: &Path) -> anyhow::Resu
     Ok(written)
 }
 
+fn render_job(
+    job: &RenderJob,
+    scene: &Scene,
+    size: Option<(u32, u32)>,
+    label: &str,
+    out: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let mut scene = scene.clone();
+    if let Some((width, height)) = size {
+        scene.camera.width = width;
+        scene.camera.height = height;
+    }
+    let options = RenderOptions {
+        samples_per_pixel: job.spp,
+        quiet: true,
+        ..RenderOptions::default()
+    };
+    let film = render_film(&scene, &options)?;
+    let meta = provenance(&scene, &options);
+    let mut written = Vec::new();
+    for format in &job.formats {
+        let ext = match format {
+            ImageFormat::Png => "png",
+            ImageFormat::Exr => "exr",
+        };
+        let path = out.join(format!("{label}.{ext}"));
+        write_film(&film, &path, &meta, DEFAULT_EXPOSURE)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
 fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     let pipeline = ResolvedPipeline::from_file(&args.pipeline)?;
-    if !pipeline.renders.is_empty() {
-        anyhow::bail!(
-            "pipeline {} has {} render job(s) ({}): render jobs need the renderer (not in this build)",
-            args.pipeline.display(),
-            pipeline.renders.len(),
-            pipeline
-                .renders
-                .iter()
-                .map(|r| r.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
     // Check every trace job before running anything, so a typo in the last one costs nothing.
     let traces = pipeline
         .traces
@@ -141,7 +166,22 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| Path::new("out").join(&pipeline.name));
-    let total = (pipeline.profiles.len() + pipeline.traces.len()) as u64;
+    // Load every scene before running anything, for the same reason.
+    let scenes = pipeline
+        .renders
+        .iter()
+        .map(|job| {
+            Scene::from_file(&job.scene).with_context(|| {
+                format!(
+                    "invalid pipeline {}: render job {:?}",
+                    args.pipeline.display(),
+                    job.name
+                )
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let renders: usize = pipeline.renders.iter().map(|r| r.sizes.len().max(1)).sum();
+    let total = (pipeline.profiles.len() + pipeline.traces.len() + renders) as u64;
     let bar = if quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
     } else {
@@ -166,6 +206,24 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
             .with_context(|| format!("trace job {:?} failed", job.name))?;
         written.extend(files);
         bar.inc(1);
+    }
+    for (job, scene) in pipeline.renders.iter().zip(&scenes) {
+        let sizes: Vec<Option<(u32, u32)>> = if job.sizes.is_empty() {
+            vec![None]
+        } else {
+            job.sizes.iter().copied().map(Some).collect()
+        };
+        for size in sizes {
+            let label = match size {
+                Some((w, h)) => format!("{}_{w}x{h}", job.name),
+                None => job.name.clone(),
+            };
+            bar.set_message(format!("render {label}"));
+            let files = render_job(job, scene, size, &label, &out)
+                .with_context(|| format!("render job {label:?} failed"))?;
+            written.extend(files);
+            bar.inc(1);
+        }
     }
     bar.finish_and_clear();
     if !quiet {

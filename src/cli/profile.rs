@@ -187,7 +187,8 @@ pub fn run(args: ProfileArgs, quiet: bool) -> anyhow::Result<()> {
     let products = profile_products(&atm, &options)?;
     match args.format {
         SummaryFormat::Table => {
-            print!("{}\n{}", atm.description, summary_text(&products.report));
+            let summary = summary_text(&products.report);
+            println!("{}\n{}", atm.description, summary.trim_end());
             if let Some(s) = &atm.sounding {
                 for w in &s.warnings {
                     println!("Ingest note: {w}");
@@ -196,7 +197,7 @@ pub fn run(args: ProfileArgs, quiet: bool) -> anyhow::Result<()> {
         }
         SummaryFormat::Json => {
             let json = summary_json(&products.report);
-            print!("{}", String::from_utf8_lossy(&json));
+            println!("{}", String::from_utf8_lossy(&json).trim_end());
         }
     }
     let written = write_profile(&out_dir, &products)?;

@@ -415,10 +415,11 @@ distances_m = [3000.0]
     assert!(out.join("us1976_transfer.png").is_file());
     assert!(r.stdout.contains("us1976_transfer.json"), "{}", r.stdout);
 
-    // Render jobs are refused with a clear message, before anything runs.
+    // A render job whose scene is missing is named, before anything runs.
     std::fs::write(&pipeline, "[[render]]\nscene = \"x.toml\"\n").unwrap();
     let r = fails(&["pipeline", "run", pipeline.to_str().unwrap()]);
-    assert!(r.stderr.contains("renderer"), "{}", r.stderr);
+    assert!(r.stderr.contains("render job \"x\""), "{}", r.stderr);
+    assert!(r.stderr.contains("x.toml"), "{}", r.stderr);
     // A bad trace job is named.
     std::fs::write(
         &pipeline,
@@ -557,5 +558,115 @@ fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
     for name in ["superior_mirage", "inferior_mirage"] {
         let t = trace(name);
         assert_eq!(t["distances_m"].as_array().unwrap().len(), 5, "{name}");
+    }
+}
+
+#[test]
+fn render_writes_png_and_exr_of_the_requested_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("a.png");
+    let exr = dir.path().join("sub/a.exr");
+    let scene = data("scenes/fig08_inferior_mirage.toml");
+    let r = ok(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--size",
+        "80x40",
+        "--spp",
+        "1",
+        "-o",
+        png.to_str().unwrap(),
+        "-o",
+        exr.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("a.png"), "{}", r.stderr);
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (80, 40));
+    let meta = exr::meta::MetaData::read_from_file(&exr, false).unwrap();
+    let size = meta.headers[0].layer_size;
+    assert_eq!((size.width(), size.height()), (80, 40));
+    // No temporary files are left beside the outputs.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.contains(".tmp")), "{names:?}");
+}
+
+#[test]
+fn render_straight_and_curved_differ_and_bad_input_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = data("scenes/fig08_inferior_mirage.toml");
+    let curved = dir.path().join("curved.png");
+    let straight = dir.path().join("straight.png");
+    let args = |out: &Path| {
+        vec![
+            "render".to_string(),
+            scene.to_str().unwrap().to_string(),
+            "--size".into(),
+            "100x50".into(),
+            "--spp".into(),
+            "1".into(),
+            "-o".into(),
+            out.to_str().unwrap().to_string(),
+        ]
+    };
+    let a = args(&curved);
+    ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut b = args(&straight);
+    b.push("--straight".into());
+    ok(&b.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_ne!(
+        std::fs::read(&curved).unwrap(),
+        std::fs::read(&straight).unwrap(),
+        "the inferior mirage must change the image"
+    );
+
+    // Unknown output format, bad spp, bad scene field (with line), missing scene.
+    let r = fails(&["render", scene.to_str().unwrap(), "-o", "x.jpg"]);
+    assert!(r.stderr.contains("x.jpg"), "{}", r.stderr);
+    let r = fails(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--spp",
+        "3",
+        "-o",
+        dir.path().join("y.png").to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("square"), "{}", r.stderr);
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[camera]\nheight_m = 10.0\nwidht = 5\n").unwrap();
+    let r = fails(&["render", bad.to_str().unwrap()]);
+    assert!(r.stderr.contains("bad.toml"), "{}", r.stderr);
+    assert!(r.stderr.contains("line 3"), "{}", r.stderr);
+    let r = fails(&["render", dir.path().join("none.toml").to_str().unwrap()]);
+    assert!(r.stderr.contains("none.toml"), "{}", r.stderr);
+}
+
+#[test]
+fn pipeline_render_job_writes_every_size_and_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = dir.path().join("p.toml");
+    let scene = data("scenes/fig01_horizon_straight.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "name = \"p\"\n[[render]]\nscene = {:?}\nname = \"fig01\"\nsizes = [\"64x32\", \"40x40\"]\nspp = 1\n",
+            scene.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("o");
+    ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for (name, w, h) in [("fig01_64x32", 64, 32), ("fig01_40x40", 40, 40)] {
+        let img = image::open(out.join(format!("{name}.png"))).unwrap();
+        assert_eq!((img.width(), img.height()), (w, h));
+        assert!(out.join(format!("{name}.exr")).is_file());
     }
 }
