@@ -148,8 +148,6 @@ fn height_at<S: StratifiedIndex + ?Sized>(
 #[derive(Debug)]
 struct Checked {
     erect: bool,
-    /// Film rows of the image's top and bottom edge.
-    y_top: u32,
     rows: u32,
     bands_seen: usize,
     /// Elevations at which the rendered band was compared with the transfer curve's.
@@ -228,7 +226,6 @@ fn check_card_images<S: StratifiedIndex + ?Sized>(
         }
         out.push(Checked {
             erect: im.erect,
-            y_top,
             rows: y_bottom - y_top,
             bands_seen: distinct.len(),
             points,
