@@ -353,6 +353,52 @@ fn fata_morgana_shows_stacked_alternating_images_where_predicted() {
     }
 }
 
+#[test]
+fn superior_mirage_from_the_papers_10_m_camera_shows_single_erect_images() {
+    let mut scene = load_scene("fig04a_superior_mirage_paper_camera.toml");
+    assert_eq!(scene.camera.height_m, 10.0);
+    boards(&mut scene);
+    let atm = atmosphere(&scene);
+    // The reason (the scene's comment): a ray turns down only where the modified refractivity
+    // M = (n − 1 + h/R)·1e6 falls below M at the camera; here it never does above 10 m.
+    let r = scene.earth_radius_m;
+    let m = |h: f64| (atm.index_and_derivative(h).0 - 1.0 + h / r) * 1e6;
+    let m_camera = m(scene.camera.height_m);
+    let m_min_above = (1..=4000)
+        .map(|i| m(scene.camera.height_m + 0.5 * i as f64))
+        .fold(f64::INFINITY, f64::min);
+    eprintln!("M(10 m) = {m_camera:.2}, min M above = {m_min_above:.2}");
+    assert!(m_min_above > m_camera, "{m_min_above} <= {m_camera}");
+    let film = render(&scene, &atm, false);
+    for card in 0..scene.cards.len() {
+        let c = &scene.cards[card];
+        let images = predicted_images(&atm, &scene, c.distance_m, c.base_m + c.height_m);
+        assert_eq!(images.len(), 1, "card {card}: {images:?}");
+        assert!(images[0].erect, "card {card}: {images:?}");
+        // And the render shows exactly that image, erect, with the predicted bands.
+        let checked = check_card_images(&atm, &scene, &film, card, 4);
+        assert_eq!(checked.len(), 1, "card {card}: {checked:?}");
+        assert!(
+            checked[0].erect && checked[0].bands_seen >= 3 && checked[0].points >= 1,
+            "card {card}: {checked:?}"
+        );
+        // Nothing of the card anywhere above its image in its column: no ghost.
+        let (x, y_top) = pixel_of(
+            &scene,
+            c.azimuth_rad,
+            images[0].elevation_max_deg.to_radians(),
+        )
+        .expect("image top in frame");
+        let above: Vec<u32> = (0..y_top.saturating_sub(1))
+            .filter(|&y| band_of(film.pixel(x, y)).is_some())
+            .collect();
+        assert!(
+            above.is_empty(),
+            "card {card}: board colours at rows {above:?}"
+        );
+    }
+}
+
 /// n ≡ 1: the straight-ray world as a stratified index (for find_images).
 struct Vacuum;
 
