@@ -510,6 +510,146 @@ fn novaya_zemlya_sun_is_seen_below_the_horizon_and_not_with_straight_rays() {
     assert!(max_gain < 1e-6, "{max_gain}");
 }
 
+/// Runs of consecutive `true` rows, as (first, last) row pairs.
+fn runs(flags: &[bool]) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (y, &f) in flags.iter().enumerate() {
+        match (f, start) {
+            (true, None) => start = Some(y as u32),
+            (false, Some(a)) => {
+                out.push((a, y as u32 - 1));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(a) = start {
+        out.push((a, flags.len() as u32 - 1));
+    }
+    out
+}
+
+#[test]
+fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
+    use ghostship::tracer::Termination;
+    let scene = load_scene("fig12b_novaya_zemlya_strips.toml");
+    assert_eq!(scene.camera.height_m, 100.0);
+    let sun = scene.sun.expect("the scene has a sun");
+    let radius = 0.5 * sun.angular_diameter_rad;
+    let atm = atmosphere(&scene);
+    // Premise: the disc is below where the sea horizon looks in the same cold air without the
+    // inversion (standard lapse from the same surface), so only the inversion can show it.
+    let plain = SyntheticAtmosphere::from_toml_str(
+        "surface_temperature_c = -30.0\nsurface_pressure_hpa = 1013.25\nbackground = -0.0065\n",
+        std::path::Path::new("plain.toml"),
+    )
+    .unwrap();
+    let plain = RefractiveAtmosphere::new(Arc::new(plain), scene.atmosphere.wavelength_nm).unwrap();
+    let cfg = render_tracer_config(scene.earth_radius_m);
+    let plain_tracer = Tracer::new(&plain, cfg.clone()).unwrap();
+    let mut highest_seen = f64::NEG_INFINITY;
+    for i in 0..=400 {
+        let alpha = (-0.4 + 0.4 * i as f64 / 400.0).to_radians();
+        let r = plain_tracer
+            .trace(scene.camera.height_m, alpha, &[])
+            .unwrap();
+        if r.termination == Some(Termination::Escaped) {
+            // Escaping rays: the lowest apparent elevation gives the lowest true one.
+            highest_seen = r.end_observer_elevation_rad;
+            break;
+        }
+    }
+    assert!(
+        sun.elevation_rad + radius < highest_seen,
+        "upper limb {} not below the plain-air sea horizon's true elevation {highest_seen}",
+        (sun.elevation_rad + radius).to_degrees()
+    );
+
+    // The traced map α → true elevation ε, row by row down the centre column (the analysis
+    // tracer, not the renderer's fan), and what the render shows there.
+    let tracer = Tracer::new(&atm, cfg).unwrap();
+    let frame = scene.camera.frame();
+    let x = scene.camera.width / 2;
+    let mut dark = scene.clone();
+    dark.sun = None;
+    let with_sun = render(&scene, &atm, false);
+    let without = render(&dark, &atm, false);
+    let h = scene.camera.height as usize;
+    let mut eps: Vec<Option<f64>> = vec![None; h];
+    let mut predicted_lit = vec![false; h];
+    let mut lit = vec![false; h];
+    for y in 0..h {
+        let (_, alpha) = frame.direction(x as f64 + 0.5, y as f64 + 0.5);
+        let r = tracer.trace(scene.camera.height_m, alpha, &[]).unwrap();
+        let gain = with_sun.pixel(x, y as u32)[0] - without.pixel(x, y as u32)[0];
+        lit[y] = gain > 0.02;
+        if r.termination != Some(Termination::Escaped) {
+            assert!(gain.abs() < 1e-6, "row {y}: not a sky ray, gain {gain}");
+            continue;
+        }
+        let e = r.end_observer_elevation_rad;
+        eps[y] = Some(e);
+        let off = (e - sun.elevation_rad).abs();
+        if off < 0.8 * radius {
+            predicted_lit[y] = true;
+            assert!(
+                gain > 0.02,
+                "row {y}: ε = {:.4}°, gain {gain}",
+                e.to_degrees()
+            );
+        } else if off > 1.2 * radius {
+            assert!(
+                gain.abs() < 1e-6,
+                "row {y}: ε = {:.4}° off the disc, gain {gain}",
+                e.to_degrees()
+            );
+        }
+    }
+    // The map is non-monotonic: going up the column from the sea horizon ε first falls below
+    // the sun's lower limb, then rises back above its upper limb.
+    let sky: Vec<(usize, f64)> = eps
+        .iter()
+        .enumerate()
+        .rev()
+        .filter_map(|(y, e)| e.map(|e| (y, e)))
+        .collect();
+    let (y_min, e_min) = sky
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    assert!(e_min < sun.elevation_rad - radius, "ε never below the disc");
+    assert!(
+        sky[0].1 > e_min + 0.1f64.to_radians()
+            && sky.last().unwrap().1 > sun.elevation_rad + radius
+    );
+    eprintln!(
+        "sea horizon row {}, ε min {:.3}° at row {y_min}",
+        sky[0].0,
+        e_min.to_degrees()
+    );
+    // At least two separate strips, predicted and rendered, one each side of the ε minimum.
+    let want = runs(&predicted_lit);
+    let got = runs(&lit);
+    eprintln!("predicted strips {want:?}, rendered {got:?}");
+    assert!(want.len() >= 2 && got.len() >= 2, "{want:?} {got:?}");
+    assert!(want.iter().any(|r| r.1 < y_min as u32) && want.iter().any(|r| r.0 > y_min as u32));
+    // Each predicted strip lies inside one rendered strip (a rendered strip reaches a little
+    // further: it includes the limbs, 0.8–1.0 of the radius, that the prediction leaves out).
+    for w in &want {
+        assert!(
+            got.iter().any(|g| g.0 <= w.0 && w.1 <= g.1),
+            "predicted strip {w:?} not inside one rendered strip: {got:?}"
+        );
+    }
+    // And they are separated by sky without sun: rows between them with ε below the disc.
+    let gap: Vec<u32> = (want[0].1 + 1..want[1].0)
+        .filter(|&y| !lit[y as usize])
+        .collect();
+    assert!(gap.len() >= 3, "gap rows {gap:?}");
+}
+
 /// Pixels that differ by more than `threshold` (any channel), and pixels of `film` on an edge
 /// (differing by more than `threshold` from a vertical neighbour).
 fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
