@@ -247,8 +247,13 @@ impl ResolvedPipeline {
             if formats.is_empty() {
                 return Err(invalid(format!("{at}: formats is empty")));
             }
-            if job.spp == Some(0) {
-                return Err(invalid(format!("{at}: spp must be at least 1")));
+            if let Some(spp) = job.spp
+                && crate::scene::samples_per_pixel_root(spp).is_none()
+            {
+                return Err(invalid(format!(
+                    "{at}: spp must be a square number (1, 4, 9, 16, …, {}), got {spp}",
+                    crate::scene::MAX_SAMPLES_PER_PIXEL
+                )));
             }
             renders.push(RenderJob {
                 name,
@@ -417,6 +422,8 @@ distances_m = [1000.0]
                 "unknown format",
             ),
             ("[[render]]\nscene = \"a.toml\"\nspp = 0\n", "spp"),
+            ("[[render]]\nscene = \"a.toml\"\nspp = 3\n", "square"),
+            ("[[render]]\nscene = \"a.toml\"\nspp = 4096\n", "square"),
             (
                 "name = \"../x\"\n[[render]]\nscene = \"a.toml\"\n",
                 "plain file name",

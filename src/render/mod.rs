@@ -59,8 +59,9 @@ impl Default for RenderOptions {
 /// Rendering failed before it started (bad options).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RenderError {
-    /// Samples per pixel must be a square number.
-    #[error("samples per pixel must be a square number (1, 4, 9, 16, …), got {0}")]
+    /// Samples per pixel must be a square number from 1 to
+    /// [`MAX_SAMPLES_PER_PIXEL`](crate::scene::MAX_SAMPLES_PER_PIXEL).
+    #[error("samples per pixel must be a square number (1, 4, 9, 16, …, 1024), got {0}")]
     SamplesPerPixel(u32),
     /// The tolerance must be finite and > 0.
     #[error("fan tolerance must be > 0 pixels, got {0}")]

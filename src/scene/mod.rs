@@ -297,10 +297,18 @@ impl Checker<'_> {
     }
 }
 
-/// Check that `spp` is a square number ≥ 1 and return its root.
+/// Largest number of samples per pixel (32 × 32). Without a bound a mistyped `--spp` (any
+/// square up to 65535²) would keep the machine busy for days; the per-sample jitter hash also
+/// keeps the sample index in 16 bits.
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 1024;
+
+/// Check that `spp` is a square number from 1 to [`MAX_SAMPLES_PER_PIXEL`] and return its root.
 pub fn samples_per_pixel_root(spp: u32) -> Option<u32> {
+    if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&spp) {
+        return None;
+    }
     let n = (spp as f64).sqrt().round() as u32;
-    (spp >= 1 && n * n == spp).then_some(n)
+    (n * n == spp).then_some(n)
 }
 
 impl Scene {
@@ -336,7 +344,9 @@ impl Scene {
         if samples_per_pixel_root(spp).is_none() {
             return Err(c.invalid(
                 "camera.samples_per_pixel",
-                format!("must be a square number (1, 4, 9, 16, …), got {spp}"),
+                format!(
+                    "must be a square number (1, 4, 9, 16, …, {MAX_SAMPLES_PER_PIXEL}), got {spp}"
+                ),
             ));
         }
         for (key, v) in [("camera.width", rc.width), ("camera.height", rc.height)] {
@@ -652,6 +662,19 @@ mod tests {
                 .to_string()
                 .contains("sun.elevation_deg")
         );
+    }
+
+    #[test]
+    fn samples_per_pixel_are_bounded_squares() {
+        for n in 1..=32u32 {
+            assert_eq!(samples_per_pixel_root(n * n), Some(n));
+        }
+        for spp in [0, 2, 3, 5, 1023, 1025, 33 * 33, 65_535 * 65_535, u32::MAX] {
+            assert_eq!(samples_per_pixel_root(spp), None, "{spp}");
+        }
+        let text = format!("{MINIMAL}samples_per_pixel = 4096\n");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("camera.samples_per_pixel"), "{err}");
     }
 
     #[test]
