@@ -135,5 +135,17 @@ pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Fil
         Some(load_atmosphere(&source, &atmosphere_options)?)
     };
     let tracer = prepare_tracer(scene, atmosphere.as_ref().map(|a| &a.refractive), options)?;
-    Ok(render_scene(scene, tracer.as_ref(), options)?)
+    let film = render_scene(scene, tracer.as_ref(), options)?;
+    if film.stats.non_finite_samples > 0 {
+        // Never silent, even with --quiet: these pixels are not what the physics says.
+        eprintln!(
+            "warning: {}: {} sample(s) had non-finite radiance and were shaded as horizon sky",
+            scene
+                .source_path
+                .as_deref()
+                .map_or_else(|| "scene".into(), |p| p.display().to_string()),
+            film.stats.non_finite_samples
+        );
+    }
+    Ok(film)
 }
