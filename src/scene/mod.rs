@@ -409,13 +409,17 @@ impl Scene {
         };
         let atmosphere = AtmosphereSettings {
             source,
-            wavelength_nm: c.range(
-                "atmosphere.wavelength_nm",
-                ra.wavelength_nm.unwrap_or(550.0),
-                300.0,
-                1100.0,
-                "300…1100 nm",
-            )?,
+            // The refractive-index model's range (Ciddor 1996), the same as every other command.
+            wavelength_nm: {
+                let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+                c.range(
+                    "atmosphere.wavelength_nm",
+                    ra.wavelength_nm.unwrap_or(550.0),
+                    lo,
+                    hi,
+                    &format!("{lo}…{hi} nm"),
+                )?
+            },
             straight: ra.straight,
             smooth_m: ra
                 .smooth_m
@@ -662,6 +666,26 @@ mod tests {
                 .to_string()
                 .contains("sun.elevation_deg")
         );
+    }
+
+    #[test]
+    fn wavelength_range_is_the_refractive_index_models() {
+        // Ciddor (1996) holds for 300–1690 nm; the scene used to stop at 1100 nm while `profile`
+        // and `trace` accept up to 1700 nm for the same atmosphere.
+        let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+        for (wl, ok) in [
+            (lo, true),
+            (1500.0, true),
+            (hi, true),
+            (hi + 1.0, false),
+            (2000.0, false),
+        ] {
+            let text = format!("{MINIMAL}[atmosphere]\nwavelength_nm = {wl}\n");
+            match parse(&text) {
+                Ok(s) => assert!(ok && s.atmosphere.wavelength_nm == wl, "{wl}"),
+                Err(e) => assert!(!ok && e.to_string().contains("wavelength_nm"), "{wl}: {e}"),
+            }
+        }
     }
 
     #[test]
