@@ -158,7 +158,8 @@ pub struct Scene {
     pub cards: Vec<Card>,
     /// The sun, if the scene has one.
     pub sun: Option<Sun>,
-    /// sha256 (hex) of the scene file content, the resolved parameters and the card images.
+    /// sha256 (hex) of the scene file content, the resolved parameters, the atmosphere file's
+    /// content (sounding or synthetic) and the card images.
     #[serde(skip)]
     pub hash_hex: String,
 }
@@ -602,6 +603,17 @@ impl Scene {
         };
         view.source_path = None;
         h.update(serde_json::to_vec(&view).unwrap_or_default());
+        // The atmosphere file enters by content too: editing a layer changes the image, so it
+        // must change the hash. An unreadable file (the render will fail to load it anyway)
+        // is marked as such.
+        if let AtmosphereSpec::Sounding(p) | AtmosphereSpec::Synthetic(p) = &self.atmosphere.source
+        {
+            h.update(b"\0atmosphere\0");
+            match std::fs::read(p) {
+                Ok(bytes) => h.update(bytes),
+                Err(_) => h.update(b"unreadable"),
+            }
+        }
         for card in &self.cards {
             h.update(b"\0");
             h.update(card.texture.width.to_le_bytes());
@@ -732,6 +744,23 @@ mod tests {
         let a = Scene::from_toml_str(&text, Path::new("/one"), Path::new("a.toml")).unwrap();
         let b = Scene::from_toml_str(&text, Path::new("two/three"), Path::new("b.toml")).unwrap();
         assert_eq!(a.hash_hex, b.hash_hex);
+    }
+
+    #[test]
+    fn hash_follows_the_atmosphere_file_content_not_its_folder() {
+        let text = format!("{MINIMAL}[atmosphere]\nsynthetic = \"atm.toml\"\n");
+        let hash_in = |dir: &Path, atmosphere: &str| {
+            std::fs::write(dir.join("atm.toml"), atmosphere).unwrap();
+            Scene::from_toml_str(&text, dir, Path::new("s.toml"))
+                .unwrap()
+                .hash_hex
+        };
+        let (one, two) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let a = hash_in(one.path(), "surface_temperature_c = 0.0\n");
+        let b = hash_in(one.path(), "surface_temperature_c = 5.0\n");
+        let c = hash_in(two.path(), "surface_temperature_c = 0.0\n");
+        assert_ne!(a, b, "editing the atmosphere must change the scene hash");
+        assert_eq!(a, c, "the same files in another folder give the same hash");
     }
 
     #[test]
