@@ -130,7 +130,7 @@ pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Fil
         let atmosphere_options = AtmosphereOptions {
             smooth_m: scene.atmosphere.smooth_m.unwrap_or(defaults.smooth_m),
             wavelength_nm: scene.atmosphere.wavelength_nm,
-            igra2_time: None,
+            igra2_time: scene.atmosphere.igra2_time.clone(),
         };
         Some(load_atmosphere(&source, &atmosphere_options)?)
     };

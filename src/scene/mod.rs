@@ -19,6 +19,7 @@
 //! wavelength_nm = 550.0
 //! straight = false           # true: n ≡ 1 (straight rays)
 //! smooth_m = 0.0             # optional smoothing length for soundings
+//! igra2_time = "2024-01-15 12"   # optional: which sounding of a multi-sounding IGRA2 file
 //!
 //! [earth]
 //! radius_m = 6371000.0
@@ -137,6 +138,8 @@ pub struct AtmosphereSettings {
     pub straight: bool,
     /// Optional smoothing length for soundings (m).
     pub smooth_m: Option<f64>,
+    /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`, UTC); `None`: the first.
+    pub igra2_time: Option<String>,
 }
 
 /// A validated scene in SI units.
@@ -210,6 +213,7 @@ struct RawAtmosphere {
     #[serde(default)]
     straight: bool,
     smooth_m: Option<f64>,
+    igra2_time: Option<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -408,6 +412,16 @@ impl Scene {
                 ));
             }
         };
+        let igra2_time = match (&ra.igra2_time, &source) {
+            (None, _) => None,
+            (Some(t), AtmosphereSpec::Sounding(_)) => Some(t.clone()),
+            (Some(_), _) => {
+                return Err(c.invalid(
+                    "atmosphere.igra2_time",
+                    "only applies to a `sounding` (an IGRA2 file)".into(),
+                ));
+            }
+        };
         let atmosphere = AtmosphereSettings {
             source,
             // The refractive-index model's range (Ciddor 1996), the same as every other command.
@@ -426,6 +440,7 @@ impl Scene {
                 .smooth_m
                 .map(|s| c.range("atmosphere.smooth_m", s, 0.0, 10_000.0, "0…10000 m"))
                 .transpose()?,
+            igra2_time,
         };
 
         let earth_radius_m = c.positive(
@@ -761,6 +776,20 @@ mod tests {
         let c = hash_in(two.path(), "surface_temperature_c = 0.0\n");
         assert_ne!(a, b, "editing the atmosphere must change the scene hash");
         assert_eq!(a, c, "the same files in another folder give the same hash");
+    }
+
+    #[test]
+    fn igra2_time_only_for_soundings() {
+        let text = format!(
+            "{MINIMAL}[atmosphere]\nsounding = \"a.txt\"\nigra2_time = \"2010-06-01 12\"\n"
+        );
+        let s = parse(&text).unwrap();
+        assert_eq!(s.atmosphere.igra2_time.as_deref(), Some("2010-06-01 12"));
+        let text = format!(
+            "{MINIMAL}[atmosphere]\nsynthetic = \"a.toml\"\nigra2_time = \"2010-06-01 12\"\n"
+        );
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("atmosphere.igra2_time"), "{err}");
     }
 
     #[test]
