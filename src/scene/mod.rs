@@ -509,6 +509,32 @@ impl Scene {
         for (i, rc) in raw.cards.iter().enumerate() {
             let key = |k: &str| format!("cards[{i}].{k}");
             let image_path = resolve(&rc.image);
+            // Numbers first (cheap, and the error names the key), then the image.
+            // Ground distances beyond half the circumference (πR) do not exist on the sphere
+            // (the card would be nearer the other way round).
+            let distance_m = c.positive(
+                &key("distance_m"),
+                rc.distance_m,
+                MAX_CARD_DISTANCE_M.min(std::f64::consts::PI * earth_radius_m),
+            )?;
+            let azimuth_rad = c
+                .range(
+                    &key("azimuth_deg"),
+                    rc.azimuth_deg,
+                    -360.0,
+                    360.0,
+                    "−360…360°",
+                )?
+                .to_radians();
+            let width_m = c.positive(&key("width_m"), rc.width_m, 100_000.0)?;
+            let height_m = c.positive(&key("height_m"), rc.height_m, 100_000.0)?;
+            let base_m = c.range(
+                &key("base_m"),
+                rc.base_m,
+                -1_000.0,
+                100_000.0,
+                "−1000…100000 m",
+            )?;
             let texture =
                 Texture::from_file(&image_path).map_err(|source| SceneError::Texture {
                     path: name.to_path_buf(),
@@ -516,25 +542,11 @@ impl Scene {
                 })?;
             cards.push(Card {
                 image_path,
-                distance_m: c.positive(&key("distance_m"), rc.distance_m, MAX_CARD_DISTANCE_M)?,
-                azimuth_rad: c
-                    .range(
-                        &key("azimuth_deg"),
-                        rc.azimuth_deg,
-                        -360.0,
-                        360.0,
-                        "−360…360°",
-                    )?
-                    .to_radians(),
-                width_m: c.positive(&key("width_m"), rc.width_m, 100_000.0)?,
-                height_m: c.positive(&key("height_m"), rc.height_m, 100_000.0)?,
-                base_m: c.range(
-                    &key("base_m"),
-                    rc.base_m,
-                    -1_000.0,
-                    100_000.0,
-                    "−1000…100000 m",
-                )?,
+                distance_m,
+                azimuth_rad,
+                width_m,
+                height_m,
+                base_m,
                 texture: Arc::new(texture),
             });
         }
@@ -790,6 +802,17 @@ mod tests {
         );
         let err = parse(&text).unwrap_err().to_string();
         assert!(err.contains("atmosphere.igra2_time"), "{err}");
+    }
+
+    #[test]
+    fn card_distance_stays_within_half_the_circumference() {
+        // The distance check comes before the image is read, so no card file is needed.
+        let text = format!(
+            "{MINIMAL}[earth]\nradius_m = 1000.0\n[[cards]]\nimage = \"nope.png\"\n\
+             distance_m = 26000\nwidth_m = 10\nheight_m = 5\n"
+        );
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("cards[0].distance_m"), "{err}");
     }
 
     #[test]
