@@ -98,6 +98,9 @@ pub struct Film {
 
 impl Film {
     /// Pixel at column `x`, row `y`.
+    ///
+    /// # Panics
+    /// If (`x`, `y`) is outside the film.
     pub fn pixel(&self, x: u32, y: u32) -> [f32; 4] {
         self.pixels[(y * self.width + x) as usize]
     }
