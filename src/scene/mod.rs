@@ -6,13 +6,13 @@
 //!
 //! ```toml
 //! [camera]
-//! height_m = 10.0            # above the surface
+//! height_m = 10.0            # above the surface; rendering needs it below the 40 km top
 //! heading_deg = 0.0          # azimuth of the optical axis, clockwise from north
 //! pitch_deg = 0.0            # elevation of the optical axis
 //! hfov_deg = 1.0             # horizontal field of view
 //! width = 400                # pixels
 //! height = 200
-//! samples_per_pixel = 4      # a square number: n×n stratified jitter
+//! samples_per_pixel = 4      # a square number ≤ 1024: n×n stratified jitter
 //!
 //! [atmosphere]               # exactly one of sounding / synthetic / standard (default us1976)
 //! synthetic = "../superior_mirage.toml"   # or sounding = "x.csv", or standard = "us1976"
