@@ -707,3 +707,52 @@ fn render_scene_chooses_the_igra2_sounding_and_refuses_a_camera_above_the_atmosp
     let r = fails(&["render", high.to_str().unwrap(), "-q", "-o", out]);
     assert!(r.stderr.contains("90000"), "{}", r.stderr);
 }
+
+#[test]
+fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
+    let raw = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+    ));
+    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = |name: &str, time: &str| {
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "[[profile]]\natmosphere = {raw:?}\nname = \"p\"\nigra2_time = \"{time}\"\n\
+                 [[trace]]\natmosphere = {raw:?}\nname = \"t\"\nigra2_time = \"{time}\"\n\
+                 observer_height_m = 10.0\nelevation_deg = \"-0.2:0.2:0.1\"\n\
+                 distances_m = [1000.0]\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    // A time the file does not hold fails, naming the ones it holds (the job's choice reaches
+    // the reader; before, pipelines always took the first sounding).
+    let bad = pipeline("bad", "2010-06-03 00");
+    let out = dir.path().join("out");
+    let r = fails(&[
+        "pipeline",
+        "run",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
+    // The 12 UTC sounding: its surface pressure, 1008.40 hPa in the raw file (00 UTC: 1009.80).
+    let good = pipeline("good", "2010-06-01 12");
+    ok(&[
+        "pipeline",
+        "run",
+        good.to_str().unwrap(),
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let layers = json_file(&out.join("p").join("layers.json"));
+    let p = layers["surface"]["pressure_hpa"].as_f64().unwrap();
+    assert!((p - 1008.40).abs() < 1e-6, "{p}");
+}
