@@ -132,7 +132,16 @@ pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Fil
             wavelength_nm: scene.atmosphere.wavelength_nm,
             igra2_time: scene.atmosphere.igra2_time.clone(),
         };
-        Some(load_atmosphere(&source, &atmosphere_options)?)
+        let loaded = load_atmosphere(&source, &atmosphere_options)?;
+        if !options.quiet
+            && let Some(sounding) = &loaded.sounding
+        {
+            // The same notes `profile` prints (skipped rows, suspect steps, ...).
+            for w in &sounding.warnings {
+                eprintln!("Ingest note: {w}");
+            }
+        }
+        Some(loaded)
     };
     let tracer = prepare_tracer(scene, atmosphere.as_ref().map(|a| &a.refractive), options)?;
     let film = render_scene(scene, tracer.as_ref(), options)?;
