@@ -13,7 +13,9 @@ pub mod report;
 pub mod transfer;
 
 pub use plot::trace_plot_png;
-pub use report::{RayReport, TraceReport, TraceRequest, trace_report};
+pub use report::{
+    DEFAULT_TRACE_TRAP_DISTANCE_M, RayReport, TraceReport, TraceRequest, trace_report,
+};
 pub use transfer::{Image, Reach, TransferCurve, apparent_horizon, find_images};
 
 /// Why an analysis could not be done.

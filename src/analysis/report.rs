@@ -37,6 +37,12 @@ pub struct TraceRequest {
     pub tracer: TracerConfig,
 }
 
+/// Default ground distance (m) at which a ray still in the air counts as trapped in a trace
+/// report. (The renderer uses its own, longer limit,
+/// [`render::traced::DEFAULT_TRAP_DISTANCE_M`](crate::render::traced::DEFAULT_TRAP_DISTANCE_M),
+/// because a ducted Novaya Zemlya sun ray must be followed until it escapes.)
+pub const DEFAULT_TRACE_TRAP_DISTANCE_M: f64 = 1_000_000.0;
+
 impl Default for TraceRequest {
     fn default() -> Self {
         TraceRequest {
@@ -47,7 +53,7 @@ impl Default for TraceRequest {
             distances_m: vec![10_000.0, 20_000.0, 30_000.0],
             target_heights_m: vec![20.0],
             wavelength_nm: 550.0,
-            trap_distance_m: 1_000_000.0,
+            trap_distance_m: DEFAULT_TRACE_TRAP_DISTANCE_M,
             tracer: TracerConfig::default(),
         }
     }

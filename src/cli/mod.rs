@@ -1,6 +1,7 @@
 //! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
-//! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis) and
-//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three). Errors go back to `main` as one `anyhow` chain.
+//! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis),
+//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three). Errors go back to
+//! `main` as one `anyhow` chain.
 
 pub mod pipeline;
 pub mod profile;

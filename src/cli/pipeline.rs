@@ -57,19 +57,23 @@ pub fn run(args: PipelineArgs, quiet: bool) -> anyhow::Result<()> {
     }
 }
 
-fn atmosphere_options(wavelength_nm: Option<f64>, smooth_m: Option<f64>) -> AtmosphereOptions {
+fn atmosphere_options(
+    wavelength_nm: Option<f64>,
+    smooth_m: Option<f64>,
+    igra2_time: Option<&str>,
+) -> AtmosphereOptions {
     let d = AtmosphereOptions::default();
     AtmosphereOptions {
         smooth_m: smooth_m.unwrap_or(d.smooth_m),
         wavelength_nm: wavelength_nm.unwrap_or(d.wavelength_nm),
-        igra2_time: None,
+        igra2_time: igra2_time.map(str::to_string),
     }
 }
 
 fn profile_job(job: &ProfileJob, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let options = ProfileOptions {
         source: AtmosphereSource::parse(&job.atmosphere),
-        atmosphere: atmosphere_options(job.wavelength_nm, job.smooth_m),
+        atmosphere: atmosphere_options(job.wavelength_nm, job.smooth_m, job.igra2_time.as_deref()),
         plot_top_agl_m: DEFAULT_PLOT_TOP_M,
         layers_top_agl_m: DEFAULT_LAYERS_TOP_M,
     };
@@ -87,7 +91,7 @@ fn trace_options(job: &TraceJob) -> anyhow::Result<TraceOptions> {
     };
     TraceOptions::new(
         AtmosphereSource::parse(&job.atmosphere),
-        atmosphere_options(job.wavelength_nm, job.smooth_m),
+        atmosphere_options(job.wavelength_nm, job.smooth_m, job.igra2_time.as_deref()),
         job.observer_height_m,
         &job.elevation_deg,
         job.distances_m.clone(),

@@ -130,10 +130,31 @@ pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Fil
         let atmosphere_options = AtmosphereOptions {
             smooth_m: scene.atmosphere.smooth_m.unwrap_or(defaults.smooth_m),
             wavelength_nm: scene.atmosphere.wavelength_nm,
-            igra2_time: None,
+            igra2_time: scene.atmosphere.igra2_time.clone(),
         };
-        Some(load_atmosphere(&source, &atmosphere_options)?)
+        let loaded = load_atmosphere(&source, &atmosphere_options)?;
+        if !options.quiet
+            && let Some(sounding) = &loaded.sounding
+        {
+            // The same notes `profile` prints (skipped rows, suspect steps, ...).
+            for w in &sounding.warnings {
+                eprintln!("Ingest note: {w}");
+            }
+        }
+        Some(loaded)
     };
     let tracer = prepare_tracer(scene, atmosphere.as_ref().map(|a| &a.refractive), options)?;
-    Ok(render_scene(scene, tracer.as_ref(), options)?)
+    let film = render_scene(scene, tracer.as_ref(), options)?;
+    if film.stats.non_finite_samples > 0 {
+        // Never silent, even with --quiet: these pixels are not what the physics says.
+        eprintln!(
+            "warning: {}: {} sample(s) had non-finite radiance and were shaded as horizon sky",
+            scene
+                .source_path
+                .as_deref()
+                .map_or_else(|| "scene".into(), |p| p.display().to_string()),
+            film.stats.non_finite_samples
+        );
+    }
+    Ok(film)
 }

@@ -16,8 +16,8 @@ use ghostship::tracer::{StratifiedIndex, TracerConfig};
 /// Most rays a fan may have.
 pub const MAX_RAYS: usize = 100_000;
 
-/// Default distance beyond which rays still in the air count as trapped (m).
-pub const DEFAULT_TRAP_DISTANCE_M: f64 = 1_000_000.0;
+/// Default distance beyond which rays still in the air count as trapped (m): the library's.
+pub const DEFAULT_TRAP_DISTANCE_M: f64 = ghostship::analysis::DEFAULT_TRACE_TRAP_DISTANCE_M;
 
 /// How the report is printed on stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

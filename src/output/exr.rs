@@ -68,8 +68,16 @@ impl ExrMetadata {
 }
 
 /// Encode `film` as an EXR file (bytes).
+///
+/// A film whose pixel count is not width × height (its fields are public) is an error, not a
+/// panic.
 pub fn encode_exr(film: &Film, meta: &ExrMetadata) -> Result<Vec<u8>, ExrError> {
     let (w, h) = (film.width as usize, film.height as usize);
+    if film.pixels.len() != w * h || w == 0 || h == 0 {
+        return Err(ExrError(exr::error::Error::Invalid(
+            "film pixel count does not match width × height (or the film is empty)".into(),
+        )));
+    }
     let mut attrs = LayerAttributes::named("rgba");
     attrs.software_name = Some(text(concat!("ghostship ", env!("CARGO_PKG_VERSION"))));
     attrs.comments = Some(text(&format!("scene sha256 {}", meta.scene_hash)));

@@ -110,4 +110,32 @@ mod tests {
         let err = write_film(&film, &dir.path().join("x.tif"), &meta, 1.0).unwrap_err();
         assert!(err.to_string().contains("x.tif"));
     }
+
+    #[test]
+    fn a_film_with_the_wrong_pixel_count_is_an_error_not_a_panic() {
+        // Film's fields are public: 3×2 declared, 5 pixels given (and an empty 0×0 film).
+        let short = Film {
+            width: 3,
+            height: 2,
+            pixels: vec![[0.5, 0.25, 0.125, 1.0]; 5],
+            stats: Default::default(),
+        };
+        let empty = Film {
+            width: 0,
+            height: 0,
+            pixels: Vec::new(),
+            stats: Default::default(),
+        };
+        let meta = ExrMetadata::default();
+        for film in [&short, &empty] {
+            for format in [FilmFormat::Exr, FilmFormat::Png] {
+                assert!(
+                    encode_film(film, format, &meta, 1.0).is_err(),
+                    "{format:?} {}x{}",
+                    film.width,
+                    film.height
+                );
+            }
+        }
+    }
 }

@@ -1,5 +1,6 @@
-//! Shared plumbing for the plots (`profile.png`, the trace fan and transfer curves): the vendored
-//! font, registered with plotters once per process, and RGB buffer → PNG bytes.
+//! Output — shared plumbing for the plots (`profile.png`, the trace fan and transfer curves).
+//! In: nothing (the vendored font) or an RGB8 buffer. Out: the font registered with plotters once
+//! per process, and PNG bytes.
 
 use std::sync::OnceLock;
 

@@ -49,7 +49,17 @@ pub fn desaturate_highlight(rgb: [f64; 3], exposure: f64) -> [f64; 3] {
 }
 
 /// Encode `film` as an 8-bit sRGB PNG (bytes) with the given `exposure`.
+///
+/// A film whose pixel count is not width × height (its fields are public) is an error, not a
+/// panic.
 pub fn encode_png(film: &Film, exposure: f64) -> Result<Vec<u8>, image::ImageError> {
+    if film.pixels.len() != film.width as usize * film.height as usize {
+        return Err(image::ImageError::Parameter(
+            image::error::ParameterError::from_kind(
+                image::error::ParameterErrorKind::DimensionMismatch,
+            ),
+        ));
+    }
     let mut rgb = Vec::with_capacity(film.pixels.len() * 3);
     for p in &film.pixels {
         for c in desaturate_highlight([p[0], p[1], p[2]].map(f64::from), exposure) {

@@ -11,6 +11,8 @@
 //! formats = ["png", "exr"]            # optional; default: ["png", "exr"]
 //! [[profile]]
 //! atmosphere = "../data/superior_mirage.toml"
+//! # optional on profile and trace jobs: wavelength_nm, smooth_m, and igra2_time = "YYYY-MM-DD HH"
+//! # (which sounding of a multi-sounding IGRA2 file; default the first)
 //! [[trace]]
 //! atmosphere = "../data/superior_mirage.toml"
 //! observer_height_m = 10.0
@@ -83,6 +85,7 @@ struct ProfileJobFile {
     name: Option<String>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    igra2_time: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -97,6 +100,7 @@ struct TraceJobFile {
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
     tolerance_m: Option<f64>,
+    igra2_time: Option<String>,
 }
 
 /// Image file formats a render job can write.
@@ -135,6 +139,8 @@ pub struct ProfileJob {
     pub wavelength_nm: Option<f64>,
     /// Smoothing scale (m).
     pub smooth_m: Option<f64>,
+    /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
+    pub igra2_time: Option<String>,
 }
 
 /// A trace job: a transfer-characteristic fan, written as `<name>.json` and `<name>.png`.
@@ -158,6 +164,8 @@ pub struct TraceJob {
     pub smooth_m: Option<f64>,
     /// Integration tolerance (m).
     pub tolerance_m: Option<f64>,
+    /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
+    pub igra2_time: Option<String>,
 }
 
 /// A validated pipeline with every path resolved.
@@ -247,8 +255,13 @@ impl ResolvedPipeline {
             if formats.is_empty() {
                 return Err(invalid(format!("{at}: formats is empty")));
             }
-            if job.spp == Some(0) {
-                return Err(invalid(format!("{at}: spp must be at least 1")));
+            if let Some(spp) = job.spp
+                && crate::scene::samples_per_pixel_root(spp).is_none()
+            {
+                return Err(invalid(format!(
+                    "{at}: spp must be a square number (1, 4, 9, 16, …, {}), got {spp}",
+                    crate::scene::MAX_SAMPLES_PER_PIXEL
+                )));
             }
             renders.push(RenderJob {
                 name,
@@ -269,6 +282,7 @@ impl ResolvedPipeline {
                 atmosphere: resolve_atmosphere(&job.atmosphere),
                 wavelength_nm: job.wavelength_nm,
                 smooth_m: job.smooth_m,
+                igra2_time: job.igra2_time,
             });
         }
 
@@ -306,6 +320,7 @@ impl ResolvedPipeline {
                 wavelength_nm: job.wavelength_nm,
                 smooth_m: job.smooth_m,
                 tolerance_m: job.tolerance_m,
+                igra2_time: job.igra2_time,
             });
         }
 
@@ -417,6 +432,8 @@ distances_m = [1000.0]
                 "unknown format",
             ),
             ("[[render]]\nscene = \"a.toml\"\nspp = 0\n", "spp"),
+            ("[[render]]\nscene = \"a.toml\"\nspp = 3\n", "square"),
+            ("[[render]]\nscene = \"a.toml\"\nspp = 4096\n", "square"),
             (
                 "name = \"../x\"\n[[render]]\nscene = \"a.toml\"\n",
                 "plain file name",

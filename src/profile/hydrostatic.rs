@@ -10,13 +10,14 @@
 //! the Hermite storage reuses the `splines`-based cubic of `monotone.rs`.
 
 use super::monotone::MonotoneCubic;
-use crate::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, EPSILON_WATER_DRY, STANDARD_GRAVITY_M_S2};
+use crate::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
 
 /// g₀ / R_d (K m⁻¹).
 pub(crate) const G_OVER_R: f64 = STANDARD_GRAVITY_M_S2 / DRY_AIR_GAS_CONSTANT_J_KG_K;
 
-/// Virtual temperature (K) of moist air: T / (1 − (e/P)(1 − ε)). `e` is clamped to [0, P/2] so a
-/// bad input can never divide by zero.
+/// Virtual temperature (K) of moist air, T / (1 − (e/P)(1 − ε)) (the ingest stage's formula,
+/// [`crate::sounding::hypsometric::virtual_temperature_k`]), with `e` clamped to [0, P/2] so a bad
+/// input can never divide by zero.
 pub(crate) fn virtual_temperature_k(
     temperature_k: f64,
     vapour_pressure_pa: f64,
@@ -25,8 +26,8 @@ pub(crate) fn virtual_temperature_k(
     if pressure_pa.is_nan() || pressure_pa <= 0.0 {
         return temperature_k;
     }
-    let ratio = (vapour_pressure_pa / pressure_pa).clamp(0.0, 0.5);
-    temperature_k / (1.0 - ratio * (1.0 - EPSILON_WATER_DRY))
+    let e = vapour_pressure_pa.clamp(0.0, 0.5 * pressure_pa);
+    crate::sounding::hypsometric::virtual_temperature_k(temperature_k, Some(e), pressure_pa)
 }
 
 /// ln P at `h_to` from ln P at `h_from` by RK4 with steps no longer than `max_step_m` (either

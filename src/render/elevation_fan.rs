@@ -3,7 +3,8 @@
 //! elevation, refined where the transfer curve bends sharply, with O(1) lookup and interpolation.
 //!
 //! **Refinement and its error bound.** The fan starts with rays spaced two pixels (at the image
-//! centre) apart in elevation, and every interval is bisected at least once. An interval [a, b] between neighbouring rays is bisected — its
+//! centre) apart in elevation, and every interval is bisected at least once, so the finished fan
+//! is at most one pixel apart. An interval [a, b] between neighbouring rays is bisected — its
 //! midpoint m is traced — and it stays *open* (is bisected again in the next round) when any of:
 //!
 //! * the two ends and the midpoint do not end the same way (sea / sky / lost), or reach a card
@@ -25,9 +26,10 @@
 //! at folds and caustics (slope → 0, or changes of how rays end), the error is confined to
 //! intervals narrower than `tolerance_px` pixels. A feature of the transfer curve narrower than the
 //! base spacing that the midpoint test misses (a wiggle between two samples) can be missed: the
-//! base spacing is one pixel, so it is smaller than a pixel row. Pixel angle = 1/focal length:
+//! spacing after the first bisection is one pixel, so it is smaller than a pixel row. Pixel angle = 1/focal length:
 //! off-centre pixels subtend slightly less (cos² of the off-axis angle), so there the bound in
-//! pixels is larger by 1/cos² (1.07 at 15° off axis; 1.0003 in a 2° mirage frame).
+//! pixels is larger by 1/cos² (1.07 at 15° off axis; 1.0003 in a 2° mirage frame; but 4 at 60°,
+//! so very wide frames are sampled more coarsely than their edge pixels).
 
 use rayon::prelude::*;
 

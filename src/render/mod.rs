@@ -59,8 +59,9 @@ impl Default for RenderOptions {
 /// Rendering failed before it started (bad options).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RenderError {
-    /// Samples per pixel must be a square number.
-    #[error("samples per pixel must be a square number (1, 4, 9, 16, …), got {0}")]
+    /// Samples per pixel must be a square number from 1 to
+    /// [`MAX_SAMPLES_PER_PIXEL`](crate::scene::MAX_SAMPLES_PER_PIXEL).
+    #[error("samples per pixel must be a square number (1, 4, 9, 16, …, 1024), got {0}")]
     SamplesPerPixel(u32),
     /// The tolerance must be finite and > 0.
     #[error("fan tolerance must be > 0 pixels, got {0}")]
@@ -97,6 +98,9 @@ pub struct Film {
 
 impl Film {
     /// Pixel at column `x`, row `y`.
+    ///
+    /// # Panics
+    /// If (`x`, `y`) is outside the film.
     pub fn pixel(&self, x: u32, y: u32) -> [f32; 4] {
         self.pixels[(y * self.width + x) as usize]
     }
@@ -231,20 +235,31 @@ fn unit_hash(key: u64) -> f64 {
     (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
+/// Directions (azimuth, elevation) through 257 points on each edge of the film (corners
+/// included): the frame's border, where both extremes of azimuth and elevation lie (apart from the
+/// zenith and nadir).
+fn border_directions(
+    frame: &CameraFrame,
+    width: u32,
+    height: u32,
+) -> impl Iterator<Item = (f64, f64)> + '_ {
+    let (w, h) = (width as f64, height as f64);
+    let steps = 256;
+    (0..=steps).flat_map(move |s| {
+        let t = s as f64 / steps as f64;
+        [(t * w, 0.0), (t * w, h), (0.0, t * h), (w, t * h)].map(|(x, y)| frame.direction(x, y))
+    })
+}
+
 /// The frame's range of apparent elevations (rad), from its border (plus the zenith or nadir when
 /// inside the frame), widened by one pixel.
 fn elevation_range(frame: &CameraFrame, width: u32, height: u32, pixel_rad: f64) -> (f64, f64) {
     let (w, h) = (width as f64, height as f64);
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
-    let steps = 256;
-    for s in 0..=steps {
-        let t = s as f64 / steps as f64;
-        for (x, y) in [(t * w, 0.0), (t * w, h), (0.0, t * h), (w, t * h)] {
-            let (_, e) = frame.direction(x, y);
-            lo = lo.min(e);
-            hi = hi.max(e);
-        }
+    for (_, e) in border_directions(frame, width, height) {
+        lo = lo.min(e);
+        hi = hi.max(e);
     }
     // An interior extreme exists only at the zenith or nadir: are they inside the frame?
     let inside = |p: Option<(f64, f64)>| {
@@ -266,21 +281,15 @@ fn elevation_range(frame: &CameraFrame, width: u32, height: u32, pixel_rad: f64)
 /// The frame's azimuth span relative to the heading (rad), or `None` if every azimuth is in view
 /// (the frame reaches near the zenith or nadir).
 fn azimuth_span(frame: &CameraFrame, width: u32, height: u32, heading: f64) -> Option<(f64, f64)> {
-    let (w, h) = (width as f64, height as f64);
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
-    let steps = 256;
-    for s in 0..=steps {
-        let t = s as f64 / steps as f64;
-        for (x, y) in [(t * w, 0.0), (t * w, h), (0.0, t * h), (w, t * h)] {
-            let (a, e) = frame.direction(x, y);
-            if e.abs() > 80f64.to_radians() {
-                return None;
-            }
-            let off = wrap_pi(a - heading);
-            lo = lo.min(off);
-            hi = hi.max(off);
+    for (a, e) in border_directions(frame, width, height) {
+        if e.abs() > 80f64.to_radians() {
+            return None;
         }
+        let off = wrap_pi(a - heading);
+        lo = lo.min(off);
+        hi = hi.max(off);
     }
     Some((lo, hi))
 }

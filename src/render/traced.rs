@@ -374,16 +374,27 @@ pub fn cards_top_m(scene: &Scene) -> f64 {
 /// * `scene.atmosphere.straight` → [`StraightRays`] (no atmosphere needed; `atmosphere` ignored);
 /// * otherwise, `options.exact` → [`ExactRays`] (3-D per sample), else [`CurvedRays`] (fan);
 ///   both through `atmosphere` with [`render_tracer_config`]`(scene.earth_radius_m)`.
+///
+/// The camera must be inside the traced atmosphere (below its top, 40 km for both back-ends):
+/// otherwise every curved ray would be refused by the tracer and shaded as the fallback horizon
+/// sky, a silently wrong frame, so it is an error ([`TracerError::ObserverOutside`]).
 pub fn prepare_tracer<'a>(
     scene: &Scene,
     atmosphere: Option<&'a RefractiveAtmosphere>,
     options: &RenderOptions,
 ) -> Result<Box<dyn RayTracer + 'a>, PrepareError> {
+    let config = render_tracer_config(scene.earth_radius_m);
+    let camera_height_m = scene.camera.height_m;
+    if !(camera_height_m >= 0.0 && camera_height_m < config.top_m) {
+        return Err(PrepareError::Tracer(TracerError::ObserverOutside {
+            height_m: camera_height_m,
+            top_m: config.top_m,
+        }));
+    }
     if scene.atmosphere.straight {
         return Ok(Box::new(StraightRays::new(scene.earth_radius_m)?));
     }
     let atmosphere = atmosphere.ok_or(PrepareError::MissingAtmosphere)?;
-    let config = render_tracer_config(scene.earth_radius_m);
     let top = cards_top_m(scene);
     if options.exact {
         Ok(Box::new(ExactRays::new(atmosphere, config, top)?))
@@ -427,6 +438,35 @@ mod tests {
             lo: 0.0,
             hi: 0.0,
         }
+    }
+
+    fn scene_with_camera_at(height_m: f64, straight: bool) -> Scene {
+        let text = format!(
+            "[camera]\nheight_m = {height_m}\nhfov_deg = 1.0\nwidth = 4\nheight = 2\n\
+             [atmosphere]\nstraight = {straight}\n"
+        );
+        let path = std::path::Path::new("camera_test.toml");
+        Scene::from_toml_str(&text, std::path::Path::new("."), path).expect("valid scene")
+    }
+
+    #[test]
+    fn camera_above_the_atmosphere_top_is_an_error_not_an_all_sky_frame() {
+        // The scene format accepts cameras up to 100 km, the tracers stop rays at 40 km: a camera
+        // at 90 km looking down used to get a frame of fallback horizon sky with no sea.
+        let top = render_tracer_config(EARTH_RADIUS_M).top_m;
+        for straight in [false, true] {
+            let scene = scene_with_camera_at(90_000.0, straight);
+            match prepare_tracer(&scene, None, &RenderOptions::default()) {
+                Err(PrepareError::Tracer(TracerError::ObserverOutside { height_m, top_m })) => {
+                    assert_eq!((height_m, top_m), (90_000.0, top));
+                }
+                Err(e) => panic!("straight = {straight}: wrong error {e}"),
+                Ok(_) => panic!("straight = {straight}: a camera at 90 km was accepted"),
+            }
+        }
+        // Just below the top it is fine (straight rays need no atmosphere).
+        let scene = scene_with_camera_at(top - 1.0, true);
+        assert!(prepare_tracer(&scene, None, &RenderOptions::default()).is_ok());
     }
 
     #[test]

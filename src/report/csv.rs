@@ -1,4 +1,6 @@
-//! `profile.csv`: the fitted air and the exact refractive index on a height grid.
+//! Stage 3 output (`profile` command) — `profile.csv`. In: a [`RefractiveAtmosphere`] (with its
+//! fitted air column) and a [`ProfileGrid`]. Out: CSV bytes: the fitted air and the exact
+//! refractive index on that height grid.
 
 use std::fmt::Write;
 

@@ -1,4 +1,6 @@
-//! `layers.json` and the readable summary: surface, inversions, ducts and refractive regimes.
+//! Stage 3 output (`profile` command) — `layers.json` and the readable summary. In: a
+//! [`LayersReport`] (surface air, inversions, ducts and refractive regimes of one atmosphere).
+//! Out: JSON bytes and summary text.
 
 use std::fmt::Write;
 

@@ -1,4 +1,6 @@
-//! `profile.png`: temperature and dn/dh against height, side by side.
+//! Stage 3 output (`profile` command) — `profile.png`. In: a [`ProfilePlot`] (the atmosphere,
+//! its measured levels and layers) and [`PlotOptions`]. Out: PNG bytes of temperature and dn/dh
+//! against height, side by side.
 //!
 //! Left panel: the measured levels as dots, the fitted T(h) as a line, inversion layers shaded.
 //! Right panel: dN/dh (N-units per km, i.e. dn/dh·10⁹ m) with the −1/R trapping line and the 0 line

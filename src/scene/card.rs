@@ -83,13 +83,18 @@ impl Texture {
     }
 
     /// Bilinear sample at texture coordinates (`u`, `v`) in [0, 1] (v = 0 at the top edge);
-    /// transparent outside.
+    /// transparent outside, and everywhere for an empty texture or one whose texel count is not
+    /// width × height (the fields are public).
     #[inline]
     pub fn sample(&self, u: f64, v: f64) -> [f32; 4] {
-        if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) || self.texels.is_empty() {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if !(0.0..=1.0).contains(&u)
+            || !(0.0..=1.0).contains(&v)
+            || self.texels.is_empty()
+            || self.texels.len() != w * h
+        {
             return [0.0; 4];
         }
-        let (w, h) = (self.width as usize, self.height as usize);
         let x = (u * w as f64 - 0.5).clamp(0.0, (w - 1) as f64);
         let y = (v * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);
         let (x0, y0) = (x as usize, y as usize);
@@ -150,5 +155,16 @@ mod tests {
         assert_eq!(tex.sample(0.5, 0.5), [0.5, 0.0, 0.0, 0.5]);
         assert_eq!(tex.sample(1.5, 0.5), [0.0; 4]);
         assert_eq!(tex.sample(0.5, -0.1), [0.0; 4]);
+    }
+
+    #[test]
+    fn inconsistent_texture_is_transparent_not_a_panic() {
+        // 2×2 declared, one texel given: sampling the bottom-right used to index out of bounds.
+        let tex = Texture {
+            width: 2,
+            height: 2,
+            texels: vec![[1.0; 4]],
+        };
+        assert_eq!(tex.sample(0.9, 0.9), [0.0; 4]);
     }
 }

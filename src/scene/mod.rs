@@ -6,19 +6,20 @@
 //!
 //! ```toml
 //! [camera]
-//! height_m = 10.0            # above the surface
+//! height_m = 10.0            # above the surface; rendering needs it below the 40 km top
 //! heading_deg = 0.0          # azimuth of the optical axis, clockwise from north
 //! pitch_deg = 0.0            # elevation of the optical axis
 //! hfov_deg = 1.0             # horizontal field of view
 //! width = 400                # pixels
 //! height = 200
-//! samples_per_pixel = 4      # a square number: n×n stratified jitter
+//! samples_per_pixel = 4      # a square number ≤ 1024: n×n stratified jitter
 //!
 //! [atmosphere]               # exactly one of sounding / synthetic / standard (default us1976)
 //! synthetic = "../superior_mirage.toml"   # or sounding = "x.csv", or standard = "us1976"
 //! wavelength_nm = 550.0
 //! straight = false           # true: n ≡ 1 (straight rays)
 //! smooth_m = 0.0             # optional smoothing length for soundings
+//! igra2_time = "2024-01-15 12"   # optional: which sounding of a multi-sounding IGRA2 file
 //!
 //! [earth]
 //! radius_m = 6371000.0
@@ -137,6 +138,8 @@ pub struct AtmosphereSettings {
     pub straight: bool,
     /// Optional smoothing length for soundings (m).
     pub smooth_m: Option<f64>,
+    /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`, UTC); `None`: the first.
+    pub igra2_time: Option<String>,
 }
 
 /// A validated scene in SI units.
@@ -158,7 +161,8 @@ pub struct Scene {
     pub cards: Vec<Card>,
     /// The sun, if the scene has one.
     pub sun: Option<Sun>,
-    /// sha256 (hex) of the scene file content, the resolved parameters and the card images.
+    /// sha256 (hex) of the scene file content, the resolved parameters, the atmosphere file's
+    /// content (sounding or synthetic) and the card images.
     #[serde(skip)]
     pub hash_hex: String,
 }
@@ -209,6 +213,7 @@ struct RawAtmosphere {
     #[serde(default)]
     straight: bool,
     smooth_m: Option<f64>,
+    igra2_time: Option<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -297,10 +302,18 @@ impl Checker<'_> {
     }
 }
 
-/// Check that `spp` is a square number ≥ 1 and return its root.
+/// Largest number of samples per pixel (32 × 32). Without a bound a mistyped `--spp` (any
+/// square up to 65535²) would keep the machine busy for days; the per-sample jitter hash also
+/// keeps the sample index in 16 bits.
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 1024;
+
+/// Check that `spp` is a square number from 1 to [`MAX_SAMPLES_PER_PIXEL`] and return its root.
 pub fn samples_per_pixel_root(spp: u32) -> Option<u32> {
+    if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&spp) {
+        return None;
+    }
     let n = (spp as f64).sqrt().round() as u32;
-    (spp >= 1 && n * n == spp).then_some(n)
+    (n * n == spp).then_some(n)
 }
 
 impl Scene {
@@ -336,7 +349,9 @@ impl Scene {
         if samples_per_pixel_root(spp).is_none() {
             return Err(c.invalid(
                 "camera.samples_per_pixel",
-                format!("must be a square number (1, 4, 9, 16, …), got {spp}"),
+                format!(
+                    "must be a square number (1, 4, 9, 16, …, {MAX_SAMPLES_PER_PIXEL}), got {spp}"
+                ),
             ));
         }
         for (key, v) in [("camera.width", rc.width), ("camera.height", rc.height)] {
@@ -397,20 +412,35 @@ impl Scene {
                 ));
             }
         };
+        let igra2_time = match (&ra.igra2_time, &source) {
+            (None, _) => None,
+            (Some(t), AtmosphereSpec::Sounding(_)) => Some(t.clone()),
+            (Some(_), _) => {
+                return Err(c.invalid(
+                    "atmosphere.igra2_time",
+                    "only applies to a `sounding` (an IGRA2 file)".into(),
+                ));
+            }
+        };
         let atmosphere = AtmosphereSettings {
             source,
-            wavelength_nm: c.range(
-                "atmosphere.wavelength_nm",
-                ra.wavelength_nm.unwrap_or(550.0),
-                300.0,
-                1100.0,
-                "300…1100 nm",
-            )?,
+            // The refractive-index model's range (Ciddor 1996), the same as every other command.
+            wavelength_nm: {
+                let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+                c.range(
+                    "atmosphere.wavelength_nm",
+                    ra.wavelength_nm.unwrap_or(550.0),
+                    lo,
+                    hi,
+                    &format!("{lo}…{hi} nm"),
+                )?
+            },
             straight: ra.straight,
             smooth_m: ra
                 .smooth_m
                 .map(|s| c.range("atmosphere.smooth_m", s, 0.0, 10_000.0, "0…10000 m"))
                 .transpose()?,
+            igra2_time,
         };
 
         let earth_radius_m = c.positive(
@@ -479,6 +509,32 @@ impl Scene {
         for (i, rc) in raw.cards.iter().enumerate() {
             let key = |k: &str| format!("cards[{i}].{k}");
             let image_path = resolve(&rc.image);
+            // Numbers first (cheap, and the error names the key), then the image.
+            // Ground distances beyond half the circumference (πR) do not exist on the sphere
+            // (the card would be nearer the other way round).
+            let distance_m = c.positive(
+                &key("distance_m"),
+                rc.distance_m,
+                MAX_CARD_DISTANCE_M.min(std::f64::consts::PI * earth_radius_m),
+            )?;
+            let azimuth_rad = c
+                .range(
+                    &key("azimuth_deg"),
+                    rc.azimuth_deg,
+                    -360.0,
+                    360.0,
+                    "−360…360°",
+                )?
+                .to_radians();
+            let width_m = c.positive(&key("width_m"), rc.width_m, 100_000.0)?;
+            let height_m = c.positive(&key("height_m"), rc.height_m, 100_000.0)?;
+            let base_m = c.range(
+                &key("base_m"),
+                rc.base_m,
+                -1_000.0,
+                100_000.0,
+                "−1000…100000 m",
+            )?;
             let texture =
                 Texture::from_file(&image_path).map_err(|source| SceneError::Texture {
                     path: name.to_path_buf(),
@@ -486,25 +542,11 @@ impl Scene {
                 })?;
             cards.push(Card {
                 image_path,
-                distance_m: c.positive(&key("distance_m"), rc.distance_m, MAX_CARD_DISTANCE_M)?,
-                azimuth_rad: c
-                    .range(
-                        &key("azimuth_deg"),
-                        rc.azimuth_deg,
-                        -360.0,
-                        360.0,
-                        "−360…360°",
-                    )?
-                    .to_radians(),
-                width_m: c.positive(&key("width_m"), rc.width_m, 100_000.0)?,
-                height_m: c.positive(&key("height_m"), rc.height_m, 100_000.0)?,
-                base_m: c.range(
-                    &key("base_m"),
-                    rc.base_m,
-                    -1_000.0,
-                    100_000.0,
-                    "−1000…100000 m",
-                )?,
+                distance_m,
+                azimuth_rad,
+                width_m,
+                height_m,
+                base_m,
                 texture: Arc::new(texture),
             });
         }
@@ -588,6 +630,17 @@ impl Scene {
         };
         view.source_path = None;
         h.update(serde_json::to_vec(&view).unwrap_or_default());
+        // The atmosphere file enters by content too: editing a layer changes the image, so it
+        // must change the hash. An unreadable file (the render will fail to load it anyway)
+        // is marked as such.
+        if let AtmosphereSpec::Sounding(p) | AtmosphereSpec::Synthetic(p) = &self.atmosphere.source
+        {
+            h.update(b"\0atmosphere\0");
+            match std::fs::read(p) {
+                Ok(bytes) => h.update(bytes),
+                Err(_) => h.update(b"unreadable"),
+            }
+        }
         for card in &self.cards {
             h.update(b"\0");
             h.update(card.texture.width.to_le_bytes());
@@ -655,6 +708,39 @@ mod tests {
     }
 
     #[test]
+    fn wavelength_range_is_the_refractive_index_models() {
+        // Ciddor (1996) holds for 300–1690 nm; the scene used to stop at 1100 nm while `profile`
+        // and `trace` accept up to 1700 nm for the same atmosphere.
+        let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+        for (wl, ok) in [
+            (lo, true),
+            (1500.0, true),
+            (hi, true),
+            (hi + 1.0, false),
+            (2000.0, false),
+        ] {
+            let text = format!("{MINIMAL}[atmosphere]\nwavelength_nm = {wl}\n");
+            match parse(&text) {
+                Ok(s) => assert!(ok && s.atmosphere.wavelength_nm == wl, "{wl}"),
+                Err(e) => assert!(!ok && e.to_string().contains("wavelength_nm"), "{wl}: {e}"),
+            }
+        }
+    }
+
+    #[test]
+    fn samples_per_pixel_are_bounded_squares() {
+        for n in 1..=32u32 {
+            assert_eq!(samples_per_pixel_root(n * n), Some(n));
+        }
+        for spp in [0, 2, 3, 5, 1023, 1025, 33 * 33, 65_535 * 65_535, u32::MAX] {
+            assert_eq!(samples_per_pixel_root(spp), None, "{spp}");
+        }
+        let text = format!("{MINIMAL}samples_per_pixel = 4096\n");
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("camera.samples_per_pixel"), "{err}");
+    }
+
+    #[test]
     fn atmosphere_paths_are_relative_to_the_scene() {
         let text =
             format!("{MINIMAL}[atmosphere]\nsynthetic = \"../fata.toml\"\nstraight = true\n");
@@ -685,6 +771,48 @@ mod tests {
         let a = Scene::from_toml_str(&text, Path::new("/one"), Path::new("a.toml")).unwrap();
         let b = Scene::from_toml_str(&text, Path::new("two/three"), Path::new("b.toml")).unwrap();
         assert_eq!(a.hash_hex, b.hash_hex);
+    }
+
+    #[test]
+    fn hash_follows_the_atmosphere_file_content_not_its_folder() {
+        let text = format!("{MINIMAL}[atmosphere]\nsynthetic = \"atm.toml\"\n");
+        let hash_in = |dir: &Path, atmosphere: &str| {
+            std::fs::write(dir.join("atm.toml"), atmosphere).unwrap();
+            Scene::from_toml_str(&text, dir, Path::new("s.toml"))
+                .unwrap()
+                .hash_hex
+        };
+        let (one, two) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let a = hash_in(one.path(), "surface_temperature_c = 0.0\n");
+        let b = hash_in(one.path(), "surface_temperature_c = 5.0\n");
+        let c = hash_in(two.path(), "surface_temperature_c = 0.0\n");
+        assert_ne!(a, b, "editing the atmosphere must change the scene hash");
+        assert_eq!(a, c, "the same files in another folder give the same hash");
+    }
+
+    #[test]
+    fn igra2_time_only_for_soundings() {
+        let text = format!(
+            "{MINIMAL}[atmosphere]\nsounding = \"a.txt\"\nigra2_time = \"2010-06-01 12\"\n"
+        );
+        let s = parse(&text).unwrap();
+        assert_eq!(s.atmosphere.igra2_time.as_deref(), Some("2010-06-01 12"));
+        let text = format!(
+            "{MINIMAL}[atmosphere]\nsynthetic = \"a.toml\"\nigra2_time = \"2010-06-01 12\"\n"
+        );
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("atmosphere.igra2_time"), "{err}");
+    }
+
+    #[test]
+    fn card_distance_stays_within_half_the_circumference() {
+        // The distance check comes before the image is read, so no card file is needed.
+        let text = format!(
+            "{MINIMAL}[earth]\nradius_m = 1000.0\n[[cards]]\nimage = \"nope.png\"\n\
+             distance_m = 26000\nwidth_m = 10\nheight_m = 5\n"
+        );
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(err.contains("cards[0].distance_m"), "{err}");
     }
 
     #[test]

@@ -19,13 +19,24 @@ use serde::Serialize;
 
 /// Unpolarised Fresnel reflectance of a smooth interface from air (n = 1) into a medium of
 /// refractive index `n`, for a ray at `grazing_rad` to the surface (incidence angle π/2 − grazing).
+///
+/// `n = 1` (no interface) reflects nothing. Where both Fresnel denominators vanish (exactly
+/// grazing incidence with n = 1 handled above, or with n < 1 at total internal reflection) the
+/// limit is total reflection, 1; the result is never NaN for finite `grazing_rad` and `n` > 0.
 pub fn fresnel_reflectance(grazing_rad: f64, n: f64) -> f64 {
+    if n == 1.0 {
+        return 0.0;
+    }
     let cos_i = grazing_rad.clamp(0.0, std::f64::consts::FRAC_PI_2).sin();
     let sin_i2 = 1.0 - cos_i * cos_i;
     let sin_t2 = sin_i2 / (n * n);
     let cos_t = (1.0 - sin_t2).max(0.0).sqrt();
-    let rs = (cos_i - n * cos_t) / (cos_i + n * cos_t);
-    let rp = (cos_t - n * cos_i) / (cos_t + n * cos_i);
+    let (den_s, den_p) = (cos_i + n * cos_t, cos_t + n * cos_i);
+    if den_s <= 0.0 || den_p <= 0.0 {
+        return 1.0;
+    }
+    let rs = (cos_i - n * cos_t) / den_s;
+    let rp = (cos_t - n * cos_i) / den_p;
     0.5 * (rs * rs + rp * rp)
 }
 
@@ -78,6 +89,33 @@ mod tests {
         let cos_t = (1.0 - brewster_incidence.sin().powi(2) / 1.333f64.powi(2)).sqrt();
         let rs = (cos_i - 1.333 * cos_t) / (cos_i + 1.333 * cos_t);
         assert!((fresnel_reflectance(g, 1.333) - 0.5 * rs * rs).abs() < 1e-12);
+    }
+
+    #[test]
+    fn fresnel_is_finite_at_the_edges_of_the_scene_ranges() {
+        // The scene accepts refractive_index = 1 and wave_slope_deg = 0: exactly grazing rays
+        // on such a "sea" gave 0/0 = NaN, which the renderer replaced by the fallback colour.
+        assert_eq!(fresnel_reflectance(0.0, 1.0), 0.0);
+        for g in [0.0, 0.1, 1.0, std::f64::consts::FRAC_PI_2] {
+            assert_eq!(fresnel_reflectance(g, 1.0), 0.0, "{g}");
+        }
+        let sea = Sea {
+            refractive_index: 1.0,
+            wave_slope_rad: 0.0,
+            ..Sea::default()
+        };
+        let sky = super::super::sky::Sky::default();
+        assert!(sea.radiance(0.0, &sky).iter().all(|v| v.is_finite()));
+        // Total internal reflection side (n < 1, only reachable through the API): 1 at grazing.
+        assert_eq!(fresnel_reflectance(0.0, 0.75), 1.0);
+        // Ranges of the scene file: finite everywhere.
+        for i in 0..=100 {
+            let n = 1.0 + 2.0 * i as f64 / 100.0;
+            for j in 0..=90 {
+                let r = fresnel_reflectance((j as f64).to_radians(), n);
+                assert!((0.0..=1.0).contains(&r), "n={n} g={j}°: {r}");
+            }
+        }
     }
 
     #[test]

@@ -23,6 +23,9 @@
 //!    computed from them.
 //! 7. Levels with pressure but no height get hypsometric heights ([`super::hypsometric`]).
 //! 8. At least [`MIN_LEVELS`] levels must remain.
+//! 9. Steps steeper than [`SUSPECT_TEMPERATURE_GRADIENT_K_PER_M`] between consecutive levels are
+//!    kept but reported in a warning: they are almost certainly a height or temperature error and
+//!    would be traced as an extreme duct.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -34,6 +37,12 @@ use crate::units;
 
 /// Fewest usable levels a sounding may have.
 pub const MIN_LEVELS: usize = 3;
+
+/// Temperature change between consecutive levels (K/m) above which a warning names the levels.
+/// The steepest step in the shared test soundings (1-s files included) is 0.12 K/m and the
+/// paper's strongest layer 0.67 K/m; 10 K/m is 0.1 K of rounding over 1 cm. Not an error: the
+/// first seconds of a 1-s ascent can legitimately carry sensor lag over a few centimetres.
+pub const SUSPECT_TEMPERATURE_GRADIENT_K_PER_M: f64 = 10.0;
 
 /// How far (K) a dewpoint may sit above the temperature and still be accepted (as saturation):
 /// both are reported to 0.1 K, so rounding alone can put a saturated dewpoint 0.1 K high.
@@ -519,6 +528,24 @@ pub(crate) fn build_levels(
         });
     }
 
+    // Rule 9.
+    let steep: Vec<usize> = levels
+        .windows(2)
+        .filter(|w| {
+            let gradient =
+                (w[1].temperature_k - w[0].temperature_k) / (w[1].height_m - w[0].height_m);
+            gradient.abs() > SUSPECT_TEMPERATURE_GRADIENT_K_PER_M
+        })
+        .map(|w| w[1].line)
+        .collect();
+    if !steep.is_empty() {
+        warnings.push(format!(
+            "{} level(s) differ from the level below by more than {SUSPECT_TEMPERATURE_GRADIENT_K_PER_M} K/m in temperature (a height or temperature error?): lines {}",
+            steep.len(),
+            describe_lines(&steep)
+        ));
+    }
+
     // Rule 8.
     if levels.len() < MIN_LEVELS {
         return Err(SoundingError::file(
@@ -657,6 +684,31 @@ mod tests {
             parse_value(p, 3, "temperature_c", "-100", Quantity::TemperatureC, true).unwrap(),
             Some(173.14999999999998)
         );
+    }
+
+    #[test]
+    fn impossible_temperature_steps_are_reported() {
+        // 5 K over 0.1 mm (50 000 K/m): a height typo, not air.
+        let (_, warnings) = build(vec![
+            row(2, Some(0.0), Some(1000.0), Some(0.0)),
+            row(3, Some(0.0001), Some(999.9), Some(-5.0)),
+            row(4, Some(1800.0), Some(800.0), Some(-10.0)),
+        ])
+        .unwrap();
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].contains("K/m") && warnings[0].contains("lines 3"),
+            "{warnings:?}"
+        );
+        // The paper's strongest layer (+10 K over 15 m) is no warning.
+        let (_, warnings) = build(vec![
+            row(2, Some(0.0), Some(1000.0), Some(0.0)),
+            row(3, Some(92.5), Some(988.5), Some(-0.6)),
+            row(4, Some(107.5), Some(986.7), Some(9.3)),
+            row(5, Some(1800.0), Some(800.0), Some(-10.0)),
+        ])
+        .unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
     }
 
     #[test]

@@ -670,3 +670,89 @@ fn pipeline_render_job_writes_every_size_and_format() {
         assert!(out.join(format!("{name}.exr")).is_file());
     }
 }
+
+#[test]
+fn render_scene_chooses_the_igra2_sounding_and_refuses_a_camera_above_the_atmosphere() {
+    let raw = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+    ));
+    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |name: &str, camera_height_m: f64, time: Option<&str>| {
+        let path = dir.path().join(name);
+        let time_line = time.map_or(String::new(), |t| format!("igra2_time = \"{t}\"\n"));
+        std::fs::write(
+            &path,
+            format!(
+                "[camera]\nheight_m = {camera_height_m}\nhfov_deg = 1.0\nwidth = 8\nheight = 4\n\
+                 [atmosphere]\nsounding = {raw:?}\n{time_line}"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let out = dir.path().join("x.png");
+    let out = out.to_str().unwrap();
+    // The file holds 2010-06-01 00 and 12 UTC and 2010-06-02 00 UTC: a time it does not hold is
+    // an error that lists the ones it does (the scene's choice reaches the reader).
+    let absent = scene("absent.toml", 10.0, Some("2010-06-03 00"));
+    let r = fails(&["render", absent.to_str().unwrap(), "-q", "-o", out]);
+    assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
+    let present = scene("present.toml", 10.0, Some("2010-06-01 12"));
+    ok(&["render", present.to_str().unwrap(), "-q", "-o", out]);
+    // A camera above the 40 km top of the traced atmosphere: every ray used to be refused by the
+    // tracer and shaded as horizon sky (no sea at all); now it is an error.
+    let high = scene("high.toml", 90_000.0, None);
+    let r = fails(&["render", high.to_str().unwrap(), "-q", "-o", out]);
+    assert!(r.stderr.contains("90000"), "{}", r.stderr);
+}
+
+#[test]
+fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
+    let raw = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+    ));
+    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = |name: &str, time: &str| {
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "[[profile]]\natmosphere = {raw:?}\nname = \"p\"\nigra2_time = \"{time}\"\n\
+                 [[trace]]\natmosphere = {raw:?}\nname = \"t\"\nigra2_time = \"{time}\"\n\
+                 observer_height_m = 10.0\nelevation_deg = \"-0.2:0.2:0.1\"\n\
+                 distances_m = [1000.0]\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    // A time the file does not hold fails, naming the ones it holds (the job's choice reaches
+    // the reader; before, pipelines always took the first sounding).
+    let bad = pipeline("bad", "2010-06-03 00");
+    let out = dir.path().join("out");
+    let r = fails(&[
+        "pipeline",
+        "run",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("2010-06-01 12"), "{}", r.stderr);
+    // The 12 UTC sounding: its surface pressure, 1008.40 hPa in the raw file (00 UTC: 1009.80).
+    let good = pipeline("good", "2010-06-01 12");
+    ok(&[
+        "pipeline",
+        "run",
+        good.to_str().unwrap(),
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let layers = json_file(&out.join("p").join("layers.json"));
+    let p = layers["surface"]["pressure_hpa"].as_f64().unwrap();
+    assert!((p - 1008.40).abs() < 1e-6, "{p}");
+}
