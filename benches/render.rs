@@ -1,41 +1,37 @@
 //! Frame time of the paper scenes with the real tracer: the fast path (elevation fan) at 400×200
-//! and 1920×1080, 1 sample per pixel, render only; exact per-pixel 3-D tracing at 400×200 for the
-//! superior mirage and the Fata Morgana (the baseline of the fan's speed-up, same 1 cm tracer
-//! tolerance); PNG and EXR encoding of a 1920×1080 film; and the process's peak resident memory
+//! and 1920×1080, 1 sample per pixel, render only; exact per-pixel 3-D tracing at 400×200 for
+//! every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance); PNG and EXR encoding of a 1920×1080 film; and the process's peak resident memory
 //! (VmHWM, printed at the end).
 
 use std::hint::black_box;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group};
+use ghostship::atmosphere::{LoadedAtmosphere, load_scene_atmosphere};
 use ghostship::output::{exr, png};
-use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
-use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
-use ghostship::scene::{AtmosphereSpec, Scene};
+use ghostship::scene::Scene;
 
-const SCENES: [&str; 6] = [
+const SCENES: [&str; 9] = [
     "fig01_horizon_straight",
+    "fig01b_horizon_curved",
     "fig02_horizon_distortion",
+    "fig04a_superior_mirage_paper_camera",
     "fig04_superior_mirage",
     "fig08_inferior_mirage",
     "fig10_fata_morgana",
     "fig12_novaya_zemlya",
+    "fig12b_novaya_zemlya_strips",
 ];
 
-fn load(name: &str, width: u32, height: u32) -> (Scene, RefractiveAtmosphere) {
+fn load(name: &str, width: u32, height: u32) -> (Scene, Option<LoadedAtmosphere>) {
     let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/scenes"))
         .join(format!("{name}.toml"));
     let mut scene = Scene::from_file(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     scene.camera.width = width;
     scene.camera.height = height;
-    let column: Arc<dyn AirColumn> = match &scene.atmosphere.source {
-        AtmosphereSpec::Synthetic(p) => Arc::new(SyntheticAtmosphere::from_file(p).unwrap()),
-        AtmosphereSpec::Us1976 => Arc::new(StandardAtmosphere::default()),
-        AtmosphereSpec::Sounding(p) => panic!("no soundings in the paper scenes: {}", p.display()),
-    };
-    let atm = RefractiveAtmosphere::new(column, scene.atmosphere.wavelength_nm).unwrap();
+    let atm = load_scene_atmosphere(&scene.atmosphere)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     (scene, atm)
 }
 
@@ -53,7 +49,7 @@ fn frames(c: &mut Criterion, width: u32, height: u32) {
     for name in SCENES {
         let (scene, atm) = load(name, width, height);
         let opts = options(false);
-        let tracer = prepare_tracer(&scene, Some(&atm), &opts).unwrap();
+        let tracer = prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &opts).unwrap();
         let film = render_scene(&scene, tracer.as_ref(), &opts).unwrap();
         eprintln!("{name} {width}x{height}: {:?}", film.stats);
         group.bench_function(name, |b| {
@@ -74,10 +70,15 @@ fn large(c: &mut Criterion) {
 fn exact(c: &mut Criterion) {
     let mut group = c.benchmark_group("exact_400x200");
     group.sample_size(10);
-    for name in ["fig04_superior_mirage", "fig10_fata_morgana"] {
+    // Every curved-ray scene (fig01 uses straight rays, for which exact mode is the same closed
+    // form).
+    for name in SCENES
+        .into_iter()
+        .filter(|n| *n != "fig01_horizon_straight")
+    {
         let (scene, atm) = load(name, 400, 200);
         let opts = options(true);
-        let tracer = prepare_tracer(&scene, Some(&atm), &opts).unwrap();
+        let tracer = prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &opts).unwrap();
         group.bench_function(name, |b| {
             b.iter(|| black_box(render_scene(&scene, tracer.as_ref(), &opts).unwrap()))
         });
@@ -88,7 +89,7 @@ fn exact(c: &mut Criterion) {
 fn encoding(c: &mut Criterion) {
     let (scene, atm) = load("fig10_fata_morgana", 1920, 1080);
     let opts = options(false);
-    let tracer = prepare_tracer(&scene, Some(&atm), &opts).unwrap();
+    let tracer = prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &opts).unwrap();
     let film = render_scene(&scene, tracer.as_ref(), &opts).unwrap();
     let meta = provenance(&scene, &opts);
     let mut group = c.benchmark_group("encode_1920x1080");

@@ -3,20 +3,18 @@
 //! `cargo run --release --example traced -- SCENE.toml OUT.png [--size WxH] [--spp N] [--exact]
 //! [--repeat N] [--plot PLOT.png] [--images] [--elev LO:HI] [--dist D1,D2] [--heights H1,H2] [--camera-height H]`.
 //!
-//! Synthetic and standard atmospheres only (soundings need the CLI's loader).
+//! Any scene atmosphere (sounding, synthetic or us1976), loaded as the CLI does.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use ghostship::analysis::{TraceRequest, trace_plot_png, trace_report};
+use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::output::film::write_film;
 use ghostship::output::png;
-use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
-use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
-use ghostship::scene::{AtmosphereSpec, Scene};
+use ghostship::scene::{AtmosphereSettings, Scene};
 
 fn arg<T: std::str::FromStr>(args: &[String], name: &str) -> Option<T> {
     args.iter()
@@ -45,12 +43,14 @@ fn main() -> anyhow::Result<()> {
     if let Some(h) = arg::<f64>(&args, "--camera-height") {
         scene.camera.height_m = h;
     }
-    let column: Arc<dyn AirColumn> = match &scene.atmosphere.source {
-        AtmosphereSpec::Synthetic(p) => Arc::new(SyntheticAtmosphere::from_file(p)?),
-        AtmosphereSpec::Us1976 => Arc::new(StandardAtmosphere::default()),
-        AtmosphereSpec::Sounding(p) => bail!("soundings not supported here: {}", p.display()),
+    // The scene's air even for straight-ray scenes (the transfer plot needs it).
+    let settings = AtmosphereSettings {
+        straight: false,
+        ..scene.atmosphere.clone()
     };
-    let atmosphere = RefractiveAtmosphere::new(column, scene.atmosphere.wavelength_nm)?;
+    let atmosphere = load_scene_atmosphere(&settings)?
+        .context("a curved-ray atmosphere is always loaded")?
+        .refractive;
     let options = RenderOptions {
         exact: args.iter().any(|a| a == "--exact"),
         samples_per_pixel: arg(&args, "--spp"),

@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
 use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
+use crate::scene::{AtmosphereSettings, AtmosphereSpec};
 use crate::sounding::{ReadOptions, Sounding, read_sounding};
 use crate::tracer::StratifiedIndex;
 
@@ -160,6 +161,30 @@ pub enum AtmosphereError {
         #[source]
         source: crate::refractivity::RefractivityError,
     },
+}
+
+/// The atmosphere a scene asks for, loaded like every command's (its `[atmosphere]` section:
+/// source, wavelength, smoothing, IGRA2 time); `None` when the scene traces straight rays, which
+/// need no air.
+pub fn load_scene_atmosphere(
+    settings: &AtmosphereSettings,
+) -> Result<Option<LoadedAtmosphere>, AtmosphereError> {
+    if settings.straight {
+        return Ok(None);
+    }
+    let source = match &settings.source {
+        AtmosphereSpec::Sounding(p) => AtmosphereSource::Sounding(p.clone()),
+        AtmosphereSpec::Synthetic(p) => AtmosphereSource::Synthetic(p.clone()),
+        AtmosphereSpec::Us1976 => AtmosphereSource::Us1976,
+    };
+    let options = AtmosphereOptions {
+        smooth_m: settings
+            .smooth_m
+            .unwrap_or(AtmosphereOptions::default().smooth_m),
+        wavelength_nm: settings.wavelength_nm,
+        igra2_time: settings.igra2_time.clone(),
+    };
+    load_atmosphere(&source, &options).map(Some)
 }
 
 /// Read, fit and refract the atmosphere `source` names.

@@ -5,12 +5,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
+use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::output::film::{FilmFormat, write_film};
 use ghostship::output::png::DEFAULT_EXPOSURE;
 use ghostship::pipeline::parse_size;
 use ghostship::render::{Film, RenderOptions, prepare_tracer, provenance, render_scene};
-use ghostship::scene::{AtmosphereSpec, Scene};
+use ghostship::scene::Scene;
 
 /// Arguments of `ghostship render`.
 #[derive(Debug, clap::Args)]
@@ -118,31 +118,15 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
 /// Resolve the scene's atmosphere (unless it asks for straight rays), choose the tracer and
 /// render. Shared with the pipeline's render jobs.
 pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Film> {
-    let atmosphere = if scene.atmosphere.straight {
-        None
-    } else {
-        let source = match &scene.atmosphere.source {
-            AtmosphereSpec::Sounding(p) => AtmosphereSource::Sounding(p.clone()),
-            AtmosphereSpec::Synthetic(p) => AtmosphereSource::Synthetic(p.clone()),
-            AtmosphereSpec::Us1976 => AtmosphereSource::Us1976,
-        };
-        let defaults = AtmosphereOptions::default();
-        let atmosphere_options = AtmosphereOptions {
-            smooth_m: scene.atmosphere.smooth_m.unwrap_or(defaults.smooth_m),
-            wavelength_nm: scene.atmosphere.wavelength_nm,
-            igra2_time: scene.atmosphere.igra2_time.clone(),
-        };
-        let loaded = load_atmosphere(&source, &atmosphere_options)?;
-        if !options.quiet
-            && let Some(sounding) = &loaded.sounding
-        {
-            // The same notes `profile` prints (skipped rows, suspect steps, ...).
-            for w in &sounding.warnings {
-                eprintln!("Ingest note: {w}");
-            }
+    let atmosphere = load_scene_atmosphere(&scene.atmosphere)?;
+    if !options.quiet
+        && let Some(sounding) = atmosphere.as_ref().and_then(|a| a.sounding.as_ref())
+    {
+        // The same notes `profile` prints (skipped rows, suspect steps, ...).
+        for w in &sounding.warnings {
+            eprintln!("Ingest note: {w}");
         }
-        Some(loaded)
-    };
+    }
     let tracer = prepare_tracer(scene, atmosphere.as_ref().map(|a| &a.refractive), options)?;
     let film = render_scene(scene, tracer.as_ref(), options)?;
     if film.stats.non_finite_samples > 0 {
