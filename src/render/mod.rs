@@ -411,7 +411,9 @@ pub fn render_scene(
                 (s.elevation_rad - r, s.elevation_rad + r)
             }),
             elevation_range_rad: elevations,
-            pixel_rad,
+            // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
+            // sub-pixel bound holds everywhere, not only at the centre.
+            pixel_rad: cam.min_pixel_angle_rad(),
             tolerance_px: options.tolerance_px,
             max_depth: options.max_refine_depth,
         };

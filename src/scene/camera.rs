@@ -39,6 +39,9 @@ pub struct CameraFrame {
     half_h: f64,
 }
 
+/// How much smaller than the centre pixel [`Camera::min_pixel_angle_rad`] may make a pixel.
+pub const MAX_PIXEL_SHRINK: f64 = 16.0;
+
 impl Camera {
     /// The camera's frame (basis and focal length).
     pub fn frame(&self) -> CameraFrame {
@@ -58,6 +61,18 @@ impl Camera {
     /// away from the centre subtend less.
     pub fn pixel_angle_rad(&self) -> f64 {
         1.0 / self.frame().focal_px
+    }
+
+    /// The smallest angle any pixel of the frame subtends (rad): a pinhole pixel at angle θ from
+    /// the optical axis spans cos²θ / f radially, so the frame's corners set it. Floored at
+    /// 1/[`MAX_PIXEL_SHRINK`] of the centre pixel, so an extreme wide angle cannot make the
+    /// elevation fan explode; below that floor (diagonal field of view above ≈ 151°) the fan's
+    /// stated sub-pixel bound holds only in the central part of the frame.
+    pub fn min_pixel_angle_rad(&self) -> f64 {
+        let frame = self.frame();
+        let half_diagonal_px = frame.half_w.hypot(frame.half_h);
+        let cos_corner = (half_diagonal_px / frame.focal_px).atan().cos();
+        (cos_corner * cos_corner).max(1.0 / MAX_PIXEL_SHRINK) / frame.focal_px
     }
 }
 
@@ -112,6 +127,40 @@ mod tests {
             height: 200,
             samples_per_pixel: 1,
         }
+    }
+
+    #[test]
+    fn smallest_pixel_is_at_the_corner() {
+        // Measure the elevation step between the last two rows at the corner column directly.
+        let c = cam(0.0, 0.0);
+        let f = c.frame();
+        let (_, e1) = f.direction(0.0, 0.0);
+        let (_, e2) = f.direction(0.0, 1.0);
+        let (_, e3) = f.direction(1.0, 0.0);
+        let corner_step = (e1 - e2).abs().min((e1 - e3).abs().max(1e-300));
+        let min = c.min_pixel_angle_rad();
+        assert!(
+            min <= (e1 - e2).abs() * 1.001,
+            "{min} vs {}",
+            (e1 - e2).abs()
+        );
+        assert!(min < c.pixel_angle_rad());
+        assert!(corner_step > 0.0);
+        // A narrow paper frame: the corner pixel is the centre pixel to 1e-4.
+        let narrow = Camera {
+            hfov_rad: 1f64.to_radians(),
+            ..c
+        };
+        assert!((narrow.min_pixel_angle_rad() / narrow.pixel_angle_rad() - 1.0).abs() < 1e-4);
+        // An extreme wide angle is floored.
+        let wide = Camera {
+            hfov_rad: 178f64.to_radians(),
+            ..c
+        };
+        assert!(
+            (wide.min_pixel_angle_rad() * MAX_PIXEL_SHRINK / wide.pixel_angle_rad() - 1.0).abs()
+                < 1e-12
+        );
     }
 
     #[test]
