@@ -4,7 +4,8 @@
 //! Spherical symmetry makes the ray depend only on its apparent elevation, so the renderer traces
 //! one fan of elevations for the whole frame ([`elevation_fan`], refined adaptively where the
 //! transfer curve bends sharply; its documentation states the error bound) and shades every pixel
-//! sample by interpolating in that fan: per sample, a direction (two `atan2`), an O(1) fan lookup,
+//! sample by interpolating in that fan: per sample, an elevation (one `atan2`; the azimuth only
+//! when a card or the sun may be met), an O(1) fan lookup,
 //! a few comparisons per card in view, and the sky/sea/sun model. Exact mode instead calls the
 //! tracer for every sample (no fan, no interpolation): it validates the fast path and is the
 //! benchmark baseline.
@@ -170,12 +171,15 @@ fn wrap_pi(x: f64) -> f64 {
 }
 
 impl Shader<'_> {
-    /// Radiance of a sample looking at (`azimuth`, apparent `alpha`) along a ray with `heights`
-    /// at the card distances and end `end`.
+    /// Radiance of a sample looking along direction vector `dir` (apparent elevation `alpha`)
+    /// along a ray with `heights` at the card distances and end `end`. The azimuth (an `atan2`)
+    /// is computed only when a card's height range or the sun's elevation band is met.
     #[inline]
-    fn shade(&self, alpha: f64, azimuth: f64, heights: &[Option<f64>], end: FanEnd) -> [f64; 3] {
+    fn shade(&self, alpha: f64, dir: [f64; 3], heights: &[Option<f64>], end: FanEnd) -> [f64; 3] {
         let mut acc = [0.0f64; 3];
         let mut transmit = 1.0f64;
+        let mut azimuth_cache: Option<f64> = None;
+        let mut azimuth = || *azimuth_cache.get_or_insert_with(|| CameraFrame::azimuth_of(dir));
         for card in &self.cards {
             let Some(h) = heights[card.distance_index] else {
                 continue;
@@ -183,7 +187,7 @@ impl Shader<'_> {
             if h < card.base_m || h > card.top_m {
                 continue;
             }
-            let mut offset = azimuth - card.azimuth_rad;
+            let mut offset = azimuth() - card.azimuth_rad;
             if offset.abs() > std::f64::consts::PI {
                 offset = wrap_pi(offset);
             }
@@ -205,8 +209,11 @@ impl Shader<'_> {
             FanEnd::Ground { grazing_rad, .. } => self.sea_table.at(grazing_rad),
             FanEnd::Sky { elevation_rad } => {
                 let mut l = self.sky_table.at(alpha);
-                if let Some(sun) = &self.sun {
-                    let disc = sun.disc(azimuth, elevation_rad);
+                // The elevation test is the disc's own quick reject, done before the azimuth.
+                if let Some(sun) = &self.sun
+                    && (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
+                {
+                    let disc = sun.disc(azimuth(), elevation_rad);
                     if disc > 0.0 {
                         let t = self.sky.transmittance(alpha);
                         for c in 0..3 {
@@ -461,18 +468,19 @@ pub fn render_scene(
                             (sy + unit_hash(2 * key + 1)) / n as f64,
                         )
                     };
-                    let (azimuth, alpha) = frame.direction(x as f64 + jx, y as f64 + jy);
+                    let dir = frame.direction_vector(x as f64 + jx, y as f64 + jy);
+                    let alpha = CameraFrame::elevation_of(dir);
                     let c = match &fan {
                         Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
                         Some(fan) => {
                             let end = fan.interpolate(alpha, &mut heights);
-                            shader.shade(alpha, azimuth, &heights, end)
+                            shader.shade(alpha, dir, &heights, end)
                         }
                         None => {
                             let mut ray =
                                 tracer.trace(cam.height_m, alpha, &distances_m, need_sky_direction);
                             ray.heights_m.resize(n_dist, None);
-                            shader.shade(alpha, azimuth, &ray.heights_m, ray.end)
+                            shader.shade(alpha, dir, &ray.heights_m, ray.end)
                         }
                     };
                     let c = if c.iter().all(|v| v.is_finite()) {

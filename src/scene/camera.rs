@@ -81,15 +81,37 @@ impl CameraFrame {
     /// radians; the azimuth is clockwise from north, in (−π, π].
     #[inline]
     pub fn direction(&self, x: f64, y: f64) -> (f64, f64) {
+        let d = self.direction_vector(x, y);
+        (Self::azimuth_of(d), Self::elevation_of(d))
+    }
+
+    /// Unnormalised direction vector (east, north, up) through film point (`x`, `y`) (pixels,
+    /// y down); its length is √(1 + u² + v²) with u, v the film offsets in focal lengths. The
+    /// renderer takes the elevation of every sample but the azimuth only when it needs it.
+    #[inline]
+    pub fn direction_vector(&self, x: f64, y: f64) -> [f64; 3] {
         let u = (x - self.half_w) / self.focal_px;
         let v = (self.half_h - y) / self.focal_px;
-        let d = [
+        [
             self.forward[0] + u * self.right[0] + v * self.up[0],
             self.forward[1] + u * self.right[1] + v * self.up[1],
             self.forward[2] + u * self.right[2] + v * self.up[2],
-        ];
-        let horizontal = d[0].hypot(d[1]);
-        (d[0].atan2(d[1]), d[2].atan2(horizontal))
+        ]
+    }
+
+    /// Elevation (rad) of direction vector `d` (any length).
+    #[inline]
+    pub fn elevation_of(d: [f64; 3]) -> f64 {
+        // The components are O(1) (|d|² = 1 + u² + v²), so the plain square root cannot
+        // overflow; it is several times cheaper than `hypot`.
+        let horizontal = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        d[2].atan2(horizontal)
+    }
+
+    /// Azimuth (rad, clockwise from north, in (−π, π]) of direction vector `d` (any length).
+    #[inline]
+    pub fn azimuth_of(d: [f64; 3]) -> f64 {
+        d[0].atan2(d[1])
     }
 
     /// Film point (x, y) (pixels, y down) where direction `d` (east, north, up) projects, or
