@@ -131,13 +131,19 @@ impl AngleTable {
     /// 180° keep the linear-interpolation error below 1e-4 of the value.
     const ENTRIES: usize = 8192;
 
-    fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3]) -> Self {
+    /// Tabulate `f` on [`lo`, `hi`] (entries computed in parallel, collected in order: the
+    /// table does not depend on the thread count).
+    fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3] + Sync) -> Self {
         let n = Self::ENTRIES;
         let step = ((hi - lo) / (n - 1) as f64).max(1e-300);
         Self {
             start: lo,
             inv_step: 1.0 / step,
-            values: (0..n).map(|i| f(lo + i as f64 * step)).collect(),
+            values: (0..n)
+                .into_par_iter()
+                .with_min_len(512)
+                .map(|i| f(lo + i as f64 * step))
+                .collect(),
         }
     }
 
@@ -387,11 +393,17 @@ pub fn render_scene(
     }
     let elevations = elevation_range(&frame, width, height, pixel_rad);
     let (sky, sea) = (scene.sky, scene.sea);
+    // The optical depths once per frame, not once per table entry (same values).
+    let depths = sky.optical_depths();
     let shader = Shader {
         cards,
         sky,
-        sky_table: AngleTable::new(elevations.0, elevations.1, |e| sky.radiance(e)),
-        sea_table: AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| sea.radiance(g, &sky)),
+        sky_table: AngleTable::new(elevations.0, elevations.1, |e| {
+            sky.radiance_with_depths(e, depths)
+        }),
+        sea_table: AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| {
+            sea.radiance_with_sky_depths(g, &sky, depths)
+        }),
         sun: scene.sun,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),

@@ -64,9 +64,22 @@ impl Default for Sea {
 impl Sea {
     /// Radiance of the sea for a ray arriving at `grazing_rad`, reflecting `sky`.
     pub fn radiance(&self, grazing_rad: f64, sky: &super::sky::Sky) -> [f64; 3] {
+        self.radiance_with_sky_depths(grazing_rad, sky, sky.optical_depths())
+    }
+
+    /// [`Sea::radiance`] with `sky`'s optical depths `depths` (from
+    /// [`Sky::optical_depths`](super::sky::Sky::optical_depths)) computed once by the caller:
+    /// the same result, cheaper per call.
+    #[inline]
+    pub fn radiance_with_sky_depths(
+        &self,
+        grazing_rad: f64,
+        sky: &super::sky::Sky,
+        depths: [f64; 3],
+    ) -> [f64; 3] {
         let g = grazing_rad.hypot(self.wave_slope_rad);
         let f = fresnel_reflectance(g, self.refractive_index);
-        let s = sky.radiance(g);
+        let s = sky.radiance_with_depths(g, depths);
         [0, 1, 2].map(|c| f * s[c] + (1.0 - f) * self.water_rgb[c])
     }
 }

@@ -73,9 +73,16 @@ impl Sky {
 
     /// Sky radiance (linear RGB) looking at apparent elevation `elevation_rad`.
     pub fn radiance(&self, elevation_rad: f64) -> [f64; 3] {
+        self.radiance_with_depths(elevation_rad, self.optical_depths())
+    }
+
+    /// [`Sky::radiance`] with the channels' optical depths `depths` (from
+    /// [`Sky::optical_depths`]) computed once by the caller: the same result, six `powf`/`powi`
+    /// cheaper per call (the renderer tabulates thousands of elevations per frame).
+    #[inline]
+    pub fn radiance_with_depths(&self, elevation_rad: f64, depths: [f64; 3]) -> [f64; 3] {
         let m = relative_air_mass(elevation_rad);
-        self.optical_depths()
-            .map(|tau| self.brightness * (1.0 - (-tau * m).exp()))
+        depths.map(|tau| self.brightness * (1.0 - (-tau * m).exp()))
     }
 
     /// Transmittance exp(−τ_c·m(e)) of each channel along apparent elevation `elevation_rad`.
