@@ -256,6 +256,18 @@ impl ElevationFan {
         from
     }
 
+    /// The steepest finite grazing angle (rad) of the fan's rays that hit the sea, if any: the
+    /// largest the fan can interpolate.
+    pub fn max_grazing_rad(&self) -> Option<f64> {
+        self.ends
+            .iter()
+            .filter_map(|e| match e {
+                FanEnd::Ground { grazing_rad, .. } if grazing_rad.is_finite() => Some(*grazing_rad),
+                _ => None,
+            })
+            .reduce(f64::max)
+    }
+
     /// Number of traced rays in the fan.
     pub fn len(&self) -> usize {
         self.alphas.len()

@@ -127,14 +127,24 @@ struct AngleTable {
 }
 
 impl AngleTable {
-    /// Entries: sky and sea vary on scales of a degree near the horizon; 8192 entries over at most
-    /// 180° keep the linear-interpolation error below 1e-4 of the value.
-    const ENTRIES: usize = 8192;
+    /// Largest spacing of the entries (rad): sky and sea vary on scales of a degree near the
+    /// horizon; at 90° / 8191 the linear-interpolation error stays below 1e-4 of the value (unit
+    /// tests check it). A range wider than 90° gets [`Self::MAX_ENTRIES`] (at most 180° / 8191).
+    const MAX_STEP: f64 = std::f64::consts::FRAC_PI_2 / 8191.0;
+    /// Fewest entries (a narrow mirage frame needs few; this keeps them finer still).
+    const MIN_ENTRIES: usize = 256;
+    /// Most entries.
+    const MAX_ENTRIES: usize = 8192;
 
     /// Tabulate `f` on [`lo`, `hi`] (entries computed in parallel, collected in order: the
     /// table does not depend on the thread count).
     fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3] + Sync) -> Self {
-        let n = Self::ENTRIES;
+        let wanted = ((hi - lo) / Self::MAX_STEP).ceil();
+        let n = if wanted.is_finite() {
+            (wanted as usize + 1).clamp(Self::MIN_ENTRIES, Self::MAX_ENTRIES)
+        } else {
+            Self::MAX_ENTRIES
+        };
         let step = ((hi - lo) / (n - 1) as f64).max(1e-300);
         Self {
             start: lo,
@@ -395,22 +405,9 @@ pub fn render_scene(
     let (sky, sea) = (scene.sky, scene.sea);
     // The optical depths once per frame, not once per table entry (same values).
     let depths = sky.optical_depths();
-    let shader = Shader {
-        cards,
-        sky,
-        sky_table: AngleTable::new(elevations.0, elevations.1, |e| {
-            sky.radiance_with_depths(e, depths)
-        }),
-        sea_table: AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| {
-            sea.radiance_with_sky_depths(g, &sky, depths)
-        }),
-        sun: scene.sun,
-        // A lost (trapped) ray travels in the lowest air: show the horizon sky.
-        fallback: scene.sky.radiance(0.0),
-    };
     let need_sky_direction = scene.sun.is_some();
     let mut stats = RenderStats {
-        cards_in_view: shader.cards.len(),
+        cards_in_view: cards.len(),
         ..RenderStats::default()
     };
 
@@ -443,6 +440,29 @@ pub fn render_scene(
         stats.fan_rays = fan.len();
         stats.fan_depth = fan.max_depth_reached;
         Some(fan)
+    };
+
+    // The sea table spans grazing angles from 0 (where a NaN grazing angle is shaded) to the
+    // steepest the frame can show: with a fan, the steepest fan ray (interpolation stays between
+    // neighbours); per-sample tracing, 90°.
+    let sea_hi = fan
+        .as_ref()
+        .and_then(ElevationFan::max_grazing_rad)
+        .map_or(std::f64::consts::FRAC_PI_2, |g| {
+            g.min(std::f64::consts::FRAC_PI_2)
+        });
+    let shader = Shader {
+        cards,
+        sky,
+        sky_table: AngleTable::new(elevations.0, elevations.1, |e| {
+            sky.radiance_with_depths(e, depths)
+        }),
+        sea_table: AngleTable::new(0.0, sea_hi, |g| {
+            sea.radiance_with_sky_depths(g, &sky, depths)
+        }),
+        sun: scene.sun,
+        // A lost (trapped) ray travels in the lowest air: show the horizon sky.
+        fallback: scene.sky.radiance(0.0),
     };
 
     let bar = if options.quiet || !std::io::stderr().is_terminal() {
@@ -549,6 +569,34 @@ mod tests {
             let (a, b) = (table.at(e), sky.radiance(e));
             for c in 0..3 {
                 assert!((a[c] - b[c]).abs() <= 1e-4 * b[c], "{e}: {a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn narrow_angle_tables_are_as_close() {
+        // A mirage frame's range gets the fewest entries; the error bound still holds.
+        let (sky, sea) = (Sky::default(), crate::scene::Sea::default());
+        let sky_table = AngleTable::new(-0.004, 0.006, |e| sky.radiance(e));
+        let sea_table = AngleTable::new(0.0, 0.004, |g| sea.radiance(g, &sky));
+        assert_eq!(sky_table.values.len(), AngleTable::MIN_ENTRIES);
+        for i in 0..1000 {
+            let x = (i as f64 + 0.37) / 1000.0;
+            let (e, g) = (-0.004 + 0.01 * x, 0.004 * x);
+            let (a, b) = (sky_table.at(e), sky.radiance(e));
+            let (c, d) = (sea_table.at(g), sea.radiance(g, &sky));
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() <= 1e-4 * b[k], "{e}: {a:?} {b:?}");
+                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
+            }
+        }
+        // Sea over its full range, at the widest spacing used below 90°.
+        let full = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| sea.radiance(g, &sky));
+        for i in 0..1000 {
+            let g = std::f64::consts::FRAC_PI_2 * (i as f64 + 0.37) / 1000.0;
+            let (c, d) = (full.at(g), sea.radiance(g, &sky));
+            for k in 0..3 {
+                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
             }
         }
     }
