@@ -3,6 +3,7 @@
 //! from /work/shared/notes/references.md (palRefro, the Nautical Almanac dip, the critical
 //! gradient) or from properties (the exact field, continuity in elevation).
 
+use super::tracer::sea_horizon_rad;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -250,22 +251,6 @@ fn paper_mirages_from_an_80_m_camera() {
             (0.2366, 93.772),
         ],
     );
-}
-
-/// Lowest elevation whose ray does not reach the ground (bisection on fresh traces).
-fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
-    let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
-    let (mut lo, mut hi) = (-0.02, 0.0);
-    assert!(hits(lo) && !hits(hi));
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if hits(mid) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi
 }
 
 /// Check 1: US1976 (StandardAtmosphere at 15 °C, 1013.25 hPa) → Ciddor 550 nm dry table → tracer

@@ -107,8 +107,9 @@ fn constant_index_gives_straight_lines() {
     eprintln!("constant n: worst height error against straight lines {worst:.2e} m");
 }
 
-/// Lowest elevation whose ray does not reach the ground (bisection on the tracer).
-fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
+/// Lowest elevation whose ray does not reach the ground (bisection on the tracer). Shared with
+/// the end-to-end checks.
+pub(crate) fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
     let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
     let (mut lo, mut hi) = (-0.02, 0.0);
     assert!(hits(lo) && !hits(hi));
