@@ -3,7 +3,7 @@
 //! from /work/shared/notes/references.md (palRefro, the Nautical Almanac dip, the critical
 //! gradient) or from properties (the exact field, continuity in elevation).
 
-use super::tracer::sea_horizon_rad;
+use super::tracer::{PALREFRO_US1976_550NM, sea_horizon_rad};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -276,16 +276,7 @@ fn us1976_ciddor_table_matches_palrefro_and_the_almanac_dip() {
         ..config(0.001)
     };
     let tracer = Tracer::new(&atm, cfg).unwrap();
-    // palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry: observed ZD → arcmin.
-    let cases = [
-        (45.0, 0.953, 0.02),
-        (80.0, 5.223, 0.02),
-        (85.0, 9.666, 0.02),
-        (88.0, 17.789, 0.02),
-        (89.0, 23.545, 0.02),
-        (89.5, 27.650, 0.02),
-        (90.0, 33.000, 0.05),
-    ];
+    let cases = PALREFRO_US1976_550NM;
     for (zd, expected, tol) in cases {
         let alpha = (90.0_f64 - zd).to_radians();
         let rec = tracer.trace(0.0, alpha, &[]).unwrap();

@@ -217,6 +217,18 @@ fn flat_earth_square_linear_index_gives_parabola() {
     assert!(worst < 0.1 * cfg.tolerance_m, "worst error {worst} m");
 }
 
+/// palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (references.md §2.1): (observed zenith distance in
+/// degrees, refraction in arcmin, allowed error in arcmin). Shared with the end-to-end checks.
+pub(crate) const PALREFRO_US1976_550NM: [(f64, f64, f64); 7] = [
+    (45.0, 0.953, 0.02),
+    (80.0, 5.223, 0.02),
+    (85.0, 9.666, 0.02),
+    (88.0, 17.789, 0.02),
+    (89.0, 23.545, 0.02),
+    (89.5, 27.650, 0.02),
+    (90.0, 33.000, 0.05),
+];
+
 #[test]
 fn us1976_astronomical_refraction_matches_palrefro() {
     let field = Us1976Field::new(0.55);
@@ -226,16 +238,7 @@ fn us1976_astronomical_refraction_matches_palrefro() {
         ..TracerConfig::default()
     };
     let tracer = Tracer::new(&field, cfg).unwrap();
-    // palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (references.md §2.1): observed ZD → arcmin.
-    let cases = [
-        (45.0, 0.953, 0.02),
-        (80.0, 5.223, 0.02),
-        (85.0, 9.666, 0.02),
-        (88.0, 17.789, 0.02),
-        (89.0, 23.545, 0.02),
-        (89.5, 27.650, 0.02),
-        (90.0, 33.000, 0.05),
-    ];
+    let cases = PALREFRO_US1976_550NM;
     for (zd, expected, tol) in cases {
         let alpha = (90.0_f64 - zd).to_radians();
         let rec = tracer.trace(0.0, alpha, &[]).unwrap();
