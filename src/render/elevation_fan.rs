@@ -290,8 +290,12 @@ impl ElevationFan {
         if n < 2 {
             return 0;
         }
-        let b = ((alpha - self.guide_start) * self.guide_inv_width).max(0.0);
-        let b = (b as usize).min(self.guide.len() - 1);
+        // Clamped in f64 and converted through i32 (the guide has at most 2²² + 1 entries): a
+        // u64 conversion costs more on x86-64, and this runs once per sample.
+        let b = ((alpha - self.guide_start) * self.guide_inv_width)
+            .max(0.0)
+            .min((self.guide.len() - 1) as f64);
+        let b = b as i32 as usize;
         let mut i = self.guide[b] as usize;
         while i + 2 < n && self.alphas[i + 1] <= alpha {
             i += 1;
@@ -330,7 +334,28 @@ impl ElevationFan {
                 }
             };
         }
-        match (self.ends[i], self.ends[i + 1]) {
+        self.end_between(i, t)
+    }
+    /// The end of the ray at elevation `alpha`, interpolated as [`Self::interpolate`] does, without
+    /// the heights: all a sample needs when its ray can meet no card.
+    #[inline]
+    pub fn interpolate_end(&self, alpha: f64) -> FanEnd {
+        if self.alphas.len() < 2 {
+            return self.ends[0];
+        }
+        let i = self.interval(alpha);
+        let (a0, a1) = (self.alphas[i], self.alphas[i + 1]);
+        self.end_between(i, ((alpha - a0) / (a1 - a0)).clamp(0.0, 1.0))
+    }
+
+    /// The end at fraction `t` of interval i: ends of the same kind are interpolated linearly;
+    /// otherwise (a change of how rays end) the nearer ray's end.
+    #[inline]
+    fn end_between(&self, i: usize, t: f64) -> FanEnd {
+        let near_right = t >= 0.5;
+        // Field by field through references: copying the two enums whole made the compiler
+        // store them in pieces and reload them at once, a store-forwarding stall per sample.
+        match (&self.ends[i], &self.ends[i + 1]) {
             (
                 FanEnd::Ground {
                     distance_m: d0,
@@ -349,12 +374,36 @@ impl ElevationFan {
             },
             (x, y) => {
                 if near_right {
-                    y
+                    *y
                 } else {
-                    x
+                    *x
                 }
             }
         }
+    }
+
+    /// Lowest and highest height (m) at card distance `k` that interpolation can give for an
+    /// elevation in [`lo`, `hi`]: the extremes over the traced rays of the intervals that hold
+    /// them (interpolated heights lie between neighbours, or are one of them). `None` if no such
+    /// ray reaches distance k; a NaN height makes the range unbounded (−∞, +∞).
+    pub fn height_range(&self, lo: f64, hi: f64, k: usize) -> Option<(f64, f64)> {
+        let d = self.n_distances;
+        let n = self.alphas.len();
+        let (first, last) = if n < 2 {
+            (0, 0)
+        } else {
+            (self.interval(lo), self.interval(hi) + 1)
+        };
+        let mut range: Option<(f64, f64)> = None;
+        for i in first..=last {
+            if let Some(h) = self.heights[i * d + k] {
+                if h.is_nan() {
+                    return Some((f64::NEG_INFINITY, f64::INFINITY));
+                }
+                range = Some(range.map_or((h, h), |(a, b)| (a.min(h), b.max(h))));
+            }
+        }
+        range
     }
 }
 

@@ -16,6 +16,7 @@
 
 pub mod elevation_fan;
 pub mod fan;
+mod shade;
 pub mod traced;
 
 use std::io::IsTerminal;
@@ -24,10 +25,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
-use crate::scene::camera::CameraFrame;
-use crate::scene::{Scene, Sky, Sun, Texture, samples_per_pixel_root};
+use crate::scene::camera::{CameraFrame, ViewDirection};
+use crate::scene::{Scene, samples_per_pixel_root};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use fan::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
+use shade::{AngleTable, Shader, ViewCard, wrap_pi};
 pub use traced::{CurvedRays, ExactRays, PrepareError, prepare_tracer};
 
 /// How to render.
@@ -107,147 +109,6 @@ impl Film {
     }
 }
 
-/// A card prepared for shading.
-struct ViewCard<'a> {
-    distance_index: usize,
-    azimuth_rad: f64,
-    half_width_rad: f64,
-    base_m: f64,
-    top_m: f64,
-    height_m: f64,
-    texture: &'a Texture,
-}
-
-/// A smooth function of one angle, tabulated uniformly and interpolated linearly (the sky and the
-/// sea are evaluated per sample; a table replaces a `powf` and three `exp` by one lookup).
-struct AngleTable {
-    start: f64,
-    inv_step: f64,
-    values: Vec<[f64; 3]>,
-}
-
-impl AngleTable {
-    /// Largest spacing of the entries (rad): sky and sea vary on scales of a degree near the
-    /// horizon; at 90° / 8191 the linear-interpolation error stays below 1e-4 of the value (unit
-    /// tests check it). A range wider than 90° gets [`Self::MAX_ENTRIES`] (at most 180° / 8191).
-    const MAX_STEP: f64 = std::f64::consts::FRAC_PI_2 / 8191.0;
-    /// Fewest entries (a narrow mirage frame needs few; this keeps them finer still).
-    const MIN_ENTRIES: usize = 256;
-    /// Most entries.
-    const MAX_ENTRIES: usize = 8192;
-
-    /// Tabulate `f` on [`lo`, `hi`] (entries computed in parallel, collected in order: the
-    /// table does not depend on the thread count).
-    fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3] + Sync) -> Self {
-        let wanted = ((hi - lo) / Self::MAX_STEP).ceil();
-        let n = if wanted.is_finite() {
-            (wanted as usize + 1).clamp(Self::MIN_ENTRIES, Self::MAX_ENTRIES)
-        } else {
-            Self::MAX_ENTRIES
-        };
-        let step = ((hi - lo) / (n - 1) as f64).max(1e-300);
-        Self {
-            start: lo,
-            inv_step: 1.0 / step,
-            values: (0..n)
-                .into_par_iter()
-                .with_min_len(512)
-                .map(|i| f(lo + i as f64 * step))
-                .collect(),
-        }
-    }
-
-    #[inline]
-    fn at(&self, x: f64) -> [f64; 3] {
-        let last = self.values.len() - 1;
-        let p = ((x - self.start) * self.inv_step).clamp(0.0, last as f64);
-        let p = if p.is_nan() { 0.0 } else { p };
-        let i = (p as usize).min(last - 1);
-        let t = p - i as f64;
-        let (a, b) = (self.values[i], self.values[i + 1]);
-        [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t)
-    }
-}
-
-/// Everything shading needs, resolved once per frame.
-struct Shader<'a> {
-    cards: Vec<ViewCard<'a>>,
-    sky: Sky,
-    sky_table: AngleTable,
-    sea_table: AngleTable,
-    sun: Option<Sun>,
-    fallback: [f64; 3],
-}
-
-#[inline]
-fn wrap_pi(x: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    let y = (x + std::f64::consts::PI).rem_euclid(two_pi) - std::f64::consts::PI;
-    if y.is_finite() { y } else { 0.0 }
-}
-
-impl Shader<'_> {
-    /// Radiance of a sample looking along direction vector `dir` (apparent elevation `alpha`)
-    /// along a ray with `heights` at the card distances and end `end`. The azimuth (an `atan2`)
-    /// is computed only when a card's height range or the sun's elevation band is met.
-    #[inline]
-    fn shade(&self, alpha: f64, dir: [f64; 3], heights: &[Option<f64>], end: FanEnd) -> [f64; 3] {
-        let mut acc = [0.0f64; 3];
-        let mut transmit = 1.0f64;
-        let mut azimuth_cache: Option<f64> = None;
-        let mut azimuth = || *azimuth_cache.get_or_insert_with(|| CameraFrame::azimuth_of(dir));
-        for card in &self.cards {
-            let Some(h) = heights[card.distance_index] else {
-                continue;
-            };
-            if h < card.base_m || h > card.top_m {
-                continue;
-            }
-            let mut offset = azimuth() - card.azimuth_rad;
-            if offset.abs() > std::f64::consts::PI {
-                offset = wrap_pi(offset);
-            }
-            if offset.abs() > card.half_width_rad {
-                continue;
-            }
-            let u = 0.5 + 0.5 * offset / card.half_width_rad;
-            let v = (card.top_m - h) / card.height_m;
-            let t = card.texture.sample(u, v);
-            for c in 0..3 {
-                acc[c] += transmit * t[c] as f64;
-            }
-            transmit *= 1.0 - t[3] as f64;
-            if transmit < 1e-6 {
-                return acc;
-            }
-        }
-        let background = match end {
-            FanEnd::Ground { grazing_rad, .. } => self.sea_table.at(grazing_rad),
-            FanEnd::Sky { elevation_rad } => {
-                let mut l = self.sky_table.at(alpha);
-                // The elevation test is the disc's own quick reject, done before the azimuth.
-                if let Some(sun) = &self.sun
-                    && (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
-                {
-                    let disc = sun.disc(azimuth(), elevation_rad);
-                    if disc > 0.0 {
-                        let t = self.sky.transmittance(alpha);
-                        for c in 0..3 {
-                            l[c] += disc * t[c];
-                        }
-                    }
-                }
-                l
-            }
-            FanEnd::Lost => self.fallback,
-        };
-        for c in 0..3 {
-            acc[c] += transmit * background[c];
-        }
-        acc
-    }
-}
-
 /// Deterministic hash of a 64-bit key → [0, 1) (splitmix64 finaliser).
 #[inline]
 fn unit_hash(key: u64) -> f64 {
@@ -315,6 +176,172 @@ fn azimuth_span(frame: &CameraFrame, width: u32, height: u32, heading: f64) -> O
         hi = hi.max(off);
     }
     Some((lo, hi))
+}
+
+/// Per-thread buffers for one image row (reused from row to row: no allocation per pixel).
+struct RowScratch {
+    /// View direction of every sample of the row, pixel by pixel.
+    dirs: Vec<ViewDirection>,
+    /// Interpolated heights at the card distances.
+    heights: Vec<Option<f64>>,
+    /// Column ranges [a, b) whose rays may meet a card.
+    card_columns: Vec<(usize, usize)>,
+}
+
+impl RowScratch {
+    fn new(samples: usize, distances: usize) -> Self {
+        Self {
+            dirs: Vec::with_capacity(samples),
+            heights: vec![None; distances],
+            card_columns: Vec::new(),
+        }
+    }
+
+    /// Directions of the samples of row `y`: n×n stratified, jittered by a hash of (pixel,
+    /// sample); the pixel centres when n = 1.
+    fn directions(&mut self, frame: &CameraFrame, y: u32, width: u32, n: u32) {
+        if n == 1 {
+            frame.row_view_directions(y, width, &mut self.dirs);
+            return;
+        }
+        self.dirs.clear();
+        for x in 0..width {
+            for s in 0..n * n {
+                let key = ((y as u64) << 40) ^ ((x as u64) << 16) ^ s as u64;
+                let (sx, sy) = ((s % n) as f64, (s / n) as f64);
+                let (jx, jy) = (
+                    (sx + unit_hash(2 * key)) / n as f64,
+                    (sy + unit_hash(2 * key + 1)) / n as f64,
+                );
+                self.dirs
+                    .push(frame.view_direction(x as f64 + jx, y as f64 + jy));
+            }
+        }
+    }
+}
+
+/// Fraction of the fan tolerance ([`RenderOptions::tolerance_px`]) by which the elevations along
+/// one image row may differ for the row to be shaded at a single elevation (1 sample per pixel,
+/// fan mode). Along a row of a level camera the elevation changes by about α·u²/2 (u the
+/// half-width in radians): 0.003 px across a 1° mirage frame at α = 0.3°, so such rows share
+/// one ray — one fan lookup, the sea or sky colour once — and only columns that can meet a card
+/// (or rows that meet the sun) are shaded pixel by pixel. Features are then misplaced by at most
+/// (1 + this) × the fan tolerance.
+pub const FLAT_ROW_FRACTION: f64 = 0.1;
+
+/// What [`shade_flat_row`] needs besides the row.
+struct FlatRow<'a> {
+    frame: &'a CameraFrame,
+    fan: &'a ElevationFan,
+    shader: &'a Shader<'a>,
+    clear_sky_from: f64,
+    limit_rad: f64,
+    y: u32,
+}
+
+/// Shade row `y` (1 sample per pixel) at one elevation, if its elevations span less than
+/// `limit_rad` and it does not meet the sun; returns whether it did.
+fn shade_flat_row(
+    ctx: &FlatRow<'_>,
+    row: &mut [[f32; 4]],
+    scratch: &mut RowScratch,
+    non_finite: &AtomicU64,
+) -> bool {
+    let width = row.len() as u32;
+    let film_y = ctx.y as f64 + 0.5;
+    // The elevation changes monotonically with the distance from the centre column.
+    let centre = ctx.frame.view_direction((width / 2) as f64 + 0.5, film_y);
+    let edge = ctx.frame.view_direction(0.5, film_y);
+    let span = (centre.elevation_rad - edge.elevation_rad).abs();
+    if span.is_nan() || span > ctx.limit_rad {
+        return false;
+    }
+    let alpha = centre.elevation_rad;
+    let finite = |c: [f64; 3]| {
+        if c.iter().all(|v| v.is_finite()) {
+            c
+        } else {
+            non_finite.fetch_add(1, Ordering::Relaxed);
+            ctx.shader.fallback
+        }
+    };
+    let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
+    if alpha >= ctx.clear_sky_from {
+        row.fill(pixel(finite(ctx.shader.sky_table.at(alpha))));
+        return true;
+    }
+    let heights = &mut scratch.heights;
+    let end = ctx.fan.interpolate(alpha, heights);
+    if ctx.shader.may_meet_sun(end) {
+        return false;
+    }
+    let columns = &mut scratch.card_columns;
+    columns.clear();
+    for card in &ctx.shader.cards {
+        if let Some(h) = heights[card.distance_index]
+            && !(h < card.base_m || h > card.top_m)
+        {
+            columns.push(
+                card_column_range(card, ctx.frame, ctx.y, width).unwrap_or((0, width as usize)),
+            );
+        }
+    }
+    let background = ctx.shader.background(&centre, end);
+    let fill = pixel(finite(background));
+    for (x, px) in row.iter_mut().enumerate() {
+        *px = if columns.iter().any(|&(a, b)| (a..b).contains(&x)) {
+            let dir = ctx
+                .frame
+                .view_direction(x as f64 + 0.5, film_y)
+                .with_elevation(alpha);
+            pixel(finite(ctx.shader.composite(&dir, heights, background)))
+        } else {
+            fill
+        };
+    }
+    true
+}
+
+/// Pixel columns [a, b) of row `y` whose samples may see `card`, given that their elevations lie
+/// in `alphas` (rad): `None` if the fan's rays at those elevations cannot be within the card's
+/// height range at its distance, else [`card_column_range`] (every column when that is
+/// unbounded). Samples outside these columns skip the card tests: they would all fail.
+fn card_columns_in_row(
+    card: &ViewCard<'_>,
+    fan: &ElevationFan,
+    alphas: (f64, f64),
+    frame: &CameraFrame,
+    y: u32,
+    width: u32,
+) -> Option<(usize, usize)> {
+    let (h_lo, h_hi) = fan.height_range(alphas.0, alphas.1, card.distance_index)?;
+    if h_hi < card.base_m || h_lo > card.top_m {
+        return None;
+    }
+    Some(card_column_range(card, frame, y, width).unwrap_or((0, width as usize)))
+}
+
+/// Pixel columns [a, b) of row `y` within `card`'s azimuth range, widened by a pixel for
+/// rounding; `None` when the range cannot be bounded (see
+/// [`CameraFrame::film_x_range_for_azimuths`]).
+fn card_column_range(
+    card: &ViewCard<'_>,
+    frame: &CameraFrame,
+    y: u32,
+    width: u32,
+) -> Option<(usize, usize)> {
+    let (a, b) = frame.film_x_range_for_azimuths(
+        card.offset_rad - card.half_width_rad,
+        card.offset_rad + card.half_width_rad,
+        y as f64,
+        (y + 1) as f64,
+    )?;
+    if !(a.is_finite() && b.is_finite()) {
+        return None;
+    }
+    let first = (a - 1.0).floor().clamp(0.0, width as f64) as usize;
+    let end = (b + 1.0).ceil().clamp(0.0, width as f64) as usize;
+    Some((first, end))
 }
 
 /// Provenance for an EXR of `scene` rendered with `options` (scene hash, observer height,
@@ -393,7 +420,7 @@ pub fn render_scene(
         max_top_m[k] = max_top_m[k].max(top_m);
         cards.push(ViewCard {
             distance_index: k,
-            azimuth_rad: c.azimuth_rad,
+            offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),
             half_width_rad,
             base_m: c.base_m,
             top_m,
@@ -461,6 +488,7 @@ pub fn render_scene(
             sea.radiance_with_sky_depths(g, &sky, depths)
         }),
         sun: scene.sun,
+        heading_rad: cam.heading_rad,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),
     };
@@ -477,62 +505,106 @@ pub fn render_scene(
         bar
     };
 
+    // A row whose elevations span less than this is shaded at one elevation (see
+    // [`FLAT_ROW_FRACTION`]).
+    let flat_row_limit_rad = FLAT_ROW_FRACTION * options.tolerance_px * cam.min_pixel_angle_rad();
     let non_finite = AtomicU64::new(0);
     let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
     let inv_samples = 1.0 / (n * n) as f64;
     let n_dist = distances_m.len();
+    let samples_per_row = width as usize * (n * n) as usize;
     pixels
         .par_chunks_mut(width as usize)
         .enumerate()
         .progress_with(bar.clone())
-        .for_each(|(y, row)| {
-            let mut heights = vec![None; n_dist];
-            for (x, px) in row.iter_mut().enumerate() {
-                let mut acc = [0.0f64; 3];
-                for s in 0..n * n {
-                    let (jx, jy) = if n == 1 {
-                        (0.5, 0.5)
-                    } else {
-                        let key = ((y as u64) << 40) ^ ((x as u64) << 16) ^ s as u64;
-                        let (sx, sy) = ((s % n) as f64, (s / n) as f64);
-                        (
-                            (sx + unit_hash(2 * key)) / n as f64,
-                            (sy + unit_hash(2 * key + 1)) / n as f64,
-                        )
-                    };
-                    let dir = frame.direction_vector(x as f64 + jx, y as f64 + jy);
-                    let alpha = CameraFrame::elevation_of(dir);
-                    let c = match &fan {
-                        Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
-                        Some(fan) => {
-                            let end = fan.interpolate(alpha, &mut heights);
-                            shader.shade(alpha, dir, &heights, end)
-                        }
-                        None => {
-                            let mut ray =
-                                tracer.trace(cam.height_m, alpha, &distances_m, need_sky_direction);
-                            ray.heights_m.resize(n_dist, None);
-                            shader.shade(alpha, dir, &ray.heights_m, ray.end)
-                        }
-                    };
-                    let c = if c.iter().all(|v| v.is_finite()) {
-                        c
-                    } else {
-                        non_finite.fetch_add(1, Ordering::Relaxed);
-                        shader.fallback
-                    };
-                    for i in 0..3 {
-                        acc[i] += c[i];
+        .for_each_init(
+            || RowScratch::new(samples_per_row, n_dist),
+            |scratch, (y, row)| {
+                if let Some(fan) = &fan
+                    && n == 1
+                    && shade_flat_row(
+                        &FlatRow {
+                            frame: &frame,
+                            fan,
+                            shader: &shader,
+                            clear_sky_from,
+                            limit_rad: flat_row_limit_rad,
+                            y: y as u32,
+                        },
+                        row,
+                        scratch,
+                        &non_finite,
+                    )
+                {
+                    return;
+                }
+                scratch.directions(&frame, y as u32, width, n);
+                let RowScratch {
+                    dirs,
+                    heights,
+                    card_columns,
+                } = scratch;
+                // Which pixels' rays may meet a card: all of them when tracing per sample;
+                // with a fan, those in the column range of a card that the row's rays can reach.
+                card_columns.clear();
+                match &fan {
+                    None => card_columns.push((0, width as usize)),
+                    Some(fan) => {
+                        let (lo, hi) = dirs
+                            .iter()
+                            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+                                (a.min(d.elevation_rad), b.max(d.elevation_rad))
+                            });
+                        card_columns.extend(shader.cards.iter().filter_map(|card| {
+                            card_columns_in_row(card, fan, (lo, hi), &frame, y as u32, width)
+                        }));
                     }
                 }
-                *px = [
-                    (acc[0] * inv_samples) as f32,
-                    (acc[1] * inv_samples) as f32,
-                    (acc[2] * inv_samples) as f32,
-                    1.0,
-                ];
-            }
-        });
+                for (x, px) in row.iter_mut().enumerate() {
+                    let may_meet_card = card_columns.iter().any(|&(a, b)| (a..b).contains(&x));
+                    let mut acc = [0.0f64; 3];
+                    let first = x * (n * n) as usize;
+                    for dir in &dirs[first..first + (n * n) as usize] {
+                        let alpha = dir.elevation_rad;
+                        let c = match &fan {
+                            Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
+                            Some(fan) if !may_meet_card => {
+                                shader.background(dir, fan.interpolate_end(alpha))
+                            }
+                            Some(fan) => {
+                                let end = fan.interpolate(alpha, heights);
+                                shader.shade(dir, heights, end)
+                            }
+                            None => {
+                                let mut ray = tracer.trace(
+                                    cam.height_m,
+                                    alpha,
+                                    &distances_m,
+                                    need_sky_direction,
+                                );
+                                ray.heights_m.resize(n_dist, None);
+                                shader.shade(dir, &ray.heights_m, ray.end)
+                            }
+                        };
+                        let c = if c.iter().all(|v| v.is_finite()) {
+                            c
+                        } else {
+                            non_finite.fetch_add(1, Ordering::Relaxed);
+                            shader.fallback
+                        };
+                        for i in 0..3 {
+                            acc[i] += c[i];
+                        }
+                    }
+                    *px = [
+                        (acc[0] * inv_samples) as f32,
+                        (acc[1] * inv_samples) as f32,
+                        (acc[2] * inv_samples) as f32,
+                        1.0,
+                    ];
+                }
+            },
+        );
     bar.finish_and_clear();
     stats.non_finite_samples = non_finite.load(Ordering::Relaxed);
     if options.exact {
@@ -549,57 +621,6 @@ pub fn render_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn wrap_pi_wraps() {
-        assert!(
-            (wrap_pi(3.0 * std::f64::consts::PI - 0.1) - (std::f64::consts::PI - 0.1)).abs()
-                < 1e-12
-        );
-        assert!((wrap_pi(-0.1) + 0.1).abs() < 1e-15);
-        assert_eq!(wrap_pi(f64::NAN), 0.0);
-    }
-
-    #[test]
-    fn angle_table_interpolates_the_sky_closely() {
-        let sky = Sky::default();
-        let table = AngleTable::new(-0.1, 1.5, |e| sky.radiance(e));
-        for i in 0..1000 {
-            let e = -0.1 + 1.6 * (i as f64 + 0.37) / 1000.0;
-            let (a, b) = (table.at(e), sky.radiance(e));
-            for c in 0..3 {
-                assert!((a[c] - b[c]).abs() <= 1e-4 * b[c], "{e}: {a:?} {b:?}");
-            }
-        }
-    }
-
-    #[test]
-    fn narrow_angle_tables_are_as_close() {
-        // A mirage frame's range gets the fewest entries; the error bound still holds.
-        let (sky, sea) = (Sky::default(), crate::scene::Sea::default());
-        let sky_table = AngleTable::new(-0.004, 0.006, |e| sky.radiance(e));
-        let sea_table = AngleTable::new(0.0, 0.004, |g| sea.radiance(g, &sky));
-        assert_eq!(sky_table.values.len(), AngleTable::MIN_ENTRIES);
-        for i in 0..1000 {
-            let x = (i as f64 + 0.37) / 1000.0;
-            let (e, g) = (-0.004 + 0.01 * x, 0.004 * x);
-            let (a, b) = (sky_table.at(e), sky.radiance(e));
-            let (c, d) = (sea_table.at(g), sea.radiance(g, &sky));
-            for k in 0..3 {
-                assert!((a[k] - b[k]).abs() <= 1e-4 * b[k], "{e}: {a:?} {b:?}");
-                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
-            }
-        }
-        // Sea over its full range, at the widest spacing used below 90°.
-        let full = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| sea.radiance(g, &sky));
-        for i in 0..1000 {
-            let g = std::f64::consts::FRAC_PI_2 * (i as f64 + 0.37) / 1000.0;
-            let (c, d) = (full.at(g), sea.radiance(g, &sky));
-            for k in 0..3 {
-                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
-            }
-        }
-    }
 
     #[test]
     fn jitter_hash_is_uniform_enough() {

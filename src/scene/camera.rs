@@ -112,6 +112,53 @@ fn small_atan(x: f64) -> f64 {
     x * p
 }
 
+/// One sample's viewing direction in the camera's own terms: its apparent elevation, and what
+/// its azimuth needs (computed only when a card or the sun may be met).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewDirection {
+    /// Apparent elevation (rad).
+    pub elevation_rad: f64,
+    /// Film x offset from the centre in focal lengths (the direction's component along the
+    /// camera's horizontal right axis).
+    u: f64,
+    /// The direction's horizontal component along the heading: cos pitch − v·sin pitch.
+    a: f64,
+}
+
+impl ViewDirection {
+    /// The same azimuth at elevation `elevation_rad` (a row shaded at one elevation).
+    #[inline]
+    pub fn with_elevation(self, elevation_rad: f64) -> Self {
+        Self {
+            elevation_rad,
+            ..self
+        }
+    }
+
+    /// Azimuth relative to the camera heading (rad, clockwise, in (−π, π]): atan2(u, a), by the
+    /// short series when |u/a| ≤ 0.125 (every frame narrower than ±7°).
+    #[inline]
+    pub fn azimuth_offset_rad(&self) -> f64 {
+        if self.a > 0.0 && self.u.abs() <= SMALL_ATAN_MAX * self.a {
+            small_atan(self.u / self.a)
+        } else {
+            self.u.atan2(self.a)
+        }
+    }
+}
+
+/// Elevation (rad) of a direction with vertical component `dz` and horizontal length
+/// `horizontal` (> 0 or a zenith/nadir direction).
+#[inline]
+fn elevation_from(dz: f64, horizontal: f64) -> f64 {
+    let t = dz / horizontal;
+    if t.abs() <= SMALL_ATAN_MAX {
+        small_atan(t)
+    } else {
+        dz.atan2(horizontal)
+    }
+}
+
 impl CameraFrame {
     /// Direction through film point (`x`, `y`) (pixels, y down) as (azimuth, elevation) in
     /// radians; the azimuth is clockwise from north, in (−π, π].
@@ -133,6 +180,59 @@ impl CameraFrame {
             self.forward[1] + u * self.right[1] + v * self.up[1],
             self.forward[2] + u * self.right[2] + v * self.up[2],
         ]
+    }
+
+    /// The view direction through film point (`x`, `y`) (pixels, y down). Its elevation is
+    /// atan(d_z / |d_h|) with d_z = sin pitch + v·cos pitch and |d_h|² = a² + u² (u, v the film
+    /// offsets in focal lengths, a = cos pitch − v·sin pitch): the same direction as
+    /// [`Self::direction_vector`], written so that a row shares everything but u.
+    #[inline]
+    pub fn view_direction(&self, x: f64, y: f64) -> ViewDirection {
+        let (dz, a) = self.row_terms(y);
+        let u = (x - self.half_w) / self.focal_px;
+        let horizontal = (a * a + u * u).sqrt();
+        ViewDirection {
+            elevation_rad: elevation_from(dz, horizontal),
+            u,
+            a,
+        }
+    }
+
+    /// The view directions through the pixel centres of row `y` (integer row index, so the film
+    /// y coordinate is `y + 0.5`) into `out`: the same values as [`Self::view_direction`], with
+    /// the square roots and the arctangent series in loops the compiler can vectorise.
+    pub fn row_view_directions(&self, y: u32, width: u32, out: &mut Vec<ViewDirection>) {
+        let (dz, a) = self.row_terms(y as f64 + 0.5);
+        out.clear();
+        out.extend((0..width).map(|x| {
+            let u = (x as f64 + 0.5 - self.half_w) / self.focal_px;
+            ViewDirection {
+                elevation_rad: dz / (a * a + u * u).sqrt(),
+                u,
+                a,
+            }
+        }));
+        if out.iter().all(|d| d.elevation_rad.abs() <= SMALL_ATAN_MAX) {
+            for d in out.iter_mut() {
+                d.elevation_rad = small_atan(d.elevation_rad);
+            }
+        } else {
+            for d in out.iter_mut() {
+                d.elevation_rad = elevation_from(dz, (a * a + d.u * d.u).sqrt());
+            }
+        }
+    }
+
+    /// For film row `y`: the vertical component d_z and the along-heading horizontal component a
+    /// of the direction vector (both shared by the whole row).
+    #[inline]
+    fn row_terms(&self, y: f64) -> (f64, f64) {
+        let v = (self.half_h - y) / self.focal_px;
+        // forward = (…, sin pitch), up = (…, cos pitch).
+        (
+            self.forward[2] + v * self.up[2],
+            self.up[2] - v * self.forward[2],
+        )
     }
 
     /// Elevation (rad) of direction vector `d` (any length).
@@ -166,6 +266,37 @@ impl CameraFrame {
         Some((
             self.half_w + self.focal_px * dot(self.right) / z,
             self.half_h - self.focal_px * dot(self.up) / z,
+        ))
+    }
+
+    /// Film x range (pixels) of the directions whose azimuth, relative to the heading, lies in
+    /// [`lo`, `hi`] (rad), over the film rows y in [`y0`, `y1`]: a direction's azimuth offset is
+    /// atan2(u, a) with u its film x offset in focal lengths and a = cos pitch − v sin pitch
+    /// (v its film y offset), so it grows with x along a row. `None` when that does not bound
+    /// it: offsets beyond ±90°, or rows reaching the zenith or nadir (a ≤ 0).
+    pub fn film_x_range_for_azimuths(
+        &self,
+        lo: f64,
+        hi: f64,
+        y0: f64,
+        y1: f64,
+    ) -> Option<(f64, f64)> {
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        if !(lo > -half_pi && hi < half_pi && lo <= hi) {
+            return None;
+        }
+        // forward = (…, sin pitch), up = (…, cos pitch).
+        let a = |y: f64| self.up[2] - (self.half_h - y) / self.focal_px * self.forward[2];
+        let (a0, a1) = (a(y0), a(y1));
+        if !(a0 > 0.0 && a1 > 0.0) {
+            return None;
+        }
+        let (t_lo, t_hi) = (lo.tan(), hi.tan());
+        let u_lo = (a0 * t_lo).min(a1 * t_lo);
+        let u_hi = (a0 * t_hi).max(a1 * t_hi);
+        Some((
+            self.half_w + self.focal_px * u_lo,
+            self.half_w + self.focal_px * u_hi,
         ))
     }
 

@@ -97,9 +97,12 @@ impl Texture {
         }
         let x = (u * w as f64 - 0.5).clamp(0.0, (w - 1) as f64);
         let y = (v * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);
-        let (x0, y0) = (x as usize, y as usize);
+        // x, y ≥ 0, so truncation is the floor; through i32 because u64 ↔ f64 conversions are
+        // slow on baseline x86-64 (textures are far smaller than 2³¹ texels a side).
+        let (xi, yi) = (x as i32, y as i32);
+        let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
+        let (x0, y0) = (xi as usize, yi as usize);
         let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
         let t = |xx: usize, yy: usize| self.texels[yy * w + xx];
         let (a, b, c, d) = (t(x0, y0), t(x1, y0), t(x0, y1), t(x1, y1));
         let mut out = [0.0f32; 4];

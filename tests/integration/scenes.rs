@@ -707,6 +707,27 @@ fn fast_fan_matches_exact_3d_tracing_fata_morgana() {
 }
 
 #[test]
+fn fast_fan_matches_exact_3d_tracing_horizons() {
+    // Standard air: one sample per pixel puts every row of these narrow frames on the flat-row
+    // path (one elevation per row), which this checks against per-pixel 3-D tracing.
+    fast_vs_exact("fig01b_horizon_curved.toml");
+    fast_vs_exact("fig02_horizon_distortion.toml");
+}
+
+#[test]
+fn fast_fan_matches_exact_3d_tracing_paper_camera_and_inferior_mirage() {
+    fast_vs_exact("fig04a_superior_mirage_paper_camera.toml");
+    fast_vs_exact("fig08_inferior_mirage.toml");
+}
+
+#[test]
+fn fast_fan_matches_exact_3d_tracing_novaya_zemlya_suns() {
+    // Rows that meet the sun are shaded pixel by pixel (the disc depends on the azimuth).
+    fast_vs_exact("fig12_novaya_zemlya.toml");
+    fast_vs_exact("fig12b_novaya_zemlya_strips.toml");
+}
+
+#[test]
 fn real_tracer_renders_are_byte_identical_on_one_and_two_threads() {
     let scene = load_scene("fig10_fata_morgana.toml");
     let atm = atmosphere(&scene);

@@ -1,0 +1,264 @@
+//! Render — shading. In: one sample's apparent elevation and direction, and its ray (interpolated
+//! from the elevation fan or traced): heights at the card distances and how it ended. Out: linear
+//! RGB radiance from the cards it meets (front to back, alpha respected), then the sky, sun or sea
+//! behind them. Tables of sky and sea radiance by angle make each sample a few lookups.
+
+use rayon::prelude::*;
+
+use super::fan::FanEnd;
+use crate::scene::camera::ViewDirection;
+use crate::scene::{Sky, Sun, Texture};
+
+/// A card prepared for shading.
+pub(super) struct ViewCard<'a> {
+    pub(super) distance_index: usize,
+    /// Azimuth of the card centre relative to the camera heading (rad, in (−π, π]).
+    pub(super) offset_rad: f64,
+    pub(super) half_width_rad: f64,
+    pub(super) base_m: f64,
+    pub(super) top_m: f64,
+    pub(super) height_m: f64,
+    pub(super) texture: &'a Texture,
+}
+
+/// A smooth function of one angle, tabulated uniformly and interpolated linearly (the sky and the
+/// sea are evaluated per sample; a table replaces a `powf` and three `exp` by one lookup).
+pub(super) struct AngleTable {
+    start: f64,
+    inv_step: f64,
+    values: Vec<[f64; 3]>,
+}
+
+impl AngleTable {
+    /// Largest spacing of the entries (rad): sky and sea vary on scales of a degree near the
+    /// horizon; at 90° / 8191 the linear-interpolation error stays below 1e-4 of the value (unit
+    /// tests check it). A range wider than 90° gets [`Self::MAX_ENTRIES`] (at most 180° / 8191).
+    const MAX_STEP: f64 = std::f64::consts::FRAC_PI_2 / 8191.0;
+    /// Fewest entries (a narrow mirage frame needs few; this keeps them finer still).
+    const MIN_ENTRIES: usize = 256;
+    /// Most entries.
+    const MAX_ENTRIES: usize = 8192;
+
+    /// Tabulate `f` on [`lo`, `hi`] (entries computed in parallel, collected in order: the
+    /// table does not depend on the thread count).
+    pub(super) fn new(lo: f64, hi: f64, f: impl Fn(f64) -> [f64; 3] + Sync) -> Self {
+        let wanted = ((hi - lo) / Self::MAX_STEP).ceil();
+        let n = if wanted.is_finite() {
+            (wanted as usize + 1).clamp(Self::MIN_ENTRIES, Self::MAX_ENTRIES)
+        } else {
+            Self::MAX_ENTRIES
+        };
+        let step = ((hi - lo) / (n - 1) as f64).max(1e-300);
+        Self {
+            start: lo,
+            inv_step: 1.0 / step,
+            values: (0..n)
+                .into_par_iter()
+                .with_min_len(512)
+                .map(|i| f(lo + i as f64 * step))
+                .collect(),
+        }
+    }
+
+    #[inline]
+    pub(super) fn at(&self, x: f64) -> [f64; 3] {
+        // Index arithmetic in f64 and i32: u64 ↔ f64 conversions are slow on x86-64 without
+        // AVX-512, and this runs once per sample. (Tables hold at most 8192 entries.)
+        let last = (self.values.len() - 1) as f64;
+        let p = ((x - self.start) * self.inv_step).clamp(0.0, last);
+        let p = if p.is_nan() { 0.0 } else { p };
+        // p ≥ 0, so truncation is the floor (`f64::floor` is a library call on baseline x86-64).
+        let cell = (p as i32).min(self.values.len() as i32 - 2);
+        let t = p - cell as f64;
+        let i = cell as usize;
+        let (a, b) = (self.values[i], self.values[i + 1]);
+        [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t)
+    }
+}
+
+/// Everything shading needs, resolved once per frame.
+pub(super) struct Shader<'a> {
+    pub(super) cards: Vec<ViewCard<'a>>,
+    pub(super) sky: Sky,
+    pub(super) sky_table: AngleTable,
+    pub(super) sea_table: AngleTable,
+    pub(super) sun: Option<Sun>,
+    /// Camera heading (rad): sample azimuths are offsets from it.
+    pub(super) heading_rad: f64,
+    pub(super) fallback: [f64; 3],
+}
+
+#[inline]
+pub(super) fn wrap_pi(x: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    let y = (x + std::f64::consts::PI).rem_euclid(two_pi) - std::f64::consts::PI;
+    if y.is_finite() { y } else { 0.0 }
+}
+
+impl Shader<'_> {
+    /// Radiance of a sample looking along `dir` along a ray with `heights` at the card distances
+    /// and end `end`.
+    #[inline]
+    pub(super) fn shade(
+        &self,
+        dir: &ViewDirection,
+        heights: &[Option<f64>],
+        end: FanEnd,
+    ) -> [f64; 3] {
+        self.composite_with(dir, heights, || self.background(dir, end))
+    }
+
+    /// The cards a sample along `dir` meets (`heights` at the card distances), front to back,
+    /// over `background`.
+    #[inline]
+    pub(super) fn composite(
+        &self,
+        dir: &ViewDirection,
+        heights: &[Option<f64>],
+        background: [f64; 3],
+    ) -> [f64; 3] {
+        self.composite_with(dir, heights, || background)
+    }
+
+    /// As [`Self::composite`] with the background computed only when a card lets light through.
+    /// The azimuth is computed only when a card's height range is met.
+    #[inline]
+    fn composite_with(
+        &self,
+        dir: &ViewDirection,
+        heights: &[Option<f64>],
+        background: impl FnOnce() -> [f64; 3],
+    ) -> [f64; 3] {
+        let mut acc = [0.0f64; 3];
+        let mut transmit = 1.0f64;
+        let mut azimuth_cache: Option<f64> = None;
+        let mut azimuth = || *azimuth_cache.get_or_insert_with(|| dir.azimuth_offset_rad());
+        for card in &self.cards {
+            let Some(h) = heights[card.distance_index] else {
+                continue;
+            };
+            if h < card.base_m || h > card.top_m {
+                continue;
+            }
+            let mut offset = azimuth() - card.offset_rad;
+            if offset.abs() > std::f64::consts::PI {
+                offset = wrap_pi(offset);
+            }
+            if offset.abs() > card.half_width_rad {
+                continue;
+            }
+            let u = 0.5 + 0.5 * offset / card.half_width_rad;
+            let v = (card.top_m - h) / card.height_m;
+            let t = card.texture.sample(u, v);
+            for c in 0..3 {
+                acc[c] += transmit * t[c] as f64;
+            }
+            transmit *= 1.0 - t[3] as f64;
+            if transmit < 1e-6 {
+                return acc;
+            }
+        }
+        let background = background();
+        for c in 0..3 {
+            acc[c] += transmit * background[c];
+        }
+        acc
+    }
+
+    /// Whether a ray that ended with `end` may show the sun (its final direction is within the
+    /// disc's elevation band): then the colour depends on the azimuth.
+    #[inline]
+    pub(super) fn may_meet_sun(&self, end: FanEnd) -> bool {
+        match (end, &self.sun) {
+            (FanEnd::Sky { elevation_rad }, Some(sun)) => {
+                (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
+            }
+            _ => false,
+        }
+    }
+
+    /// Radiance behind every card: the sea, or the sky (with the sun disc where the ray's final
+    /// direction meets it), or the fallback for a lost ray. A sample whose ray meets no card is
+    /// shaded by this alone ([`Self::shade`] adds nothing to it).
+    #[inline]
+    pub(super) fn background(&self, dir: &ViewDirection, end: FanEnd) -> [f64; 3] {
+        let alpha = dir.elevation_rad;
+        match end {
+            FanEnd::Ground { grazing_rad, .. } => self.sea_table.at(grazing_rad),
+            FanEnd::Sky { elevation_rad } => {
+                let mut l = self.sky_table.at(alpha);
+                // The elevation test is the disc's own quick reject, done before the azimuth.
+                if let Some(sun) = &self.sun
+                    && (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
+                {
+                    let azimuth = self.heading_rad + dir.azimuth_offset_rad();
+                    let disc = sun.disc(azimuth, elevation_rad);
+                    if disc > 0.0 {
+                        let t = self.sky.transmittance(alpha);
+                        for c in 0..3 {
+                            l[c] += disc * t[c];
+                        }
+                    }
+                }
+                l
+            }
+            FanEnd::Lost => self.fallback,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_pi_wraps() {
+        assert!(
+            (wrap_pi(3.0 * std::f64::consts::PI - 0.1) - (std::f64::consts::PI - 0.1)).abs()
+                < 1e-12
+        );
+        assert!((wrap_pi(-0.1) + 0.1).abs() < 1e-15);
+        assert_eq!(wrap_pi(f64::NAN), 0.0);
+    }
+
+    #[test]
+    fn angle_table_interpolates_the_sky_closely() {
+        let sky = Sky::default();
+        let table = AngleTable::new(-0.1, 1.5, |e| sky.radiance(e));
+        for i in 0..1000 {
+            let e = -0.1 + 1.6 * (i as f64 + 0.37) / 1000.0;
+            let (a, b) = (table.at(e), sky.radiance(e));
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() <= 1e-4 * b[c], "{e}: {a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn narrow_angle_tables_are_as_close() {
+        // A mirage frame's range gets the fewest entries; the error bound still holds.
+        let (sky, sea) = (Sky::default(), crate::scene::Sea::default());
+        let sky_table = AngleTable::new(-0.004, 0.006, |e| sky.radiance(e));
+        let sea_table = AngleTable::new(0.0, 0.004, |g| sea.radiance(g, &sky));
+        assert_eq!(sky_table.values.len(), AngleTable::MIN_ENTRIES);
+        for i in 0..1000 {
+            let x = (i as f64 + 0.37) / 1000.0;
+            let (e, g) = (-0.004 + 0.01 * x, 0.004 * x);
+            let (a, b) = (sky_table.at(e), sky.radiance(e));
+            let (c, d) = (sea_table.at(g), sea.radiance(g, &sky));
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() <= 1e-4 * b[k], "{e}: {a:?} {b:?}");
+                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
+            }
+        }
+        // Sea over its full range, at the widest spacing used below 90°.
+        let full = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |g| sea.radiance(g, &sky));
+        for i in 0..1000 {
+            let g = std::f64::consts::FRAC_PI_2 * (i as f64 + 0.37) / 1000.0;
+            let (c, d) = (full.at(g), sea.radiance(g, &sky));
+            for k in 0..3 {
+                assert!((c[k] - d[k]).abs() <= 1e-4 * d[k], "{g}: {c:?} {d:?}");
+            }
+        }
+    }
+}
