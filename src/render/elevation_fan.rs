@@ -3,8 +3,9 @@
 //! elevation, refined where the transfer curve bends sharply, with O(1) lookup and interpolation.
 //!
 //! **Refinement and its error bound.** The fan starts with rays spaced two pixels (at the image
-//! centre) apart in elevation, and every interval is bisected at least once, so the finished fan
-//! is at most one pixel apart. An interval [a, b] between neighbouring rays is bisected — its
+//! centre) apart in elevation, and every interval is bisected at least once — so the finished
+//! fan is at most one pixel apart — except where the two rays belong to a *monotone family* and
+//! miss every card (below). An interval [a, b] between neighbouring rays is bisected — its
 //! midpoint m is traced — and it stays *open* (is bisected again in the next round) when any of:
 //!
 //! * the two ends and the midpoint do not end the same way (sea / sky / lost), or reach a card
@@ -17,6 +18,20 @@
 //!   the wrong elevation by that much);
 //! * with a sun in the scene, near the sun's elevation, the same test on the final sky elevation.
 //!
+//! **Monotone families.** Over a sphere with n = n(r), a ray keeps Bouguer's invariant
+//! K = n·r·cos ψ (ψ its local elevation; K = n₀r₀cos α at the camera). Take two rays launched
+//! upwards, α₁ < α₂, that never turned down ([`FanRay::monotone`]): at every radius
+//! cos ψ = K/(n r) is smaller for ray 2, so ray 2 is steeper everywhere, reaches every radius at
+//! a shorter ground distance, and at every ground distance is higher. A ray launched between
+//! them has K between theirs, so n r > K₁ > K along ray 1's path: it cannot turn either, and it
+//! lies between the two at every distance. The same holds for rays that descend into the sea
+//! without turning (the steeper one is lower everywhere and lands first). So when both rays of
+//! a base interval are of one such family and pass above the highest card top at every card
+//! distance (or, into the sea, land before the same card distances), every ray between them does
+//! too: they show the sky at their own apparent elevation (no sun in the scene) or the sea, and
+//! the interval is not bisected. It stays two pixels wide; only the sea's grazing angle is
+//! interpolated across it (the sea's colour changes smoothly with it).
+//!
 //! An interval is closed when its midpoint passes, or when it is narrower than
 //! `tolerance_px` pixels (then any feature it shows is misplaced by less than that: every elevation
 //! inside it lies within `tolerance_px` pixels of both traced rays), or at `max_depth` bisections.
@@ -26,7 +41,8 @@
 //! at folds and caustics (slope → 0, or changes of how rays end), the error is confined to
 //! intervals narrower than `tolerance_px` pixels. A feature of the transfer curve narrower than the
 //! base spacing that the midpoint test misses (a wiggle between two samples) can be missed: the
-//! spacing after the first bisection is one pixel, so it is smaller than a pixel row. Pixel angle = 1/focal length:
+//! spacing after the first bisection is one pixel, so it is smaller than a pixel row (monotone
+//! families, which have no such features, keep two pixels). Pixel angle = 1/focal length:
 //! off-centre pixels subtend slightly less (cos² of the off-axis angle), so there the bound in
 //! pixels is larger by 1/cos² (1.07 at 15° off axis; 1.0003 in a 2° mirage frame; but 4 at 60°,
 //! so very wide frames are sampled more coarsely than their edge pixels).
@@ -122,6 +138,73 @@ fn needs_refinement(spec: &FanSpec, a: &FanRay, m: &FanRay, b: &FanRay) -> bool 
     false
 }
 
+/// Whether every ray launched between `a` and `b` (neighbours, α_a < α_b) is shaded exactly as
+/// interpolation shades it without a midpoint: both rays belong to a monotone family (both
+/// launched upwards and never turned, or both downwards into the sea without turning; see the
+/// module docs) and miss every card the same way — passing above the highest card top at each
+/// card distance, or (into the sea) all ending before it. Upward rays also need the scene to
+/// have no sun: their colour is then the sky at their own apparent elevation, whatever the fan.
+fn monotone_and_clear(spec: &FanSpec, a: &FanRay, b: &FanRay) -> bool {
+    if !(a.monotone && b.monotone) {
+        return false;
+    }
+    let above_every_top = |r: &FanRay| {
+        r.heights_m
+            .iter()
+            .zip(&spec.max_top_m)
+            .all(|(h, top)| h.is_none_or(|h| h > *top))
+    };
+    let up = a.elevation_rad > 0.0 && b.elevation_rad > 0.0;
+    let down = a.elevation_rad < 0.0 && b.elevation_rad < 0.0;
+    match (a.end, b.end) {
+        (FanEnd::Sky { .. }, FanEnd::Sky { .. }) if up => {
+            !spec.need_sky_direction && above_every_top(a) && above_every_top(b)
+        }
+        (FanEnd::Ground { .. }, FanEnd::Ground { .. }) if down => {
+            above_every_top(a)
+                && above_every_top(b)
+                && a.heights_m
+                    .iter()
+                    .zip(&b.heights_m)
+                    .all(|(x, y)| x.is_some() == y.is_some())
+        }
+        _ => false,
+    }
+}
+
+/// Bisect the open interval (`a`, `b`) at bisection level `level` (0 for a base interval):
+/// trace its midpoint, push the rays inside it to `inside` in order (left half, midpoint, right
+/// half), and return the deepest level reached. The interval is bisected when it is wider than
+/// `tolerance_px` pixels and `level` < `max_depth`; its halves are bisected again when the
+/// midpoint test ([`needs_refinement`]) fails.
+fn refine(
+    spec: &FanSpec,
+    trace: &(impl Fn(f64) -> FanRay + Sync),
+    a: &FanRay,
+    b: &FanRay,
+    level: u32,
+    inside: &mut Vec<FanRay>,
+) -> u32 {
+    if level >= spec.max_depth
+        || b.elevation_rad - a.elevation_rad <= spec.tolerance_px * spec.pixel_rad
+    {
+        return level;
+    }
+    let m = trace(0.5 * (a.elevation_rad + b.elevation_rad));
+    let mut depth = level + 1;
+    if needs_refinement(spec, a, &m, b) {
+        depth = depth.max(refine(spec, trace, a, &m, level + 1, inside));
+        let at = inside.len();
+        inside.push(m);
+        // The right half needs the midpoint as its left end: borrow it back from the list.
+        let m = inside[at].clone();
+        depth = depth.max(refine(spec, trace, &m, b, level + 1, inside));
+    } else {
+        inside.push(m);
+    }
+    depth
+}
+
 impl ElevationFan {
     /// Trace and refine the fan for `spec` (rays traced in parallel, collected in order: the
     /// result does not depend on the number of threads).
@@ -145,7 +228,7 @@ impl ElevationFan {
             ray.heights_m.resize(spec.distances_m.len(), None);
             ray
         };
-        let mut rays: Vec<FanRay> = (0..n_base)
+        let rays: Vec<FanRay> = (0..n_base)
             .into_par_iter()
             .map(|i| {
                 trace(if i + 1 == n_base {
@@ -155,49 +238,34 @@ impl ElevationFan {
                 })
             })
             .collect();
-        let mut open = vec![true; n_base - 1];
-        let min_width = spec.tolerance_px * spec.pixel_rad;
-        let mut depth = 0;
-        while depth < spec.max_depth {
-            let candidates: Vec<usize> = (0..open.len())
-                .filter(|&i| {
-                    open[i] && rays[i + 1].elevation_rad - rays[i].elevation_rad > min_width
-                })
-                .collect();
-            if candidates.is_empty() {
-                break;
+        // Every base interval is bisected at least once, except between two rays of a monotone
+        // family that are clear of every card (module docs). Each base interval is refined on
+        // its own (its decisions depend only on its own rays), all in parallel: no round of
+        // bisections waits for the slowest ray of the previous one. Collected in order, so the
+        // fan does not depend on the number of threads.
+        let refined: Vec<(Vec<FanRay>, u32)> = rays
+            .par_windows(2)
+            .map(|w| {
+                let mut inside = Vec::new();
+                let depth = if monotone_and_clear(spec, &w[0], &w[1]) {
+                    0
+                } else {
+                    refine(spec, &trace, &w[0], &w[1], 0, &mut inside)
+                };
+                (inside, depth)
+            })
+            .collect();
+        let depth = refined.iter().map(|(_, d)| *d).max().unwrap_or(0);
+        let mut all =
+            Vec::with_capacity(rays.len() + refined.iter().map(|(r, _)| r.len()).sum::<usize>());
+        let mut refined = refined.into_iter();
+        for ray in rays {
+            all.push(ray);
+            if let Some((inside, _)) = refined.next() {
+                all.extend(inside);
             }
-            depth += 1;
-            let mids: Vec<FanRay> = candidates
-                .par_iter()
-                .map(|&i| trace(0.5 * (rays[i].elevation_rad + rays[i + 1].elevation_rad)))
-                .collect();
-            let mut new_rays = Vec::with_capacity(rays.len() + mids.len());
-            let mut mid_positions = Vec::with_capacity(mids.len());
-            let mut mids = candidates.iter().copied().zip(mids).peekable();
-            for (i, ray) in rays.into_iter().enumerate() {
-                new_rays.push(ray);
-                if let Some((j, _)) = mids.peek()
-                    && *j == i
-                    && let Some((_, m)) = mids.next()
-                {
-                    mid_positions.push(new_rays.len());
-                    new_rays.push(m);
-                }
-            }
-            // Both halves of a bisected interval stay open iff its midpoint test fails; every
-            // other interval is closed.
-            let mut flags = vec![false; new_rays.len() - 1];
-            for &p in &mid_positions {
-                let refine =
-                    needs_refinement(spec, &new_rays[p - 1], &new_rays[p], &new_rays[p + 1]);
-                flags[p - 1] = refine;
-                flags[p] = refine;
-            }
-            rays = new_rays;
-            open = flags;
         }
-        Self::from_rays(rays, spec.distances_m.len(), depth)
+        Self::from_rays(all, spec.distances_m.len(), depth)
     }
 
     fn from_rays(rays: Vec<FanRay>, n_distances: usize, depth: u32) -> Self {
@@ -470,7 +538,43 @@ mod tests {
         let a = fan.elevations_rad();
         let i = a.partition_point(|&x| x < -dip);
         assert!(a[i] - a[i - 1] <= 0.1 * 2e-5, "{}", a[i] - a[i - 1]);
-        // Away from the horizon nothing was refined beyond the first bisection: one pixel.
-        assert!((a[1] - a[0] - 2e-5).abs() < 0.01 * 2e-5, "{}", a[1] - a[0]);
+        // Far below the horizon the rays descend straight into the sea (a monotone family, no
+        // card): the base spacing of two pixels is kept.
+        assert!((a[1] - a[0] - 4e-5).abs() < 0.01 * 2e-5, "{}", a[1] - a[0]);
+        // Just below the horizon, next to the refined change, one pixel or less.
+        assert!(
+            a[i - 1] - a[i - 2] <= 2e-5 * 1.0001,
+            "{}",
+            a[i - 1] - a[i - 2]
+        );
+        // High above it, climbing rays (no card, no sun) keep two pixels as well...
+        let n = a.len();
+        assert!((a[n - 1] - a[n - 2] - 4e-5).abs() < 0.01 * 2e-5);
+        // ...but not when a sun needs their sky directions.
+        let sunny = FanSpec {
+            need_sky_direction: true,
+            sun_band_rad: Some((0.5, 0.6)),
+            ..s
+        };
+        let b = ElevationFan::build(&tracer, &sunny);
+        let m = b.elevations_rad().len();
+        let top = b.elevations_rad();
+        assert!(top[m - 1] - top[m - 2] <= 2e-5 * 1.0001);
+    }
+
+    #[test]
+    fn rays_that_may_meet_a_card_are_one_pixel_apart() {
+        // A card 20 m high at 5 km: rays that reach it below 20 m are not a clear family.
+        let tracer = StraightRays::new(EARTH_RADIUS_M).unwrap();
+        let s = spec(vec![5_000.0], vec![20.0]);
+        let fan = ElevationFan::build(&tracer, &s);
+        let a = fan.elevations_rad();
+        for w in a.windows(2) {
+            let mid = 0.5 * (w[0] + w[1]);
+            let ray = tracer.trace(10.0, mid, &[5_000.0], false);
+            if ray.heights_m[0].is_some_and(|h| h <= 20.0) {
+                assert!(w[1] - w[0] <= 2e-5 * 1.0001, "{mid}: {}", w[1] - w[0]);
+            }
+        }
     }
 }

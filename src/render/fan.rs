@@ -28,6 +28,11 @@ pub struct FanRay {
     pub heights_m: Vec<Option<f64>>,
     /// How the ray ended.
     pub end: FanEnd,
+    /// The ray kept the sign of its launch elevation until it ended: it climbed the whole way or
+    /// descended the whole way, never passing an apogee or perigee. `false` when unknown. In a
+    /// spherically stratified atmosphere such rays form monotone families (see
+    /// [`ElevationFan`](super::ElevationFan)), which lets the fan skip refining between them.
+    pub monotone: bool,
 }
 
 /// How a ray ended.
@@ -185,6 +190,7 @@ impl RayTracer for ConstantCurvatureRays {
             elevation_rad,
             heights_m,
             end: FanEnd::Lost,
+            monotone: false,
         };
         if !camera_height_m.is_finite() || camera_height_m < 0.0 || !elevation_rad.is_finite() {
             return lost(vec![None; distances_m.len()]);
@@ -241,10 +247,14 @@ impl RayTracer for ConstantCurvatureRays {
                 Some((p - re * c) / c)
             })
             .collect();
+        // A line climbs the whole way when launched upwards; launched downwards it descends the
+        // whole way to its first crossing with the sphere, or passes a perigee when it misses.
+        let monotone = alpha > 0.0 || (alpha < 0.0 && ground_theta.is_some());
         FanRay {
             elevation_rad,
             heights_m,
             end,
+            monotone,
         }
     }
 }

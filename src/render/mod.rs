@@ -119,7 +119,7 @@ fn unit_hash(key: u64) -> f64 {
     (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
-/// Directions (azimuth, elevation) through 257 points on each edge of the film (corners
+/// Directions (azimuth, elevation) through 65 points on each edge of the film (corners
 /// included): the frame's border, where both extremes of azimuth and elevation lie (apart from the
 /// zenith and nadir).
 fn border_directions(
@@ -128,7 +128,9 @@ fn border_directions(
     height: u32,
 ) -> impl Iterator<Item = (f64, f64)> + '_ {
     let (w, h) = (width as f64, height as f64);
-    let steps = 256;
+    // Along an edge the elevation has at most one interior extreme, at the edge's middle
+    // (included: the count is even); the azimuth is monotone. So few points suffice.
+    let steps = 64;
     (0..=steps).flat_map(move |s| {
         let t = s as f64 / steps as f64;
         [(t * w, 0.0), (t * w, h), (0.0, t * h), (w, t * h)].map(|(x, y)| frame.direction(x, y))
@@ -292,8 +294,7 @@ fn shade_flat_row(
         *px = if columns.iter().any(|&(a, b)| (a..b).contains(&x)) {
             let dir = ctx
                 .frame
-                .view_direction(x as f64 + 0.5, film_y)
-                .with_elevation(alpha);
+                .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha);
             pixel(finite(ctx.shader.composite(&dir, heights, background)))
         } else {
             fill
@@ -441,9 +442,10 @@ pub fn render_scene(
     // Samples at or above this elevation see only sky (no sun, above every card): shade them
     // from the sky table alone — the same result as the full path, without the fan lookup.
     let mut clear_sky_from = f64::INFINITY;
-    let fan = if options.exact {
-        None
-    } else {
+    let build_fan = || {
+        if options.exact {
+            return None;
+        }
         let spec = FanSpec {
             camera_height_m: cam.height_m,
             distances_m: distances_m.clone(),
@@ -461,13 +463,25 @@ pub fn render_scene(
             max_depth: options.max_refine_depth,
         };
         let fan = ElevationFan::build(tracer, &spec);
-        if scene.sun.is_none() {
-            clear_sky_from = fan.clear_sky_from(&spec.max_top_m);
-        }
+        let clear_sky_from = if scene.sun.is_none() {
+            fan.clear_sky_from(&spec.max_top_m)
+        } else {
+            f64::INFINITY
+        };
+        Some((fan, clear_sky_from))
+    };
+    // The sky table needs no fan: build both at once.
+    let (fan, sky_table) = rayon::join(build_fan, || {
+        AngleTable::new(elevations.0, elevations.1, |e| {
+            sky.radiance_with_depths(e, depths)
+        })
+    });
+    let fan = fan.map(|(fan, from)| {
+        clear_sky_from = from;
         stats.fan_rays = fan.len();
         stats.fan_depth = fan.max_depth_reached;
-        Some(fan)
-    };
+        fan
+    });
 
     // The sea table spans grazing angles from 0 (where a NaN grazing angle is shaded) to the
     // steepest the frame can show: with a fan, the steepest fan ray (interpolation stays between
@@ -481,9 +495,7 @@ pub fn render_scene(
     let shader = Shader {
         cards,
         sky,
-        sky_table: AngleTable::new(elevations.0, elevations.1, |e| {
-            sky.radiance_with_depths(e, depths)
-        }),
+        sky_table,
         sea_table: AngleTable::new(0.0, sea_hi, |g| {
             sea.radiance_with_sky_depths(g, &sky, depths)
         }),

@@ -114,6 +114,7 @@ fn fan_ray(record: &RayRecord, elevation_rad: f64, n_distances: usize) -> FanRay
         elevation_rad,
         heights_m,
         end,
+        monotone: !record.turned,
     }
 }
 
@@ -134,6 +135,7 @@ fn lost(elevation_rad: f64, n_distances: usize) -> FanRay {
         elevation_rad,
         heights_m: vec![None; n_distances],
         end: FanEnd::Lost,
+        monotone: false,
     }
 }
 

@@ -126,15 +126,6 @@ pub struct ViewDirection {
 }
 
 impl ViewDirection {
-    /// The same azimuth at elevation `elevation_rad` (a row shaded at one elevation).
-    #[inline]
-    pub fn with_elevation(self, elevation_rad: f64) -> Self {
-        Self {
-            elevation_rad,
-            ..self
-        }
-    }
-
     /// Azimuth relative to the camera heading (rad, clockwise, in (−π, π]): atan2(u, a), by the
     /// short series when |u/a| ≤ 0.125 (every frame narrower than ±7°).
     #[inline]
@@ -194,6 +185,18 @@ impl CameraFrame {
         ViewDirection {
             elevation_rad: elevation_from(dz, horizontal),
             u,
+            a,
+        }
+    }
+
+    /// The direction through film point (`x`, `y`) with its elevation taken as `elevation_rad`
+    /// (a row shaded at one elevation: only the azimuth comes from the film point).
+    #[inline]
+    pub fn view_direction_at_elevation(&self, x: f64, y: f64, elevation_rad: f64) -> ViewDirection {
+        let (_, a) = self.row_terms(y);
+        ViewDirection {
+            elevation_rad,
+            u: (x - self.half_w) / self.focal_px,
             a,
         }
     }

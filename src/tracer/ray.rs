@@ -256,6 +256,10 @@ pub struct RayRecord {
     /// Largest |I − I₀| / (n₀ r₀) along the ray, I = n·r·cos ψ (Bouguer); only meaningful for
     /// spherically symmetric fields (on a flat Earth: Snell's n·cos ψ, relative to n₀).
     pub invariant_drift: f64,
+    /// Whether the ray's local elevation left the sign it was launched with (it passed an apogee
+    /// or perigee), checked at every accepted step and at the end; always true for a level
+    /// launch. A ray that never turned climbed (or descended) the whole way.
+    pub turned: bool,
 }
 
 impl RayRecord {
@@ -277,6 +281,15 @@ impl RayRecord {
         self.accepted_steps = 0;
         self.rejected_steps = 0;
         self.invariant_drift = 0.0;
+        self.turned = elevation_rad.is_nan() || elevation_rad == 0.0;
+    }
+
+    /// Note the local elevation `elevation_rad` of a point on the ray.
+    #[inline]
+    fn note_elevation(&mut self, elevation_rad: f64) {
+        let same_sign = (self.elevation_rad > 0.0 && elevation_rad > 0.0)
+            || (self.elevation_rad < 0.0 && elevation_rad < 0.0);
+        self.turned |= !same_sign;
     }
 }
 
@@ -645,12 +658,14 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             rec.invariant_drift = rec
                 .invariant_drift
                 .max((o.invariant - invariant0).abs() / scale);
+            rec.note_elevation(o.elevation_rad);
             finish(rec, kind, &o, s + t * h, elevation0);
             return;
         }
         rec.invariant_drift = rec
             .invariant_drift
             .max((obs1.invariant - invariant0).abs() / scale);
+        rec.note_elevation(obs1.elevation_rad);
         let next_point = point(&obs1, s + h);
         if let Some(p) = path.as_deref_mut() {
             p.push(next_point);

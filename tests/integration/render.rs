@@ -219,6 +219,8 @@ impl RayTracer for FoldRays {
             elevation_rad: alpha,
             heights_m,
             end,
+            // The fold makes the family non-monotone in α whatever each ray does.
+            monotone: false,
         }
     }
 }
@@ -540,6 +542,7 @@ impl RayTracer for HostileRays {
             elevation_rad: alpha,
             heights_m: distances.iter().map(|_| Some(f64::NAN)).collect(),
             end,
+            monotone: alpha.to_bits().is_multiple_of(2),
         }
     }
 }
@@ -577,6 +580,7 @@ impl RayTracer for LiftedRays {
             end: FanEnd::Sky {
                 elevation_rad: alpha - 2f64.to_radians(),
             },
+            monotone: false,
         }
     }
 }

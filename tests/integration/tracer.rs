@@ -832,3 +832,44 @@ fn us1976_dip_matches_the_refraction_coefficient() {
     assert!(((dip - expected) * ARCMIN_PER_RAD).abs() < 0.005);
     assert!((dip * ARCMIN_PER_RAD - 1.76 * h0.sqrt()).abs() < 0.05);
 }
+
+#[test]
+fn records_whether_a_ray_turned() {
+    // Straight lines over a sphere (n constant): upward rays climb the whole way, downward
+    // rays that land descend the whole way, downward rays that miss pass a perigee.
+    let field = Constant(1.000_3);
+    let tracer = Tracer::new(&field, config(0.01)).unwrap();
+    let up = tracer.trace(10.0, 0.001, &[]).unwrap();
+    assert!(!up.turned, "{up:?}");
+    let down = tracer.trace(10.0, -0.01, &[]).unwrap();
+    assert_eq!(down.termination, Some(Termination::Ground));
+    assert!(!down.turned);
+    let dip = (R / (R + 10.0)).acos();
+    let grazing = tracer.trace(10.0, -0.5 * dip, &[]).unwrap();
+    assert_eq!(grazing.termination, Some(Termination::Escaped));
+    assert!(
+        grazing.turned,
+        "a ray above the sea horizon passes its perigee"
+    );
+    // A level launch counts as turned (no sign to keep).
+    assert!(tracer.trace(10.0, 0.0, &[]).unwrap().turned);
+    // In the perfect duct (n ∝ 1/r) a slightly downward ray stays downward (log spiral into
+    // the sea); an upward one stays upward.
+    let duct = InverseRadius(1.000_3);
+    let tracer = Tracer::new(&duct, config(0.01)).unwrap();
+    assert!(!tracer.trace(25.0, -1e-4, &[]).unwrap().turned);
+    assert!(!tracer.trace(25.0, 1e-4, &[]).unwrap().turned);
+    // Stronger than the duct (n ∝ 1/r², n·r falls with height): an upward ray is turned back
+    // down (apogee r₀/cos α, 3 m above the camera at α = 1 mrad) and lands.
+    struct Trap;
+    impl StratifiedIndex for Trap {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            let q = R / (R + h);
+            (1.000_3 * q * q, -2.0 * 1.000_3 * q * q / (R + h))
+        }
+    }
+    let tracer = Tracer::new(&Trap, config(0.01)).unwrap();
+    let rec = tracer.trace(10.0, 1e-3, &[]).unwrap();
+    assert_eq!(rec.termination, Some(Termination::Ground), "{rec:?}");
+    assert!(rec.turned);
+}
