@@ -4,11 +4,19 @@
 //! Spherical symmetry makes the ray depend only on its apparent elevation, so the renderer traces
 //! one fan of elevations for the whole frame ([`elevation_fan`], refined adaptively where the
 //! transfer curve bends sharply; its documentation states the error bound) and shades every pixel
-//! sample by interpolating in that fan: per sample, an elevation (one `atan2`; the azimuth only
-//! when a card or the sun may be met), an O(1) fan lookup,
-//! a few comparisons per card in view, and the sky/sea/sun model. Exact mode instead calls the
-//! tracer for every sample (no fan, no interpolation): it validates the fast path and is the
-//! benchmark baseline.
+//! sample by interpolating in that fan: per sample, an elevation (a square root and a short
+//! arctangent series; the azimuth only when a card or the sun may be met), an O(1) fan lookup, a
+//! few comparisons per card in view, and the sky/sea/sun model (shading in `shade`). Per row,
+//! cards are tested only in the columns their azimuth range and the row's heights allow.
+//!
+//! **Flat rows.** With one sample per pixel, a row whose elevations span less than
+//! [`FLAT_ROW_FRACTION`] × the fan tolerance (every row of a narrow mirage frame: the elevation
+//! changes by ≈ α·u²/2 across it) is shaded at the elevation of its centre column: one fan
+//! lookup, one sea or sky colour for the row, and per pixel only the card tests in card columns.
+//! Rows whose ray may meet the sun are shaded pixel by pixel (the disc depends on the azimuth).
+//!
+//! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
+//! it validates the fast path and is the benchmark baseline.
 //!
 //! Samples: n×n stratified, jittered by a hash of (pixel, sample) — no global random state, so the
 //! image is the same whatever the thread count (rows are rendered in parallel, each pixel on its
