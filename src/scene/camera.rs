@@ -404,4 +404,56 @@ mod tests {
             assert!((f.centre_row_of_elevation(el, c.pitch_rad) - y).abs() < 1e-9);
         }
     }
+
+    #[test]
+    fn view_directions_match_the_direction_vector() {
+        for (heading, pitch) in [(0.0, 0.0), (37.0, -12.0), (-150.0, 25.0), (90.0, 80.0)] {
+            let c = cam(heading, pitch);
+            let f = c.frame();
+            let mut row = Vec::new();
+            for y in [0u32, 57, 199] {
+                f.row_view_directions(y, c.width, &mut row);
+                for x in [0u32, 1, 133, 200, 399] {
+                    let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
+                    let (az, el) = f.direction(fx, fy);
+                    let d = f.view_direction(fx, fy);
+                    assert_eq!(d, row[x as usize]);
+                    assert!((d.elevation_rad - el).abs() < 1e-14, "{heading} {pitch}");
+                    let off = d.azimuth_offset_rad() + c.heading_rad - az;
+                    let off = (off + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                        - std::f64::consts::PI;
+                    assert!(off.abs() < 1e-14, "{heading} {pitch}: {off}");
+                    let at = f.view_direction_at_elevation(fx, fy, 0.25);
+                    assert_eq!(at.elevation_rad, 0.25);
+                    assert_eq!(at.azimuth_offset_rad(), d.azimuth_offset_rad());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn azimuth_range_bounds_the_columns_that_see_it() {
+        for pitch in [-20.0, 0.0, 15.0] {
+            let c = cam(30.0, pitch);
+            let f = c.frame();
+            let (lo, hi) = (-0.2, 0.05);
+            let (a, b) = f.film_x_range_for_azimuths(lo, hi, 40.0, 41.0).unwrap();
+            assert!(a < b);
+            for i in 0..=800 {
+                let x = i as f64 * 0.5;
+                for y in [40.0, 40.5, 41.0] {
+                    let off = f.view_direction(x, y).azimuth_offset_rad();
+                    if (lo..=hi).contains(&off) {
+                        assert!(x >= a - 1e-9 && x <= b + 1e-9, "{pitch}: x {x} off {off}");
+                    }
+                }
+            }
+        }
+        // Offsets beyond ±90° are not bounded.
+        let f = cam(0.0, 0.0).frame();
+        assert!(f.film_x_range_for_azimuths(-2.0, 0.1, 0.0, 1.0).is_none());
+        // Rows that reach past the zenith are not bounded (a ≤ 0).
+        let f = cam(0.0, 89.0).frame();
+        assert!(f.film_x_range_for_azimuths(-0.1, 0.1, 0.0, 1.0).is_none());
+    }
 }

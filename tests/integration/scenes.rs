@@ -731,14 +731,15 @@ fn fast_fan_matches_exact_3d_tracing_novaya_zemlya_suns() {
 fn real_tracer_renders_are_byte_identical_on_one_and_two_threads() {
     let scene = load_scene("fig10_fata_morgana.toml");
     let atm = atmosphere(&scene);
-    let encode = |threads: usize| {
+    // One sample per pixel takes the flat-row path, four the per-sample path.
+    let encode = |threads: usize, spp: u32| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {
             let opts = RenderOptions {
-                samples_per_pixel: Some(4),
+                samples_per_pixel: Some(spp),
                 quiet: true,
                 ..RenderOptions::default()
             };
@@ -749,10 +750,18 @@ fn real_tracer_renders_are_byte_identical_on_one_and_two_threads() {
             (png, exr)
         })
     };
-    let one = encode(1);
-    let two = encode(2);
-    assert!(one.0 == two.0, "PNG differs between 1 and 2 threads");
-    assert!(one.1 == two.1, "EXR differs between 1 and 2 threads");
+    for spp in [1, 4] {
+        let one = encode(1, spp);
+        let two = encode(2, spp);
+        assert!(
+            one.0 == two.0,
+            "PNG differs between 1 and 2 threads ({spp} spp)"
+        );
+        assert!(
+            one.1 == two.1,
+            "EXR differs between 1 and 2 threads ({spp} spp)"
+        );
+    }
 }
 
 #[test]
