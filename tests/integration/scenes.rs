@@ -606,48 +606,48 @@ fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
             );
         }
     }
-    // The map is non-monotonic: going up the column from the sea horizon ε first falls below
-    // the sun's lower limb, then rises back above its upper limb.
+    // The map is non-monotonic: going up the column from the sea horizon ε has several dips
+    // (one per M shelf of the atmosphere): interior local minima.
     let sky: Vec<(usize, f64)> = eps
         .iter()
         .enumerate()
         .rev()
         .filter_map(|(y, e)| e.map(|e| (y, e)))
         .collect();
-    let (y_min, e_min) = sky
-        .iter()
-        .copied()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .unwrap();
-    assert!(e_min < sun.elevation_rad - radius, "ε never below the disc");
-    assert!(
-        sky[0].1 > e_min + 0.1f64.to_radians()
-            && sky.last().unwrap().1 > sun.elevation_rad + radius
-    );
-    eprintln!(
-        "sea horizon row {}, ε min {:.3}° at row {y_min}",
-        sky[0].0,
-        e_min.to_degrees()
-    );
-    // At least two separate strips, predicted and rendered, one each side of the ε minimum.
+    let minima: Vec<usize> = sky
+        .windows(3)
+        .filter(|w| w[1].1 < w[0].1 && w[1].1 < w[2].1)
+        .map(|w| w[1].0)
+        .collect();
+    eprintln!("sea horizon row {}, ε minima at rows {minima:?}", sky[0].0);
+    assert!(minima.len() >= 2, "ε has only the minima {minima:?}");
+    // At least three separate strips, predicted and rendered, with sky between them.
     let want = runs(&predicted_lit);
     let got = runs(&lit);
     eprintln!("predicted strips {want:?}, rendered {got:?}");
-    assert!(want.len() >= 2 && got.len() >= 2, "{want:?} {got:?}");
-    assert!(want.iter().any(|r| r.1 < y_min as u32) && want.iter().any(|r| r.0 > y_min as u32));
+    assert!(want.len() >= 3 && got.len() >= 3, "{want:?} {got:?}");
     // Each predicted strip lies inside one rendered strip (a rendered strip reaches a little
-    // further: it includes the limbs, 0.8–1.0 of the radius, that the prediction leaves out).
+    // further: it includes the limbs, 0.8–1.0 of the radius, that the prediction leaves out),
+    // and each rendered strip holds a predicted one (no strip the traced map does not explain).
     for w in &want {
         assert!(
             got.iter().any(|g| g.0 <= w.0 && w.1 <= g.1),
             "predicted strip {w:?} not inside one rendered strip: {got:?}"
         );
     }
-    // And they are separated by sky without sun: rows between them with ε below the disc.
-    let gap: Vec<u32> = (want[0].1 + 1..want[1].0)
-        .filter(|&y| !lit[y as usize])
-        .collect();
-    assert!(gap.len() >= 3, "gap rows {gap:?}");
+    for g in &got {
+        assert!(
+            want.iter().any(|w| g.0 <= w.0 && w.1 <= g.1),
+            "rendered strip {g:?} holds no predicted strip: {want:?}"
+        );
+    }
+    // Consecutive strips are separated by sky without sun: rows whose rays look past the disc.
+    for pair in got.windows(2) {
+        let gap: Vec<u32> = (pair[0].1 + 1..pair[1].0)
+            .filter(|&y| eps[y as usize].is_some_and(|e| (e - sun.elevation_rad).abs() > radius))
+            .collect();
+        assert!(gap.len() >= 3, "gap rows between {pair:?}: {gap:?}");
+    }
 }
 
 /// Pixels that differ by more than `threshold` (any channel), and pixels of `film` on an edge
