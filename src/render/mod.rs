@@ -10,8 +10,8 @@
 //! cards are tested only in the columns their azimuth range and the row's heights allow.
 //!
 //! **Flat rows.** With one sample per pixel, a row whose elevations span less than
-//! [`FLAT_ROW_FRACTION`] × the fan tolerance (every row of a narrow mirage frame: the elevation
-//! changes by ≈ α·u²/2 across it) is shaded at the elevation of its centre column: one fan
+//! [`FLAT_ROW_FRACTION`] × the fan tolerance (the elevation changes by ≈ α·u²/2 across it: every
+//! row of a narrow mirage frame at 400×200, about half of them at 1920×1080) is shaded at the elevation of its centre column: one fan
 //! lookup, one sea or sky colour for the row, and per pixel only the card tests in card columns.
 //! Rows whose ray may meet the sun are shaded pixel by pixel (the disc depends on the azimuth).
 //!
@@ -233,10 +233,11 @@ impl RowScratch {
 /// Fraction of the fan tolerance ([`RenderOptions::tolerance_px`]) by which the elevations along
 /// one image row may differ for the row to be shaded at a single elevation (1 sample per pixel,
 /// fan mode). Along a row of a level camera the elevation changes by about α·u²/2 (u the
-/// half-width in radians): 0.003 px across a 1° mirage frame at α = 0.3°, so such rows share
-/// one ray — one fan lookup, the sea or sky colour once — and only columns that can meet a card
-/// (or rows that meet the sun) are shaded pixel by pixel. Features are then misplaced by at most
-/// (1 + this) × the fan tolerance.
+/// half-width in radians): across a 1° mirage frame at α = 0.3° that is 0.005 px at 400 px wide
+/// (every row of the paper frames at 400×200 is flat) but 0.02 px at 1920 (about half the rows
+/// of a 1080p frame are). Flat rows share one ray — one fan lookup, the sea or sky colour once —
+/// and only columns that can meet a card (or rows that meet the sun) are shaded pixel by pixel.
+/// Features are then misplaced by at most (1 + this) × the fan tolerance.
 pub const FLAT_ROW_FRACTION: f64 = 0.1;
 
 /// What [`shade_flat_row`] needs besides the row.
@@ -267,17 +268,20 @@ fn shade_flat_row(
         return false;
     }
     let alpha = centre.elevation_rad;
-    let finite = |c: [f64; 3]| {
+    // A colour that is not finite becomes the fallback; `samples` pixels use it (counted).
+    let finite = |c: [f64; 3], samples: u64| {
         if c.iter().all(|v| v.is_finite()) {
             c
         } else {
-            non_finite.fetch_add(1, Ordering::Relaxed);
+            if samples > 0 {
+                non_finite.fetch_add(samples, Ordering::Relaxed);
+            }
             ctx.shader.fallback
         }
     };
     let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
     if alpha >= ctx.clear_sky_from {
-        row.fill(pixel(finite(ctx.shader.sky_table.at(alpha))));
+        row.fill(pixel(finite(ctx.shader.sky_table.at(alpha), width as u64)));
         return true;
     }
     let heights = &mut scratch.heights;
@@ -297,13 +301,15 @@ fn shade_flat_row(
         }
     }
     let background = ctx.shader.background(&centre, end);
-    let fill = pixel(finite(background));
+    let in_card_columns = |x: usize| columns.iter().any(|&(a, b)| (a..b).contains(&x));
+    let filled = (0..row.len()).filter(|&x| !in_card_columns(x)).count();
+    let fill = pixel(finite(background, filled as u64));
     for (x, px) in row.iter_mut().enumerate() {
-        *px = if columns.iter().any(|&(a, b)| (a..b).contains(&x)) {
+        *px = if in_card_columns(x) {
             let dir = ctx
                 .frame
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha);
-            pixel(finite(ctx.shader.composite(&dir, heights, background)))
+            pixel(finite(ctx.shader.composite(&dir, heights, background), 1))
         } else {
             fill
         };

@@ -189,7 +189,7 @@ impl Shader<'_> {
                 let mut l = self.sky_table.at(alpha);
                 // The elevation test is the disc's own quick reject, done before the azimuth.
                 if let Some(sun) = &self.sun
-                    && (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
+                    && self.may_meet_sun(end)
                 {
                     let azimuth = self.heading_rad + dir.azimuth_offset_rad();
                     let disc = sun.disc(azimuth, elevation_rad);

@@ -69,6 +69,9 @@ pub fn straight_ray(
     let psi_end = elevation_rad + end_angle;
     let r_end = k / psi_end.cos();
     record.termination = Some(termination);
+    // A line launched upwards climbs the whole way; launched downwards it descends the whole way
+    // to the sea, or passes its perigee and escapes (reset already counts a level launch).
+    record.turned |= elevation_rad < 0.0 && termination == Termination::Escaped;
     record.end = RayPoint {
         arc_length_m: r_end * psi_end.sin() - r0 * elevation_rad.sin(),
         distance_m: end_angle * earth_radius_m,

@@ -566,6 +566,15 @@ fn no_pixel_is_ever_nan() {
             assert!(film.pixels.iter().flatten().all(|v| v.is_finite()));
         }
     }
+    // A narrow frame at one sample per pixel: the flat-row path (one elevation per row).
+    let text = format!(
+        "[camera]\nheight_m = 10\nhfov_deg = 1\nwidth = 64\nheight = 48\n\
+         [sun]\nelevation_deg = 0.1\nazimuth_deg = 0.1\n\
+         [[cards]]\nimage = {board:?}\ndistance_m = 1000\nwidth_m = 5\nheight_m = 20\n"
+    );
+    let (_dir, scene) = scene_in_tempdir(&text);
+    let film = render_scene(&scene, &HostileRays, &quiet()).unwrap();
+    assert!(film.pixels.iter().flatten().all(|v| v.is_finite()));
 }
 
 /// Rays that all come up by 2° (like strongly ducted air): final direction = α − 2°.

@@ -650,20 +650,37 @@ fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
     }
 }
 
-/// Pixels that differ by more than `threshold` (any channel), and pixels of `film` on an edge
-/// (differing by more than `threshold` from a vertical neighbour).
+/// Pixels of `a` and `b` that differ by more than `threshold` (any channel), and pixels of `b`
+/// on an edge (differing by more than `threshold` from a vertical neighbour). Panics if a
+/// differing pixel is not next to an edge (any of its four neighbours differs from it) in `a` or
+/// in `b`: the fan moves edges, it never changes a pixel inside a uniform region.
 fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
     let differ = |p: [f32; 4], q: [f32; 4]| (0..3).any(|k| (p[k] - q[k]).abs() > threshold);
-    let diff = a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .filter(|(p, q)| differ(**p, **q))
-        .count();
+    let at_edge = |film: &Film, x: u32, y: u32| {
+        let p = film.pixel(x, y);
+        [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
+            .iter()
+            .any(|(dx, dy)| {
+                let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+                nx >= 0
+                    && ny >= 0
+                    && (nx as u32) < film.width
+                    && (ny as u32) < film.height
+                    && differ(p, film.pixel(nx as u32, ny as u32))
+            })
+    };
+    let mut diff = 0;
     let mut edges = 0;
     for y in 0..b.height {
         for x in 0..b.width {
             let p = b.pixel(x, y);
+            if differ(a.pixel(x, y), p) {
+                diff += 1;
+                assert!(
+                    at_edge(a, x, y) || at_edge(b, x, y),
+                    "pixel ({x}, {y}) differs away from any edge"
+                );
+            }
             let up = y > 0 && differ(p, b.pixel(x, y - 1));
             let down = y + 1 < b.height && differ(p, b.pixel(x, y + 1));
             if up || down {

@@ -853,6 +853,10 @@ fn records_whether_a_ray_turned() {
     );
     // A level launch counts as turned (no sign to keep).
     assert!(tracer.trace(10.0, 0.0, &[]).unwrap().turned);
+    // The closed-form straight ray says the same.
+    let line = |e: f64| ghostship::tracer::straight_ray(10.0, e, R, 40_000.0, &[]).unwrap();
+    assert!(!line(0.001).turned && !line(-0.01).turned);
+    assert!(line(-0.5 * dip).turned && line(0.0).turned);
     // In the perfect duct (n ∝ 1/r) a slightly downward ray stays downward (log spiral into
     // the sea); an upward one stays upward.
     let duct = InverseRadius(1.000_3);
