@@ -328,6 +328,22 @@ fn max_channel_difference(a: [f32; 4], b: [f32; 4]) -> f32 {
     (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max)
 }
 
+/// Whether pixel (`x`, `y`) of `film` sits at an edge: one of its four neighbours differs from
+/// it by more than `threshold` in some channel.
+pub(crate) fn at_edge(film: &Film, x: u32, y: u32, threshold: f32) -> bool {
+    let p = film.pixel(x, y);
+    [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
+        .iter()
+        .any(|(dx, dy)| {
+            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+            nx >= 0
+                && ny >= 0
+                && (nx as u32) < film.width
+                && (ny as u32) < film.height
+                && max_channel_difference(p, film.pixel(nx as u32, ny as u32)) > threshold
+        })
+}
+
 #[test]
 fn fan_render_matches_exact_render_except_at_edges() {
     // The sun (radius 0.27°) sits just above the boards; with the fold tracer its final sky
@@ -377,21 +393,7 @@ fn fan_render_matches_exact_render_except_at_edges() {
                 // differs from it. The fan misplaces features by < 0.1 px, which moves an edge
                 // across a pixel centre, or makes a sub-pixel feature (a 12 cm tick mark) fall on
                 // or between pixel centres — never changes a pixel inside a uniform region.
-                let at_edge = |film: &Film| {
-                    let p = film.pixel(x, y);
-                    [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
-                        .iter()
-                        .any(|(dx, dy)| {
-                            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-                            nx >= 0
-                                && ny >= 0
-                                && (nx as u32) < w
-                                && (ny as u32) < h
-                                && max_channel_difference(p, film.pixel(nx as u32, ny as u32))
-                                    > threshold
-                        })
-                };
-                let near_edge = at_edge(&exact) || at_edge(&fast);
+                let near_edge = at_edge(&exact, x, y, threshold) || at_edge(&fast, x, y, threshold);
                 assert!(
                     near_edge,
                     "{name}: pixel ({x}, {y}) differs away from any edge"

@@ -22,6 +22,8 @@ use ghostship::scene::card::srgb_to_linear;
 use ghostship::scene::{AtmosphereSpec, Scene, Texture, assets};
 use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
+use crate::render::at_edge;
+
 fn data_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data"))
 }
@@ -656,19 +658,6 @@ fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
 /// in `b`: the fan moves edges, it never changes a pixel inside a uniform region.
 fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
     let differ = |p: [f32; 4], q: [f32; 4]| (0..3).any(|k| (p[k] - q[k]).abs() > threshold);
-    let at_edge = |film: &Film, x: u32, y: u32| {
-        let p = film.pixel(x, y);
-        [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
-            .iter()
-            .any(|(dx, dy)| {
-                let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-                nx >= 0
-                    && ny >= 0
-                    && (nx as u32) < film.width
-                    && (ny as u32) < film.height
-                    && differ(p, film.pixel(nx as u32, ny as u32))
-            })
-    };
     let mut diff = 0;
     let mut edges = 0;
     for y in 0..b.height {
@@ -677,7 +666,7 @@ fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usiz
             if differ(a.pixel(x, y), p) {
                 diff += 1;
                 assert!(
-                    at_edge(a, x, y) || at_edge(b, x, y),
+                    at_edge(a, x, y, threshold) || at_edge(b, x, y, threshold),
                     "pixel ({x}, {y}) differs away from any edge"
                 );
             }
