@@ -1,4 +1,6 @@
 //! One integration-test binary (keeps link time low); each file is a module.
+mod support;
+
 mod cli;
 mod end_to_end;
 mod ingest;

@@ -1,0 +1,1 @@
+//! Paths of the repository's own test inputs.

@@ -1,0 +1,1 @@
+//! An independent reference ray tracer for spherically stratified air (filled in separately).
