@@ -26,3 +26,4 @@ pub mod scene;
 pub mod sounding;
 pub mod tracer;
 pub mod units;
+pub mod verify;

@@ -634,6 +634,21 @@ impl AirColumn for Profile {
             dvapour_pressure_dh_pa_per_m: de,
         }
     }
+
+    /// The knots of the piecewise fits (every level: T and ln P are piecewise cubics, C¹ at
+    /// them), the ends of the humidity data, the top of the data (where the blend into US1976
+    /// starts, C¹) and the US1976 layer bases above it.
+    fn breaks_m(&self) -> Vec<f64> {
+        let mut breaks: Vec<f64> = self.knots.iter().map(|k| k.height_m).collect();
+        if let Some(v) = &self.vapour {
+            breaks.extend([v.lo_m, v.hi_m]);
+        }
+        breaks.push(self.top_m);
+        breaks.extend(super::us1976::layer_bases_geometric_m().filter(|&h| h > self.top_m));
+        breaks.push(MODEL_TOP_M);
+        breaks.retain(|&h| h > self.surface_height_m);
+        super::normalise_breaks(breaks)
+    }
 }
 
 #[cfg(test)]

@@ -62,6 +62,22 @@ pub trait AirColumn: Send + Sync {
     fn surface_height_m(&self) -> f64;
     /// Air at `height_m` above mean sea level (at or above the surface).
     fn air_at(&self, height_m: f64) -> AirSample;
+    /// Heights above mean sea level (ascending) where the column is not smooth: where dT/dh, or
+    /// a second derivative of T, P or e, may jump (knots of a piecewise fit, edges of a
+    /// constant-gradient layer, layer bases of the standard atmosphere). A ray integrator loses
+    /// its order in a step that straddles one, so the tracer ends its steps on them. Default:
+    /// none (a smooth column).
+    fn breaks_m(&self) -> Vec<f64> {
+        Vec::new()
+    }
+}
+
+/// Sort heights, drop non-finite ones and merge those closer than 1 mm (one break).
+pub fn normalise_breaks(mut heights_m: Vec<f64>) -> Vec<f64> {
+    heights_m.retain(|h| h.is_finite());
+    heights_m.sort_by(f64::total_cmp);
+    heights_m.dedup_by(|a, b| (*a - *b).abs() < 1e-3);
+    heights_m
 }
 
 /// Whether an inversion starts at the ground or aloft.

@@ -104,6 +104,16 @@ impl AirColumn for StandardAtmosphere {
             dvapour_pressure_dh_pa_per_m: 0.0,
         }
     }
+
+    /// The US1976 layer bases (dT/dh jumps there) and the 86 km top of the model.
+    fn breaks_m(&self) -> Vec<f64> {
+        super::normalise_breaks(
+            super::us1976::layer_bases_geometric_m()
+                .chain([MODEL_TOP_M])
+                .filter(|&h| h > self.surface_height_m)
+                .collect(),
+        )
+    }
 }
 
 #[cfg(test)]

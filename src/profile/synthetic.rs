@@ -581,6 +581,31 @@ impl AirColumn for SyntheticAtmosphere {
             dvapour_pressure_dh_pa_per_m: de,
         }
     }
+
+    /// Edges of constant-gradient layers, the tropopause of a lapse-rate background and the
+    /// US1976 layer bases above it (dT/dh jumps at each); step layers are smooth.
+    fn breaks_m(&self) -> Vec<f64> {
+        let mut breaks: Vec<f64> = self
+            .layers
+            .iter()
+            .filter_map(|layer| match *layer {
+                SyntheticLayer::Gradient { from_m, to_m, .. } => Some([from_m, to_m]),
+                SyntheticLayer::Step { .. } => None,
+            })
+            .flatten()
+            .collect();
+        let standard_from = match self.background {
+            Background::Lapse { tropopause_m, .. } => {
+                breaks.push(tropopause_m);
+                tropopause_m
+            }
+            Background::Us1976 => self.surface_height_m,
+        };
+        breaks.extend(super::us1976::layer_bases_geometric_m().filter(|&h| h > standard_from));
+        breaks.push(MODEL_TOP_M);
+        breaks.retain(|&h| h > self.surface_height_m);
+        super::normalise_breaks(breaks)
+    }
 }
 
 #[cfg(test)]

@@ -36,6 +36,19 @@ pub struct StandardAir {
     pub dtemperature_dh_k_per_m: f64,
 }
 
+/// Geometric heights above mean sea level (m) of the US1976 layer bases above the ground (11, 20,
+/// 32, 47, 51 and 71 km geopotential): dT/dh jumps there.
+pub fn layer_bases_geometric_m() -> impl Iterator<Item = f64> {
+    LAYERS[1..]
+        .iter()
+        .map(|&(base, _)| geopotential_to_geometric_m(base))
+}
+
+/// Geopotential height (m′) → geometric height above mean sea level (m).
+pub fn geopotential_to_geometric_m(geopotential_m: f64) -> f64 {
+    US1976_EARTH_RADIUS_M * geopotential_m / (US1976_EARTH_RADIUS_M - geopotential_m)
+}
+
 /// Geometric height above mean sea level (m) → geopotential height (m′).
 pub fn geometric_to_geopotential_m(height_m: f64) -> f64 {
     US1976_EARTH_RADIUS_M * height_m / (US1976_EARTH_RADIUS_M + height_m)

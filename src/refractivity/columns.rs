@@ -68,6 +68,12 @@ impl AirColumn for LapseRateColumn {
             dvapour_pressure_dh_pa_per_m: de,
         }
     }
+
+    /// The start of the isothermal air, where dT/dh jumps.
+    fn breaks_m(&self) -> Vec<f64> {
+        let top = self.surface_height_m + self.isothermal_above_agl_m.max(0.0);
+        if top.is_finite() { vec![top] } else { Vec::new() }
+    }
 }
 
 /// The U.S. Standard Atmosphere 1976 (dry) from a surface height (m above mean sea level).
@@ -95,6 +101,13 @@ impl AirColumn for StandardAtmosphereColumn {
             vapour_pressure_pa: 0.0,
             dvapour_pressure_dh_pa_per_m: 0.0,
         }
+    }
+
+    /// The US1976 layer bases (dT/dh jumps there).
+    fn breaks_m(&self) -> Vec<f64> {
+        crate::profile::us1976::layer_bases_geometric_m()
+            .filter(|&h| h > self.surface_height_m)
+            .collect()
     }
 }
 

@@ -1,9 +1,17 @@
 //! The fast lookup table behind [`RefractiveAtmosphere`](super::RefractiveAtmosphere)'s
-//! `StratifiedIndex` implementation: a uniform grid in height with a cubic Hermite in each cell.
+//! `StratifiedIndex` implementation: a uniform grid in height with a quintic Hermite in each cell.
 //!
 //! In: a function giving the exact (n − 1, dn/dh) at a height. Out: O(1) lookups of
-//! (n − 1, dn/dh), where dn/dh is the derivative of the same cubic, so the pair is consistent (the
-//! tracer's Bouguer invariant sees a field whose n is exactly the integral of its dn/dh).
+//! (n − 1, dn/dh), where dn/dh is the derivative of the same polynomial, so the pair is consistent
+//! (the tracer's Bouguer invariant sees a field whose n is exactly the integral of its dn/dh).
+//!
+//! Why quintic: each cell matches n, dn/dh and d²n/dh² at both ends, so the table is C² and the
+//! ray equation's right-hand side (which holds dn/dh) stays C¹ across the nodes. A cubic table
+//! (C¹) puts a jump of d²n/dh² at every node, 0.25 m apart near the ground, and every integrator
+//! step straddles some: that capped the tracer's accuracy at a few 0.1 mm at 26 km whatever its
+//! tolerance. d²n/dh² at a node is the central difference of the exact dn/dh over ±1 mm; a node
+//! next to a real kink gets a wrong value there, and the cell check below sends those cells to
+//! the exact formula.
 //!
 //! Written by hand: `splines` has no derivative and does an O(log n) search per call, and the
 //! tracer's hot loop wants an O(1) index with a per-cell fallback, which no crate offers.
@@ -47,18 +55,53 @@ pub(crate) enum Lookup {
     Outside,
 }
 
-/// A uniform grid of nodes (n − 1, dn/dh) with a cubic Hermite per cell.
+/// A uniform grid with a quintic Hermite per cell (stored as its six coefficients in the cell
+/// fraction t ∈ [0, 1]).
 #[derive(Debug, Clone)]
 pub(crate) struct HermiteGrid {
     start_m: f64,
     step_m: f64,
     inv_step: f64,
-    nodes: Vec<[f64; 2]>,
+    cells: Vec<[f64; 6]>,
     exact_cell: Vec<bool>,
+}
+
+/// Half-width (m) of the central difference of dn/dh that gives d²n/dh² at a node.
+const SECOND_DERIVATIVE_STEP_M: f64 = 1e-3;
+
+/// The quintic on [0, 1] with value, slope and second derivative `a` at 0 and `b` at 1 (slopes
+/// and second derivatives already scaled to the unit interval).
+fn quintic(a: [f64; 3], b: [f64; 3]) -> [f64; 6] {
+    let (c0, c1, c2) = (a[0], a[1], 0.5 * a[2]);
+    let big_a = b[0] - (c0 + c1 + c2);
+    let big_b = b[1] - (c1 + 2.0 * c2);
+    let big_c = b[2] - 2.0 * c2;
+    [
+        c0,
+        c1,
+        c2,
+        10.0 * big_a - 4.0 * big_b + 0.5 * big_c,
+        -15.0 * big_a + 7.0 * big_b - big_c,
+        6.0 * big_a - 3.0 * big_b + 0.5 * big_c,
+    ]
 }
 
 /// A node function failed (non-finite or invalid air); carries its error.
 pub(crate) type NodeResult<E> = Result<(f64, f64), E>;
+
+/// A node at `h`: (n − 1, slope, second derivative), the slope and second derivative scaled to
+/// a cell of `step_m`.
+fn node<E>(
+    exact: &(dyn Fn(f64) -> NodeResult<E> + Sync),
+    h: f64,
+    step_m: f64,
+) -> Result<[f64; 3], E> {
+    let (v, d) = exact(h)?;
+    let (_, below) = exact(h - SECOND_DERIVATIVE_STEP_M)?;
+    let (_, above) = exact(h + SECOND_DERIVATIVE_STEP_M)?;
+    let second = (above - below) / (2.0 * SECOND_DERIVATIVE_STEP_M);
+    Ok([v, d * step_m, second * step_m * step_m])
+}
 
 impl HermiteGrid {
     /// Build a grid of `cells` cells of `step_m` from `start_m`, evaluating `exact` at every node
@@ -72,15 +115,15 @@ impl HermiteGrid {
         tolerance_dndh: f64,
         exact: &(dyn Fn(f64) -> NodeResult<E> + Sync),
     ) -> Result<(Self, GridError), E> {
-        let nodes: Vec<[f64; 2]> = (0..=cells)
+        let nodes: Vec<[f64; 3]> = (0..=cells)
             .into_par_iter()
-            .map(|i| exact(start_m + i as f64 * step_m).map(|(a, b)| [a, b]))
+            .map(|i| node(exact, start_m + i as f64 * step_m, step_m))
             .collect::<Result<_, E>>()?;
         let mut grid = Self {
             start_m,
             step_m,
             inv_step: 1.0 / step_m,
-            nodes,
+            cells: nodes.windows(2).map(|w| quintic(w[0], w[1])).collect(),
             exact_cell: vec![false; cells],
         };
         // Per cell: (raw max dn, raw max d(dn/dh)).
@@ -126,16 +169,10 @@ impl HermiteGrid {
     /// Hermite value and derivative in cell `i` at fraction `t` ∈ [0, 1].
     #[inline]
     fn interpolate(&self, i: usize, t: f64) -> (f64, f64) {
-        let [y0, m0] = self.nodes[i];
-        let [y1, m1] = self.nodes[i + 1];
-        let h = self.step_m;
-        let d = y1 - y0;
-        let a1 = h * m0;
-        let c2 = 3.0 * d - h * (2.0 * m0 + m1);
-        let c3 = -2.0 * d + h * (m0 + m1);
-        let value = y0 + t * (a1 + t * (c2 + t * c3));
-        let deriv = (a1 + t * (2.0 * c2 + 3.0 * t * c3)) * self.inv_step;
-        (value, deriv)
+        let [c0, c1, c2, c3, c4, c5] = self.cells[i];
+        let value = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))));
+        let deriv = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)));
+        (value, deriv * self.inv_step)
     }
 
     /// Look up `height_m` (which must not be NaN).
@@ -165,7 +202,7 @@ impl HermiteGrid {
 mod tests {
     use super::*;
 
-    /// A cubic is reproduced exactly by a cubic Hermite.
+    /// A cubic is reproduced exactly (to rounding) by the quintic Hermite.
     #[test]
     fn reproduces_a_cubic_exactly() {
         let f = |h: f64| -> NodeResult<()> {

@@ -11,6 +11,7 @@
 //!   paths can be checked against each other.
 //! * [`straight_ray`] — exact straight-line geometry (n ≡ 1), the paper's Figure 1.
 
+mod breaks;
 mod dopri;
 mod ray;
 mod straight;
@@ -32,6 +33,11 @@ use system::{FieldSystem, PlanarSystem};
 pub trait IndexField: Send + Sync {
     /// Refractive index and its gradient (m⁻¹) at `position_m`.
     fn index_and_gradient(&self, position_m: DVec3) -> (f64, DVec3);
+    /// Heights above the ground (m, ascending) of the levels where the field is not smooth (see
+    /// [`StratifiedIndex::breaks_m`]); the integrator ends its steps on them. Default: none.
+    fn breaks_m(&self) -> &[f64] {
+        &[]
+    }
 }
 
 /// A horizontally stratified index n(h), h = height above the surface (m), over a sphere.
@@ -39,11 +45,22 @@ pub trait IndexField: Send + Sync {
 pub trait StratifiedIndex: Send + Sync {
     /// n and dn/dh (m⁻¹) at height `height_m` above the surface.
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64);
+    /// Heights above the surface (m, ascending, finite) where dn/dh or d²n/dh² may jump: the
+    /// knots of a piecewise fit, the edges of constant-gradient layers, the standard
+    /// atmosphere's layer bases. A Runge–Kutta step that straddles such a level drops to first
+    /// or second order, so the integrator ends a step exactly on every break a ray crosses and
+    /// restarts there. Default: none (a smooth field).
+    fn breaks_m(&self) -> &[f64] {
+        &[]
+    }
 }
 
 impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         (**self).index_and_derivative(height_m)
+    }
+    fn breaks_m(&self) -> &[f64] {
+        (**self).breaks_m()
     }
 }
 
@@ -61,6 +78,9 @@ impl<S: StratifiedIndex> IndexField for Spherical<S> {
         let r = position_m.length();
         let (n, dn) = self.index.index_and_derivative(r - self.earth_radius_m);
         (n, position_m * (dn / r))
+    }
+    fn breaks_m(&self) -> &[f64] {
+        self.index.breaks_m()
     }
 }
 

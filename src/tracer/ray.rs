@@ -22,6 +22,7 @@ use std::fmt;
 
 use serde::Serialize;
 
+use super::breaks::{Bracket, Exit};
 use super::dopri::{Controller, Dense, Step};
 use super::system::{Observables, RaySystem};
 
@@ -251,8 +252,12 @@ pub struct RayRecord {
     pub refraction_rad: Option<f64>,
     /// Accepted steps.
     pub accepted_steps: u32,
-    /// Rejected steps.
+    /// Rejected steps (including steps discarded because they straddled a break and were
+    /// retaken shorter, to end on it).
     pub rejected_steps: u32,
+    /// Breaks of the field (see [`StratifiedIndex::breaks_m`](super::StratifiedIndex::breaks_m))
+    /// on which a step was ended.
+    pub breaks_landed: u32,
     /// Largest |I − I₀| / (n₀ r₀) along the ray, I = n·r·cos ψ (Bouguer); only meaningful for
     /// spherically symmetric fields (on a flat Earth: Snell's n·cos ψ, relative to n₀).
     pub invariant_drift: f64,
@@ -280,6 +285,7 @@ impl RayRecord {
         self.refraction_rad = None;
         self.accepted_steps = 0;
         self.rejected_steps = 0;
+        self.breaks_landed = 0;
         self.invariant_drift = 0.0;
         self.turned = elevation_rad.is_nan() || elevation_rad == 0.0;
     }
@@ -491,6 +497,8 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     let mut h = cfg.initial_step_m.min(cfg.max_step_m);
     let mut controller = Controller::new();
     let mut steps = 0u32;
+    let mut bracket = Bracket::new(sys.breaks(), obs.height_m, sys.climb(&y) > 0.0);
+    let mut aim: Option<Aim> = None;
     loop {
         if steps >= cfg.max_steps {
             finish(rec, Termination::MaxSteps, &obs, s, elevation0);
@@ -505,6 +513,9 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             h = h.min(vertical_limit / sin_psi);
         }
         h = h.min(cfg.max_step_m);
+        if let Some(a) = aim {
+            h = a.step_m;
+        }
         let remaining = cfg.max_length_m - s;
         if remaining <= cfg.min_step_m {
             finish(rec, Termination::MaxLength, &obs, s, elevation0);
@@ -528,6 +539,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         };
         if err.is_nan() || err > 1.0 {
             rec.rejected_steps += 1;
+            aim = None;
             let shrunk = controller.reject(h, err);
             if !err.is_finite() && shrunk < cfg.min_step_m {
                 finish(rec, Termination::NonFinite, &obs, s, elevation0);
@@ -536,7 +548,6 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             h = shrunk;
             continue;
         }
-        rec.accepted_steps += 1;
         let y1 = step.y1;
         let obs1 = sys.observe(&y1);
         if !obs_finite(&obs1) {
@@ -545,6 +556,32 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         }
         let mut dense: Option<Dense<N>> = None;
         let get_dense = |dense: &mut Option<Dense<N>>| *dense.get_or_insert_with(|| step.dense());
+        // Breaks: a step that crosses one is retaken shorter to end on it (see `breaks`).
+        match aim {
+            Some(a) => match a.polish(obs1.height_m, obs1.elevation_rad) {
+                Some(polished) => {
+                    rec.rejected_steps += 1;
+                    aim = Some(polished);
+                    continue;
+                }
+                None => {
+                    bracket.cross(a.exit.up);
+                    rec.breaks_landed += 1;
+                }
+            },
+            None if !bracket.is_empty() => {
+                if let Some(a) = aim_at_break(sys, &mut bracket, &step, &obs, &obs1, h, cfg) {
+                    rec.rejected_steps += 1;
+                    aim = Some(Aim {
+                        next_step_m: controller.accept(h, err),
+                        ..a
+                    });
+                    continue;
+                }
+            }
+            None => {}
+        }
+        rec.accepted_steps += 1;
 
         // Terminating events: earliest wins.
         let mut end: Option<(f64, Termination)> = None;
@@ -680,8 +717,96 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             finish(rec, Termination::LeftRegion, &obs, s, elevation0);
             return;
         }
-        h = controller.accept(h, err);
+        h = match aim.take() {
+            Some(a) => a.next_step_m,
+            None => controller.accept(h, err),
+        };
     }
+}
+
+/// Shortest step (m of path) retaken to end on a break; a crossing closer to the start than this
+/// is a ray that already sits on the break (within rounding) and just changes interval.
+const MIN_LANDING_STEP_M: f64 = 1e-6;
+
+/// Largest distance (m) from a break at which a step that was aimed at it counts as landed.
+const LANDING_TOLERANCE_M: f64 = 1e-9;
+
+/// Retakes of an aimed step (Newton on its length) to bring its end onto the break.
+const MAX_POLISH: u8 = 2;
+
+/// A step being retaken so that it ends on a break.
+#[derive(Debug, Clone, Copy)]
+struct Aim {
+    /// Length of the retaken step (m of path).
+    step_m: f64,
+    /// The break and the direction of the crossing.
+    exit: Exit,
+    /// Retakes so far.
+    polished: u8,
+    /// The step to continue with after landing (what the controller proposed for the original).
+    next_step_m: f64,
+}
+
+impl Aim {
+    /// After the aimed step ended at `height_m` with local elevation `elevation_rad`: a corrected
+    /// step if it missed the break by more than [`LANDING_TOLERANCE_M`] and a Newton correction
+    /// is well conditioned, else `None` (landed).
+    fn polish(self, height_m: f64, elevation_rad: f64) -> Option<Aim> {
+        let miss = height_m - self.exit.height_m;
+        let climb = elevation_rad.sin();
+        if miss.abs() <= LANDING_TOLERANCE_M || self.polished >= MAX_POLISH || climb.abs() < 1e-6
+        {
+            return None;
+        }
+        let step_m = self.step_m - miss / climb;
+        (step_m > MIN_LANDING_STEP_M && step_m < 2.0 * self.step_m).then_some(Aim {
+            step_m,
+            polished: self.polished + 1,
+            ..self
+        })
+    }
+}
+
+/// The aimed retake of `step` if it leaves the ray's interval between breaks far enough from its
+/// start; crossings at the start only move `bracket` on.
+fn aim_at_break<const N: usize, Sys: RaySystem<N>>(
+    sys: &Sys,
+    bracket: &mut Bracket<'_>,
+    step: &Step<N>,
+    obs: &Observables,
+    obs1: &Observables,
+    h: f64,
+    cfg: &TracerConfig,
+) -> Option<Aim> {
+    let climb0 = sys.climb(&step.y0);
+    let climb1 = sys.climb(&step.y1);
+    let turns = (climb0 > 0.0) != (climb1 > 0.0);
+    if !turns && obs1.height_m > bracket.lower_m() && obs1.height_m < bracket.upper_m() {
+        return None;
+    }
+    let dense = &step.dense();
+    let extremum = turns.then(|| locate(|t| sys.climb(&dense.at(t)), 0.0, 1.0, h));
+    let mut height = |t: f64| sys.height(&dense.at(t));
+    let mut root = |g: &mut dyn FnMut(f64) -> f64, a: f64, c: f64| locate(g, a, c, h);
+    for _ in 0..4 {
+        let exit = bracket.first_exit(
+            (obs.height_m, obs1.height_m),
+            extremum,
+            &mut height,
+            &mut root,
+        )?;
+        let step_m = exit.t * h;
+        if step_m > MIN_LANDING_STEP_M.max(cfg.min_step_m) {
+            return Some(Aim {
+                step_m,
+                exit,
+                polished: 0,
+                next_step_m: h,
+            });
+        }
+        bracket.cross(exit.up);
+    }
+    None
 }
 
 /// Snap the end height of a ground or top event onto its level (the root finder stops within

@@ -47,6 +47,8 @@ pub(crate) trait RaySystem<const N: usize> {
     fn observe(&self, y: &[f64; N]) -> Observables;
     /// Scale of the invariant (n·r or n at launch) used to express its drift as a fraction.
     fn invariant_scale(&self, y: &[f64; N]) -> f64;
+    /// Heights (m above the ground, ascending) where the field is not smooth.
+    fn breaks(&self) -> &[f64];
 }
 
 /// Spherically symmetric field, 2-D state (x, y, Tx, Ty) about Earth's centre.
@@ -99,6 +101,9 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
         let r = y[0].hypot(y[1]);
         let (n, _) = self.field.index_and_derivative(r - self.radius_m);
         n * r
+    }
+    fn breaks(&self) -> &[f64] {
+        self.field.breaks_m()
     }
 }
 
@@ -199,5 +204,8 @@ impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
             Ground::Sphere { .. } => n * r.length(),
             Ground::Flat => n,
         }
+    }
+    fn breaks(&self) -> &[f64] {
+        self.field.breaks_m()
     }
 }

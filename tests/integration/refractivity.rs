@@ -186,7 +186,8 @@ fn table_agrees_with_exact_evaluation() {
 }
 
 /// US1976 has six lapse-rate changes below 80 km where dn/dh jumps; only the cells holding them
-/// (one or two each) may fall back to the exact formula.
+/// (one, or two where a kink falls on a node) fall back to the exact formula, and every kink is
+/// in one.
 #[test]
 fn us1976_kinks_are_the_only_exact_cells() {
     let atm = atmosphere(StandardAtmosphereColumn {
@@ -194,17 +195,24 @@ fn us1976_kinks_are_the_only_exact_cells() {
     });
     let err = atm.table_max_error();
     // The jump of dn/dh at a kink is (n−1)/T·Δ(dT/dh): 2.9e-9 m⁻¹ at 11 km, 9e-11 at 20 km,
-    // < 2e-11 higher up, so only the cells at 11 km and perhaps 20 km exceed 1e-11.
+    // ~1e-12 higher up: all far above the 1e-14 the quintic cells are held to.
     assert!(
-        err.coarse.exact_cells >= 1 && err.coarse.exact_cells <= 4,
+        err.coarse.exact_cells >= 6 && err.coarse.exact_cells <= 12 && err.fine.exact_cells == 0,
         "{err:?}"
     );
     // Plain Hermite across the 11 km kink is off by ~1e-9 in dn/dh: the fallback matters.
     assert!(err.coarse.raw_max_abs_ddndh_per_m > 1e-10, "{err:?}");
-    // The tropopause (11 km geopotential = 11 019.07 m geometric) is in an exact cell.
+    // Each layer base (geopotential → geometric) is in an exact cell, and is a break.
     let r = ghostship::profile::us1976::US1976_EARTH_RADIUS_M;
-    let kink = r * 11_000.0 / (r - 11_000.0);
-    assert_eq!(atm.table_refractivity(kink), atm.exact_refractivity(kink));
+    for base in [11_000.0, 20_000.0, 32_000.0, 47_000.0, 51_000.0, 71_000.0] {
+        let kink = r * base / (r - base);
+        assert_eq!(atm.table_refractivity(kink), atm.exact_refractivity(kink));
+        assert!(
+            atm.breaks_m().iter().any(|b| (b - kink).abs() < 1e-6),
+            "{kink}: {:?}",
+            atm.breaks_m()
+        );
+    }
 }
 
 #[test]

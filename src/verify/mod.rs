@@ -1,0 +1,6 @@
+//! Verification — the accuracy study behind the tracer's tolerance. In: atmospheres (the paper's
+//! layered TOMLs, shipped soundings, and the layered stress soundings built here). Out: ray
+//! heights at target distances, traced at a range of tolerances and compared with a tight
+//! reference run, for the `bench` command and the tests.
+
+pub mod stress;
