@@ -383,10 +383,17 @@ fn significant_breaks(
             continue;
         }
         let slope = |x: f64| exact(x).map(|v| v.1);
-        let (m2, m1, p1, p2) = (slope(h - 2.0 * d)?, slope(h - d)?, slope(h + d)?, slope(h + 2.0 * d)?);
+        let (m2, m1, p1, p2) = (
+            slope(h - 2.0 * d)?,
+            slope(h - d)?,
+            slope(h + d)?,
+            slope(h + 2.0 * d)?,
+        );
         let slope_jump = ((2.0 * p1 - p2) - (2.0 * m1 - m2)).abs();
         let curvature_jump = ((p2 - p1) - (m1 - m2)).abs() / d;
-        if slope_jump > BREAK_MIN_SLOPE_JUMP_PER_M || curvature_jump > BREAK_MIN_CURVATURE_JUMP_PER_M2 {
+        if slope_jump > BREAK_MIN_SLOPE_JUMP_PER_M
+            || curvature_jump > BREAK_MIN_CURVATURE_JUMP_PER_M2
+        {
             kept.push(h);
         }
     }

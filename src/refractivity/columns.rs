@@ -72,7 +72,11 @@ impl AirColumn for LapseRateColumn {
     /// The start of the isothermal air, where dT/dh jumps.
     fn breaks_m(&self) -> Vec<f64> {
         let top = self.surface_height_m + self.isothermal_above_agl_m.max(0.0);
-        if top.is_finite() { vec![top] } else { Vec::new() }
+        if top.is_finite() {
+            vec![top]
+        } else {
+            Vec::new()
+        }
     }
 }
 

@@ -8,6 +8,9 @@
 //! from fifth to first or second order; ending steps on breaks keeps the method's order (the
 //! same treatment a careful reference integrator gives a discontinuity).
 
+/// A root finder: `locate(g, a, c)` returns a root of `g` on [a, c].
+pub(crate) type Locate<'a> = dyn FnMut(&mut dyn FnMut(f64) -> f64, f64, f64) -> f64 + 'a;
+
 /// The open height interval between two neighbouring breaks in which the ray currently is.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Bracket<'b> {
@@ -76,7 +79,7 @@ impl<'b> Bracket<'b> {
         heights_m: (f64, f64),
         extremum: Option<f64>,
         height: &mut dyn FnMut(f64) -> f64,
-        locate: &mut dyn FnMut(&mut dyn FnMut(f64) -> f64, f64, f64) -> f64,
+        locate: &mut Locate<'_>,
     ) -> Option<Exit> {
         let (lower, upper) = (self.lower_m(), self.upper_m());
         let (h0, h1) = heights_m;
@@ -155,7 +158,9 @@ mod tests {
         let b = Bracket::new(&breaks, 15.0, true);
         // Rising straight through 20 at t = 0.5.
         let mut h = |t: f64| 15.0 + 10.0 * t;
-        let e = b.first_exit((15.0, 25.0), None, &mut h, &mut bisect).unwrap();
+        let e = b
+            .first_exit((15.0, 25.0), None, &mut h, &mut bisect)
+            .unwrap();
         assert!((e.t - 0.5).abs() < 1e-12 && e.up && e.height_m == 20.0);
         // Up to an apex at 19 (t = 0.4), then down through 10.
         let mut h = |t: f64| 19.0 - 40.0 * (t - 0.4) * (t - 0.4);
@@ -168,7 +173,10 @@ mod tests {
         assert!((h(e.t) - 10.0).abs() < 1e-9);
         // Staying inside: no exit.
         let mut h = |t: f64| 15.0 + t;
-        assert!(b.first_exit((15.0, 16.0), None, &mut h, &mut bisect).is_none());
+        assert!(
+            b.first_exit((15.0, 16.0), None, &mut h, &mut bisect)
+                .is_none()
+        );
         // An apex that pokes above 20 exits on the way up.
         let mut h = |t: f64| 15.0 + 24.0 * t * (1.0 - t);
         let e = b

@@ -28,12 +28,7 @@ const STRESS: &[Corners] = &[
     Corners {
         // An arctic surface inversion, +8 K over 300 m in three linear pieces.
         name: "arctic_surface_inversion",
-        corners: &[
-            (0.0, -25.0),
-            (60.0, -21.0),
-            (150.0, -18.5),
-            (300.0, -17.0),
-        ],
+        corners: &[(0.0, -25.0), (60.0, -21.0), (150.0, -18.5), (300.0, -17.0)],
     },
     Corners {
         // Two thin layers aloft: +6 K over 3 m at 40 m and +4 K over 3 m at 90 m.
@@ -54,11 +49,7 @@ const STRESS: &[Corners] = &[
     Corners {
         // A strong elevated duct: +12 K over 20 m at 60 m.
         name: "elevated_duct",
-        corners: &[
-            (0.0, -5.0),
-            (60.0, -5.39),
-            (80.0, 6.61),
-        ],
+        corners: &[(0.0, -5.0), (60.0, -5.39), (80.0, 6.61)],
     },
     Corners {
         // A surface duct: +0.115 K/m over the lowest 150 m at −10 °C (super-critical).

@@ -53,6 +53,9 @@ impl StratifiedIndex for Exact<'_> {
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         self.0.exact(height_m)
     }
+    fn breaks_m(&self) -> &[f64] {
+        self.0.breaks_m()
+    }
 }
 
 fn config(tolerance_m: f64) -> TracerConfig {
@@ -465,7 +468,7 @@ fn real_soundings_trace_cleanly_and_continuously() {
             // below 0.02 rad in this fan out to 30 km), and the errors add at most linearly.
             let bound = r.accepted_steps as f64
                 * tol
-                * (1.0 / EARTH_RADIUS_M + 0.02 / TracerConfig::default().direction_length_m);
+                * (1.0 / EARTH_RADIUS_M + 0.02 / TracerConfig::default().error_length_m);
             assert!(
                 r.invariant_drift <= bound,
                 "{name}: ray {:.4}° drift {} > {bound}",
@@ -564,7 +567,10 @@ fn paper_fans_are_continuous_in_elevation() {
         ("superior_mirage", 80.0, 1e-2),
         ("inferior_mirage", 10.0, 1e-2),
         ("fata_morgana", 10.0, 1e-2),
-        ("fata_morgana", 80.0, 1e-2),
+        // From 80 m the fan crosses a near-fold at 36 km (|∂h/∂α| ≈ 800 × D): there two rays
+        // 1e-17 rad apart take different step sequences at 1 cm and land 0.27 m apart (each
+        // within the error such a conditioning allows); at 1 mm the jump is 1.2e-4 m.
+        ("fata_morgana", 80.0, 1e-3),
     ];
     for (name, h0, tol) in cases {
         let atm = paper(name);
