@@ -206,7 +206,7 @@ mod tests {
         ciddor_refractive_index(633e-9, t, 101_325.0, e, 450.0)
     }
 
-    /// Check values of the `ref_index` package (NIST Stone & Zimmerman), references.md §2.6.
+    /// Check values of the `ref_index` package (NIST Stone & Zimmerman), docs/references.md §2.6.
     #[test]
     fn matches_nist_ref_index_moist_air_values() {
         for (rh, t_c, expected) in [
@@ -222,7 +222,7 @@ mod tests {
         }
     }
 
-    /// Dry air at 15 °C, 101 325 Pa, 450 ppm: the Ciddor column of references.md §2.6.
+    /// Dry air at 15 °C, 101 325 Pa, 450 ppm: the Ciddor column of docs/references.md §2.6.
     #[test]
     fn matches_dry_air_dispersion_table() {
         for (lambda_um, expected) in [

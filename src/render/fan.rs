@@ -295,7 +295,7 @@ mod tests {
 
     #[test]
     fn straight_dip_is_geometric() {
-        // Dip of the horizon 1.926′·√h for R = 6371 km (references.md §2.2).
+        // Dip of the horizon 1.926′·√h for R = 6371 km (docs/references.md §2.2).
         let tracer = StraightRays::new(EARTH_RADIUS_M).unwrap();
         for &h in &[1.0f64, 10.0, 100.0] {
             let dip = 1.926 / ARCMIN_PER_RAD * h.sqrt();
@@ -352,7 +352,7 @@ mod tests {
             straight.trace(5.0, -0.0007, &d, true),
             k0.trace(5.0, -0.0007, &d, true)
         );
-        // With k the dip is the geometric one × √(1−k) to first order (references.md §2.2: the
+        // With k the dip is the geometric one × √(1−k) to first order (docs/references.md §2.2: the
         // Nautical Almanac's 1.76′√h corresponds to k ≈ 0.164).
         let k = ConstantCurvatureRays::new(0.164, EARTH_RADIUS_M).unwrap();
         let dip = 1.76 / ARCMIN_PER_RAD * 10f64.sqrt();

@@ -291,8 +291,8 @@ mod tests {
         let v: serde_json::Value = serde_json::from_slice(&summary_json(&report)).unwrap();
         assert_eq!(v["inversions"][0]["kind"], "surface");
         assert_eq!(v["surface"]["pressure_hpa"], 1020.0);
-        // Critical gradient at −20 °C, 1020 hPa: references.md gives 0.0915 K/m at 1013.25 hPa;
-        // higher pressure lowers it slightly (n − 1 ∝ P).
+        // Critical gradient at −20 °C, 1020 hPa: docs/references.md gives 0.0915 K/m at
+        // 1013.25 hPa; higher pressure lowers it slightly (n − 1 ∝ P).
         let g = v["surface"]["critical_gradient_k_per_m"].as_f64().unwrap();
         assert!(g > 0.089 && g < 0.0915, "{g}");
     }

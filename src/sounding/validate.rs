@@ -39,9 +39,10 @@ use crate::units;
 pub const MIN_LEVELS: usize = 3;
 
 /// Temperature change between consecutive levels (K/m) above which a warning names the levels.
-/// The steepest step in the shared test soundings (1-s files included) is 0.12 K/m and the
-/// paper's strongest layer 0.67 K/m; 10 K/m is 0.1 K of rounding over 1 cm. Not an error: the
-/// first seconds of a 1-s ascent can legitimately carry sensor lag over a few centimetres.
+/// The steepest step in the test soundings (`tests/data/soundings`, 1-s files included) is
+/// 0.12 K/m and the paper's strongest layer 0.67 K/m; 10 K/m is 0.1 K of rounding over 1 cm. Not
+/// an error: the first seconds of a 1-s ascent can legitimately carry sensor lag over a few
+/// centimetres.
 pub const SUSPECT_TEMPERATURE_GRADIENT_K_PER_M: f64 = 10.0;
 
 /// How far (K) a dewpoint may sit above the temperature and still be accepted (as saturation):

@@ -101,7 +101,7 @@ mod tests {
         let below = straight_ray(h0, -dip - 1e-9, r, 40_000.0, &[]).unwrap();
         assert_eq!(above.termination, Some(Termination::Escaped));
         assert_eq!(below.termination, Some(Termination::Ground));
-        // Dip 1.926′·√h (references.md §2.2): 6.091′ at 10 m.
+        // Dip 1.926′·√h (docs/references.md §2.2): 6.091′ at 10 m.
         assert!((dip * crate::units::ARCMIN_PER_RAD - 6.091).abs() < 0.001);
         // Horizon distance √(2Rh) = 11.29 km; the ray just below the dip meets the ground a
         // little before the tangent point (θ = dip − √(2·δ) with δ = 1 − K/R ≈ 1.8e-12 → ~12 m).

@@ -2,19 +2,11 @@
 //! temporary folders. Expected values come from the input files themselves (surface temperature,
 //! layer placement), from straight-line geometry over a sphere, or from properties.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use assert_cmd::cargo::cargo_bin_cmd;
 
-fn data(name: &str) -> PathBuf {
-    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name);
-    assert!(
-        path.exists(),
-        "shipped data file {} is missing",
-        path.display()
-    );
-    path
-}
+use crate::support::data::{data_file, repo_file, sounding};
 
 fn ghostship() -> assert_cmd::Command {
     cargo_bin_cmd!("ghostship")
@@ -83,7 +75,7 @@ fn json_file(path: &Path) -> serde_json::Value {
 #[test]
 fn profile_of_a_sounding_writes_three_files() {
     let dir = tempfile::tempdir().unwrap();
-    let input = data("Utqiagvik-70026_2026020600_all-levels.csv");
+    let input = data_file("Utqiagvik-70026_2026020600_all-levels.csv");
     let out = dir.path().join("utq");
     let r = ok(&[
         "profile",
@@ -125,7 +117,7 @@ fn profile_of_a_sounding_writes_three_files() {
 #[test]
 fn profile_of_a_synthetic_atmosphere_finds_its_layer() {
     let dir = tempfile::tempdir().unwrap();
-    let input = data("superior_mirage.toml");
+    let input = data_file("superior_mirage.toml");
     let r = ok(&[
         "profile",
         input.to_str().unwrap(),
@@ -317,7 +309,7 @@ fn straight_rays_follow_line_sphere_geometry() {
 fn trace_csv_and_plot() {
     let dir = tempfile::tempdir().unwrap();
     let plot = dir.path().join("fan.png");
-    let input = data("superior_mirage.toml");
+    let input = data_file("superior_mirage.toml");
     let r = ok(&[
         "trace",
         "--atmosphere",
@@ -377,8 +369,8 @@ fn bad_elevation_specs_are_explained() {
 #[test]
 fn pipeline_run_writes_every_job() {
     let dir = tempfile::tempdir().unwrap();
-    let synthetic = data("inferior_mirage.toml");
-    let sounding = data("Danmarkshavn-04320_2026020523_all-levels.csv");
+    let synthetic = data_file("inferior_mirage.toml");
+    let sounding = data_file("Danmarkshavn-04320_2026020523_all-levels.csv");
     let pipeline = dir.path().join("small.toml");
     std::fs::write(
         &pipeline,
@@ -472,11 +464,7 @@ fn profile_writes_to_out_profile_stem_by_default() {
 
 #[test]
 fn igra2_time_chooses_the_sounding() {
-    let raw = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
-    ));
-    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let dir = tempfile::tempdir().unwrap();
     let surface_hpa = |time: Option<&str>| {
         let mut args = vec![
@@ -510,11 +498,7 @@ fn igra2_time_chooses_the_sounding() {
 
 #[test]
 fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
-    let pipeline = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/pipelines/soundings.toml"
-    ));
-    assert!(pipeline.exists(), "{} is missing", pipeline.display());
+    let pipeline = repo_file("pipelines/soundings.toml");
     let dir = tempfile::tempdir().unwrap();
     ok(&[
         "pipeline",
@@ -566,7 +550,7 @@ fn render_writes_png_and_exr_of_the_requested_size() {
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("a.png");
     let exr = dir.path().join("sub/a.exr");
-    let scene = data("scenes/fig08_inferior_mirage.toml");
+    let scene = data_file("scenes/fig08_inferior_mirage.toml");
     let r = ok(&[
         "render",
         scene.to_str().unwrap(),
@@ -596,7 +580,7 @@ fn render_writes_png_and_exr_of_the_requested_size() {
 #[test]
 fn render_straight_and_curved_differ_and_bad_input_is_reported() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = data("scenes/fig08_inferior_mirage.toml");
+    let scene = data_file("scenes/fig08_inferior_mirage.toml");
     let curved = dir.path().join("curved.png");
     let straight = dir.path().join("straight.png");
     let args = |out: &Path| {
@@ -647,7 +631,7 @@ fn render_straight_and_curved_differ_and_bad_input_is_reported() {
 fn pipeline_render_job_writes_every_size_and_format() {
     let dir = tempfile::tempdir().unwrap();
     let pipeline = dir.path().join("p.toml");
-    let scene = data("scenes/fig01_horizon_straight.toml");
+    let scene = data_file("scenes/fig01_horizon_straight.toml");
     std::fs::write(
         &pipeline,
         format!(
@@ -673,11 +657,7 @@ fn pipeline_render_job_writes_every_size_and_format() {
 
 #[test]
 fn render_scene_chooses_the_igra2_sounding_and_refuses_a_camera_above_the_atmosphere() {
-    let raw = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
-    ));
-    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let dir = tempfile::tempdir().unwrap();
     let scene = |name: &str, camera_height_m: f64, time: Option<&str>| {
         let path = dir.path().join(name);
@@ -710,11 +690,7 @@ fn render_scene_chooses_the_igra2_sounding_and_refuses_a_camera_above_the_atmosp
 
 #[test]
 fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
-    let raw = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
-    ));
-    assert!(raw.exists(), "shared sounding {} is missing", raw.display());
+    let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let dir = tempfile::tempdir().unwrap();
     let pipeline = |name: &str, time: &str| {
         let path = dir.path().join(format!("{name}.toml"));

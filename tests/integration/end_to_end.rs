@@ -1,10 +1,11 @@
 //! End-to-end physics through the real stages: sounding file or synthetic TOML → profile →
 //! Ciddor n(h) table ([`RefractiveAtmosphere`]) → tracer → transfer analysis. Expected values come
-//! from /work/shared/notes/references.md (palRefro, the Nautical Almanac dip, the critical
+//! from docs/references.md (palRefro, the Nautical Almanac dip, the critical
 //! gradient) or from properties (the exact field, continuity in elevation).
 
+use super::support::data::{self as paths, repo_file};
 use super::tracer::{PALREFRO_US1976_550NM, sea_horizon_rad};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -16,19 +17,6 @@ use ghostship::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerC
 use ghostship::units::ARCMIN_PER_RAD;
 
 const EARTH_RADIUS_M: f64 = 6_371_000.0;
-
-fn repo_file(rel: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
-    assert!(path.exists(), "missing test input {}", path.display());
-    path
-}
-
-fn shared_sounding(name: &str) -> PathBuf {
-    let path =
-        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings/")).join(name);
-    assert!(path.exists(), "missing shared sounding {}", path.display());
-    path
-}
 
 /// A paper atmosphere from `data/NAME.toml` through Ciddor at 550 nm with the default table.
 fn paper(name: &str) -> RefractiveAtmosphere {
@@ -257,7 +245,7 @@ fn paper_mirages_from_an_80_m_camera() {
 }
 
 /// Check 1: US1976 (StandardAtmosphere at 15 °C, 1013.25 hPa) → Ciddor 550 nm dry table → tracer
-/// to 80 km reproduces palRefro (references.md §2.1) and the Nautical Almanac dip (§2.2).
+/// to 80 km reproduces palRefro (docs/references.md §2.1) and the Nautical Almanac dip (§2.2).
 #[test]
 fn us1976_ciddor_table_matches_palrefro_and_the_almanac_dip() {
     let column = StandardAtmosphere::with_surface(0.0, 288.15, 101_325.0).unwrap();
@@ -324,7 +312,7 @@ fn us1976_ciddor_table_matches_palrefro_and_the_almanac_dip() {
 /// With the full Ciddor formula κ(0) is 1.0019/R, slightly *above* Earth's: the gradient is a
 /// little super-critical at the ground (a ray launched horizontally at exactly h = 0 goes into
 /// the ground at once), so the ray is launched at 5 cm. The ideal-gas estimate
-/// (n − 1 ∝ P/T, as in references.md §2.3) gives 0.9991/R; the 0.28 % difference is the
+/// (n − 1 ∝ P/T, as in docs/references.md §2.3) gives 0.9991/R; the 0.28 % difference is the
 /// temperature dependence of the compressibility Z in Ciddor's density (second virial term).
 #[test]
 fn novaya_zemlya_ground_ray_follows_the_earth() {
@@ -398,7 +386,7 @@ fn residual_jump<S: StratifiedIndex>(
     (b.1 - a.1).abs()
 }
 
-/// Check 4: real soundings (Bjornoya from data/, Trois-Rivieres from shared/) through the fit
+/// Check 4: real soundings (Bjornoya from data/, Trois-Rivieres from tests/data/) through the fit
 /// and the table: every ray of a fan ends with a reason, Bouguer's invariant holds, h(D; α) is
 /// continuous in α; prints µs per ray, the rejected-step ratio and the table's exact cells.
 #[test]
@@ -407,7 +395,7 @@ fn real_soundings_trace_cleanly_and_continuously() {
         ("Bjornoya", repo_file("data/Bjornoya-01028_2024022611.csv")),
         (
             "TroisRivieres",
-            shared_sounding("TroisRivieres-UQAM_2022022222.csv"),
+            paths::sounding("TroisRivieres-UQAM_2022022222.csv"),
         ),
     ];
     let h0 = 10.0;

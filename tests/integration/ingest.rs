@@ -1,4 +1,4 @@
-//! Stage 1 — ingest, against the real soundings in `../shared/soundings`, the shipped copies in
+//! Stage 1 — ingest, against the real soundings in `tests/data/soundings`, the shipped copies in
 //! `data/`, the TEXT:LIST fixture, crafted bad files, and random/mutated input (proptest).
 
 use std::path::{Path, PathBuf};
@@ -10,19 +10,7 @@ use ghostship::sounding::{
 use ghostship::units;
 use proptest::prelude::*;
 
-const SOUNDINGS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings");
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data");
-
-fn shared(rel: &str) -> PathBuf {
-    let p = Path::new(SOUNDINGS).join(rel);
-    assert!(
-        p.exists(),
-        "missing shared sounding {} — the tests need /work/shared/soundings next to the crate",
-        p.display()
-    );
-    p
-}
+use crate::support::data::{data_file, fixture, sounding, soundings_dir};
 
 fn read(path: &Path) -> Sounding {
     read_sounding(path, &ReadOptions::default())
@@ -61,10 +49,7 @@ fn csv_rows(path: &Path) -> Vec<CsvRow> {
 
 fn all_shared_csvs() -> Vec<PathBuf> {
     let mut files = Vec::new();
-    for dir in [
-        Path::new(SOUNDINGS).to_path_buf(),
-        shared("pressure_levels"),
-    ] {
+    for dir in [soundings_dir(), sounding("pressure_levels")] {
         for entry in std::fs::read_dir(&dir).expect("read shared soundings dir") {
             let p = entry.unwrap().path();
             if p.extension().is_some_and(|e| e == "csv") {
@@ -156,7 +141,7 @@ fn every_shared_csv_ingests_with_its_values() {
 /// a warning, and its first row (no pressure) is kept.
 #[test]
 fn one_second_files_policy() {
-    let tr = read(&shared("TroisRivieres-UQAM_2022022222.csv"));
+    let tr = read(&sounding("TroisRivieres-UQAM_2022022222.csv"));
     assert_eq!(tr.metadata_number("station_elevation_m"), Some(59.0));
     assert_eq!(tr.metadata_number("latitude"), Some(46.349));
     assert_eq!(tr.metadata_number("station"), None);
@@ -173,14 +158,14 @@ fn one_second_files_policy() {
         "NyAlesund-01004_2024022611.csv",
         "Bjornoya-01028_2024022611.csv",
     ] {
-        let s = read(&shared(f));
+        let s = read(&sounding(f));
         assert!(s.warnings.is_empty(), "{f}: {:?}", s.warnings);
         assert!(s.levels.len() > 2800);
     }
 }
 
-/// The shipped defaults in data/ are byte-identical to the shared soundings (provenance lines
-/// intact) and ingest.
+/// The shipped defaults in data/ are byte-identical to their originals in tests/data/soundings
+/// (provenance lines intact) and ingest.
 #[test]
 fn shipped_data_copies() {
     for (copy, original) in [
@@ -197,10 +182,10 @@ fn shipped_data_copies() {
             "pressure_levels/Danmarkshavn-04320_2026020523_all-levels.csv",
         ),
     ] {
-        let copy = Path::new(DATA).join(copy);
+        let copy = data_file(copy);
         assert_eq!(
             text_of(&copy),
-            text_of(&shared(original)),
+            text_of(&sounding(original)),
             "{}",
             copy.display()
         );
@@ -241,19 +226,19 @@ fn wyoming_text_csv_reproduces_the_normalised_csvs() {
             "35.1800",
         ),
     ] {
-        let r = read(&shared(raw));
+        let r = read(&sounding(raw));
         assert_eq!(r.format, SoundingFormat::WyomingTextCsv);
         assert_eq!(r.metadata["latitude"], lat);
-        assert_same_levels(&r, &read(&shared(csv)));
+        assert_same_levels(&r, &read(&sounding(csv)));
     }
 }
 
 #[test]
 fn wyoming_text_list_fixture_reproduces_boise() {
-    let path = Path::new(FIXTURES).join("Boise-72681_2010120912_uwyo_TEXT-LIST.html");
+    let path = fixture("Boise-72681_2010120912_uwyo_TEXT-LIST.html");
     let s = read(&path);
     assert_eq!(s.format, SoundingFormat::WyomingTextList);
-    assert_same_levels(&s, &read(&shared("Boise-72681_2010120912.csv")));
+    assert_same_levels(&s, &read(&sounding("Boise-72681_2010120912.csv")));
     assert_eq!(s.metadata["station"], "72681 BOI Boise");
     assert_eq!(s.metadata["station_identifier"], "BOI");
     assert_eq!(s.metadata["latitude"], "43.56");
@@ -264,14 +249,14 @@ fn wyoming_text_list_fixture_reproduces_boise() {
 
 #[test]
 fn igra2_data_reproduces_the_normalised_csv() {
-    let raw = shared("raw/USM00070026-data_2010-06-01_excerpt.txt");
+    let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let s = read(&raw);
     assert_eq!(s.format, SoundingFormat::Igra2Data);
     assert_eq!(s.metadata["nominal_time_utc"], "2010-06-01 00");
     assert_eq!(s.metadata["latitude"], "71.2889");
     assert_eq!(s.metadata["longitude"], "-156.7833");
     assert_eq!(s.metadata["release_time_utc_hhmm"], "2303");
-    let csv = read(&shared("Utqiagvik-70026_2010060100.csv"));
+    let csv = read(&sounding("Utqiagvik-70026_2010060100.csv"));
     // The CSV holds the rows with GPH and TEMP; here every row with temperature has a GPH too.
     assert!(
         s.levels
@@ -297,12 +282,12 @@ fn igra2_data_reproduces_the_normalised_csv() {
 
 #[test]
 fn igra2_derived_reproduces_the_normalised_csv() {
-    let raw = shared("raw/USM00070026-drvd_2014-09-10_excerpt.txt");
+    let raw = sounding("raw/USM00070026-drvd_2014-09-10_excerpt.txt");
     let first = read(&raw);
     assert_eq!(first.format, SoundingFormat::Igra2Derived);
     assert_eq!(first.metadata["nominal_time_utc"], "2014-09-10 00");
     let s = read_sounding(&raw, &ReadOptions::with_igra2_time("2014-09-10 12")).unwrap();
-    let rows = csv_rows(&shared("Utqiagvik-70026_2014091012.csv"));
+    let rows = csv_rows(&sounding("Utqiagvik-70026_2014091012.csv"));
     assert_eq!(s.levels.len(), rows.len());
     for (l, (_, p, h, t, _)) in s.levels.iter().zip(rows) {
         assert_eq!(l.height_m, h.unwrap());
@@ -336,7 +321,7 @@ struct Recomputed {
 /// Heights of deleted levels recomputed hypsometrically, against the reported heights.
 /// `keep` decides which levels keep their height (the anchors).
 fn hypsometric_errors(rel: &str, keep: impl Fn(usize, f64) -> bool) -> Vec<Recomputed> {
-    let path = shared(rel);
+    let path = sounding(rel);
     let text = text_of(&path);
     let reported = read(&path);
     let pressures: Vec<f64> = csv_rows(&path).iter().map(|r| r.1.unwrap()).collect();
@@ -452,7 +437,7 @@ fn hypsometric_heights_match_reported_heights() {
         "SanDiego-72293_2023063012.csv",
         "Utqiagvik-70026_2014091012.csv",
     ] {
-        let count = csv_rows(&shared(rel)).len();
+        let count = csv_rows(&sounding(rel)).len();
         let self_consistent = !rel.starts_with("Norman");
         for (anchors, errors) in [
             (
@@ -507,7 +492,7 @@ fn hypsometric_heights_match_reported_heights() {
 /// between their Part A neighbours; the anchors stay exactly as reported.
 #[test]
 fn pressure_level_files_get_hypsometric_heights() {
-    for entry in std::fs::read_dir(shared("pressure_levels")).unwrap() {
+    for entry in std::fs::read_dir(sounding("pressure_levels")).unwrap() {
         let path = entry.unwrap().path();
         let s = read(&path);
         let rows = csv_rows(&path);
@@ -732,11 +717,11 @@ fn sample_texts() -> Vec<String> {
         "raw/USM00070026-drvd_2014-09-10_excerpt.txt",
     ]
     .iter()
-    .map(|r| text_of(&shared(r)))
+    .map(|r| text_of(&sounding(r)))
     .chain([
-        text_of(&Path::new(FIXTURES).join("Boise-72681_2010120912_uwyo_TEXT-LIST.html")),
+        text_of(&fixture("Boise-72681_2010120912_uwyo_TEXT-LIST.html")),
         // The first 400 lines of a 1-s file (keeps each case fast).
-        text_of(&shared("TroisRivieres-UQAM_2022022222.csv"))
+        text_of(&sounding("TroisRivieres-UQAM_2022022222.csv"))
             .lines()
             .take(400)
             .collect::<Vec<_>>()
@@ -865,7 +850,7 @@ proptest! {
 #[test]
 fn raw_files_ingest_or_are_refused_clearly() {
     let mut seen = 0;
-    for entry in std::fs::read_dir(shared("raw")).unwrap() {
+    for entry in std::fs::read_dir(sounding("raw")).unwrap() {
         let path = entry.unwrap().path();
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let supported = name.contains("uwyo_TEXT-CSV") || name.starts_with("USM00070026");

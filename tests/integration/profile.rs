@@ -15,11 +15,11 @@ use ghostship::units::saturation_vapour_pressure_pa;
 use ghostship::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
 use proptest::prelude::*;
 
-/// Read one of the real soundings in shared/soundings through the ingest stage.
+use crate::support::data as paths;
+
+/// Read one of the real soundings in tests/data/soundings through the ingest stage.
 fn load(name: &str) -> Sounding {
-    let path =
-        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings/")).join(name);
-    assert!(path.exists(), "missing test sounding {}", path.display());
+    let path = paths::sounding(name);
     read_sounding(&path, &ReadOptions::default())
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
@@ -424,7 +424,7 @@ fn bad_soundings_are_errors_not_panics() {
 // Synthetic atmospheres (the paper's cases in data/).
 
 fn data(name: &str) -> SyntheticAtmosphere {
-    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/")).join(name);
+    let path = paths::data_file(name);
     SyntheticAtmosphere::from_file(&path).unwrap_or_else(|e| panic!("{e}"))
 }
 
@@ -802,7 +802,7 @@ proptest! {
 
 #[test]
 fn sparse_real_soundings_match_the_readme() {
-    // Expected layers from shared/soundings/README.md (read off the data there, not from this
+    // Expected layers from tests/data/soundings/README.md (read off the data there, not from this
     // code). Sparse levels: extrema sit exactly on levels, so base/top are exact.
     let check = |name: &str, base: f64, top: f64, dt: f64, kind: InversionKind| {
         let s = load(name);

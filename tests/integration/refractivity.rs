@@ -257,14 +257,14 @@ fn rejects_bad_wavelength_and_unphysical_air() {
     assert!(matches!(err, RefractivityError::InvalidAir { .. }), "{err}");
 }
 
-/// references.md §2.3: 0.1121 K/m at 0 °C and 0.1286 K/m at 15 °C (1013.25 hPa, 550 nm).
+/// docs/references.md §2.3: 0.1121 K/m at 0 °C and 0.1286 K/m at 15 °C (1013.25 hPa, 550 nm).
 #[test]
 fn critical_gradient_matches_reference_and_definition() {
     let g0 = critical_temperature_gradient_k_per_m(273.15, 101_325.0, 0.0, 550e-9, EARTH_RADIUS_M);
     let g15 = critical_temperature_gradient_k_per_m(288.15, 101_325.0, 0.0, 550e-9, EARTH_RADIUS_M);
     assert!((g0 - 0.1121).abs() < 1e-4, "{g0}");
     assert!((g15 - 0.1286).abs() < 1e-4, "{g15}");
-    // The rest of the table in references.md §2.3 (given to 3–4 digits).
+    // The rest of the table in docs/references.md §2.3 (given to 3–4 digits).
     for (t_c, expected, tol) in [
         (30.0, 0.146, 5e-4),
         (-10.0, 0.1016, 1e-4),
@@ -654,13 +654,9 @@ fn inverse_t_integral(t0: f64, g: f64, dz: f64) -> f64 {
 
 impl PiecewiseSounding {
     fn read(name: &str) -> (Self, Vec<Level>) {
-        let path = format!(
-            concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/soundings/{}"),
-            name
-        );
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
-            panic!("sounding {path} is missing ({e}); tests need /work/shared")
-        });
+        let path = crate::support::data::sounding(name);
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("cannot read sounding {} ({e})", path.display()));
         let mut s = PiecewiseSounding {
             heights_m: vec![],
             temperatures_k: vec![],

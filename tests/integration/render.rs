@@ -10,12 +10,10 @@ use ghostship::render::{
 };
 use ghostship::scene::{Scene, assets};
 
+use crate::support::data::data_dir;
+
 const R: f64 = 6_371_000.0;
 const ARCMIN: f64 = std::f64::consts::PI / (180.0 * 60.0);
-
-fn data_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data"))
-}
 
 fn quiet() -> RenderOptions {
     RenderOptions {
@@ -90,7 +88,7 @@ fn sea_start_row(h: f64, k: f64) -> (u32, f64) {
 
 #[test]
 fn horizon_row_matches_the_geometric_dip_for_straight_rays() {
-    // references.md §2.2: geometric dip 1.926′·√h (R = 6371 km).
+    // docs/references.md §2.2: geometric dip 1.926′·√h (R = 6371 km).
     for h in [1.0f64, 10.0] {
         let (row, f) = sea_start_row(h, 0.0);
         let dip = 1.926 * h.sqrt() * ARCMIN;
@@ -106,7 +104,8 @@ fn horizon_row_matches_the_geometric_dip_for_straight_rays() {
 
 #[test]
 fn horizon_row_matches_the_nautical_almanac_dip_with_refraction() {
-    // Nautical Almanac dip 1.76′·√h ⇔ geometric × √(1 − k) with k ≈ 0.164 (references.md §2.2).
+    // Nautical Almanac dip 1.76′·√h ⇔ geometric × √(1 − k) with k ≈ 0.164
+    // (docs/references.md §2.2).
     let (row, f) = sea_start_row(10.0, 0.164);
     let boundary = 100.0 + f * (1.76 * 10f64.sqrt() * ARCMIN).tan();
     let predicted = (boundary - 0.5).ceil() as i64;

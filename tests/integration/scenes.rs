@@ -7,7 +7,6 @@
 //! of distinct colours, bottom first): the band seen in a pixel tells the height on the card that
 //! the pixel's ray passes, so erect and inverted images show as band orders.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use ghostship::analysis::{Image, Reach, TransferCurve, find_images};
@@ -23,10 +22,7 @@ use ghostship::scene::{AtmosphereSpec, Scene, Texture, assets};
 use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
 use crate::render::at_edge;
-
-fn data_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data"))
-}
+use crate::support::data::data_dir;
 
 fn load_scene(name: &str) -> Scene {
     let path = data_dir().join("scenes").join(name);

@@ -1,5 +1,5 @@
 //! Tracer and analysis checks against exact solutions and published reference numbers
-//! (/work/shared/notes/references.md §1, §2.1, §2.2, §2.3, §2.7).
+//! (docs/references.md §1, §2.1, §2.2, §2.3, §2.7).
 
 use ghostship::analysis::{TraceRequest, trace_plot_png, trace_report};
 use ghostship::profile::us1976::us1976;
@@ -29,7 +29,7 @@ impl StratifiedIndex for InverseRadius {
     }
 }
 
-/// Dry air with n − 1 = A·P[mb]/T (SLALIB/H&S optical form, references.md §2.6) over US1976.
+/// Dry air with n − 1 = A·P[mb]/T (SLALIB/H&S optical form, docs/references.md §2.6) over US1976.
 struct Us1976Field {
     a: f64,
 }
@@ -56,7 +56,8 @@ impl StratifiedIndex for Us1976Field {
     }
 }
 
-/// references.md §2.7: T = 273.15 + 0.1121·h, P hydrostatic from 101 325 Pa, n−1 = 7.9012e-7·P/T.
+/// docs/references.md §2.7: T = 273.15 + 0.1121·h, P hydrostatic from 101 325 Pa,
+/// n−1 = 7.9012e-7·P/T.
 struct CriticalGradient;
 impl StratifiedIndex for CriticalGradient {
     fn index_and_derivative(&self, h: f64) -> (f64, f64) {
@@ -217,8 +218,9 @@ fn flat_earth_square_linear_index_gives_parabola() {
     assert!(worst < 0.1 * cfg.tolerance_m, "worst error {worst} m");
 }
 
-/// palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (references.md §2.1): (observed zenith distance in
-/// degrees, refraction in arcmin, allowed error in arcmin). Shared with the end-to-end checks.
+/// palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (docs/references.md §2.1): (observed zenith
+/// distance in degrees, refraction in arcmin, allowed error in arcmin). Shared with the
+/// end-to-end checks.
 pub(crate) const PALREFRO_US1976_550NM: [(f64, f64, f64); 7] = [
     (45.0, 0.953, 0.02),
     (80.0, 5.223, 0.02),
@@ -264,7 +266,8 @@ fn critical_gradient_ray_matches_reference_trace() {
     };
     let tracer = Tracer::new(&CriticalGradient, cfg).unwrap();
     let distances = [10_000.0, 20_000.0, 50_000.0, 100_000.0];
-    // references.md §2.7 (DOP853, rtol 1e-12); tolerances are half a unit in the last printed digit.
+    // docs/references.md §2.7 (DOP853, rtol 1e-12); tolerances are half a unit in the last
+    // printed digit.
     let cases: [(f64, [(f64, f64); 4]); 2] = [
         (
             0.0,
@@ -827,7 +830,7 @@ fn us1976_dip_matches_the_refraction_coefficient() {
     let h0 = 10.0;
     let dip = -sea_horizon_rad(&tracer, h0);
     // Near the ground the ray is a circle of curvature k/R, k = −R·(dn/dh)/n: then the dip is
-    // √(2h(1 − k)/R) (references.md §2.2).
+    // √(2h(1 − k)/R) (docs/references.md §2.2).
     let (n, dn) = field.index_and_derivative(h0 / 2.0);
     let k = -R * dn / n;
     let expected = (2.0 * h0 * (1.0 - k) / R).sqrt();
