@@ -5,6 +5,7 @@ mod cli;
 mod end_to_end;
 mod ingest;
 mod profile;
+mod reference_tracer;
 mod refractivity;
 mod render;
 mod scenes;
