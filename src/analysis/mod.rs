@@ -16,7 +16,9 @@ pub use plot::trace_plot_png;
 pub use report::{
     DEFAULT_TRACE_TRAP_DISTANCE_M, RayReport, TraceReport, TraceRequest, trace_report,
 };
-pub use transfer::{Image, Reach, TransferCurve, apparent_horizon, find_images};
+pub use transfer::{
+    FoldTest, Image, Reach, TransferCurve, apparent_horizon, find_images, find_images_with,
+};
 
 /// Why an analysis could not be done.
 #[derive(Debug, thiserror::Error)]

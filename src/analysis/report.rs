@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::AnalysisError;
-use super::transfer::{Image, Reach, TransferCurve, apparent_horizon, find_images};
+use super::transfer::{FoldTest, Image, Reach, TransferCurve, apparent_horizon, find_images};
 use crate::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig};
 
 /// What to trace.
@@ -171,6 +171,11 @@ pub struct TraceReport {
     pub observer_height_m: f64,
     /// Tracer tolerance (m).
     pub tolerance_m: f64,
+    /// Smallest height reversal of h(D; α), on rays re-traced at `retrace_tolerance_m`, that
+    /// counts as a fold between two images (m); see [`FoldTest`].
+    pub fold_threshold_m: f64,
+    /// Tolerance of the rays re-traced to test and refine folds and image edges (m).
+    pub retrace_tolerance_m: f64,
     /// Wavelength (nm).
     pub wavelength_nm: f64,
     /// Earth radius (m).
@@ -278,6 +283,8 @@ pub fn trace_report(
     Ok(TraceReport {
         observer_height_m: h0,
         tolerance_m: request.tracer.tolerance_m,
+        fold_threshold_m: FoldTest::default().threshold_m(request.tracer.tolerance_m),
+        retrace_tolerance_m: FoldTest::default().retrace_tolerance_m(request.tracer.tolerance_m),
         wavelength_nm: request.wavelength_nm,
         earth_radius_m: request.tracer.earth_radius_m,
         top_m: request.tracer.top_m,

@@ -3,6 +3,7 @@ mod support;
 
 mod cli;
 mod end_to_end;
+mod images;
 mod ingest;
 mod profile;
 mod reference_tracer;
