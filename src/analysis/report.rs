@@ -11,7 +11,9 @@ use serde::Serialize;
 
 use super::AnalysisError;
 use super::transfer::{FoldTest, Image, Reach, TransferCurve, apparent_horizon, find_images};
-use crate::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig};
+use crate::tracer::{
+    BouguerEnvelope, Fate, RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig,
+};
 
 /// What to trace.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -131,7 +133,9 @@ pub struct RayReport {
     pub rejected_steps: u32,
     /// Largest relative drift of Bouguer's invariant along the ray.
     pub invariant_drift: f64,
-    /// Neither escaped nor hit the ground within the trap distance.
+    /// Trapped in a duct: it reached the trap distance with turning points above and below it
+    /// (Bouguer's invariant proves it oscillates there for ever). A ray that reaches the trap
+    /// distance but provably escapes or meets the ground is traced on to its end instead.
     pub trapped: bool,
 }
 
@@ -149,7 +153,7 @@ impl RayReport {
             steps: r.steps(),
             rejected_steps: r.rejected_steps,
             invariant_drift: r.invariant_drift,
-            trapped: termination == Termination::MaxDistance,
+            trapped: false,
         }
     }
 }
@@ -198,6 +202,49 @@ pub struct TraceReport {
     pub trapped_elevations_deg: Vec<f64>,
 }
 
+/// The fate (by Bouguer's invariant) of each fan ray that stopped at the trap distance: rays
+/// that provably escape or meet the ground are traced on without a distance limit (so an escaped
+/// ray gets its refraction however long its path); the others are trapped if the invariant
+/// proves it, else left as they are. Returns the trapped flag of every record.
+fn settle_fates(
+    atmosphere: &dyn StratifiedIndex,
+    envelope: &BouguerEnvelope,
+    request: &TraceRequest,
+    records: &mut [RayRecord],
+) -> Result<Vec<bool>, AnalysisError> {
+    let radius = request.tracer.earth_radius_m;
+    let open_cfg = TracerConfig {
+        stop_after_last_target: false,
+        max_distance_m: None,
+        ..request.tracer.clone()
+    };
+    let open = Tracer::new(atmosphere, open_cfg)?;
+    let mut trapped = vec![false; records.len()];
+    for (record, trapped) in records.iter_mut().zip(trapped.iter_mut()) {
+        if record.termination != Some(Termination::MaxDistance) {
+            continue;
+        }
+        let end = record.end;
+        let (n, _) = atmosphere.index_and_derivative(end.height_m);
+        let invariant = n * (radius + end.height_m) * end.elevation_rad.cos();
+        match envelope.fate(end.height_m, end.elevation_rad > 0.0, invariant) {
+            Fate::Trapped => *trapped = true,
+            Fate::Escapes | Fate::MeetsGround => {
+                let elevation = record.elevation_rad;
+                *record = open
+                    .trace_fan(
+                        request.observer_height_m,
+                        &[elevation],
+                        &request.distances_m,
+                    )?
+                    .remove(0);
+            }
+            Fate::Undecided => {}
+        }
+    }
+    Ok(trapped)
+}
+
 /// Trace the request's fan through `atmosphere` and analyse it.
 pub fn trace_report(
     atmosphere: &dyn StratifiedIndex,
@@ -218,11 +265,21 @@ pub fn trace_report(
     let probe_tracer = Tracer::new(atmosphere, probe_cfg)?;
     let h0 = request.observer_height_m;
     let elevations = request.elevations_rad();
-    let records = fan_tracer.trace_fan(h0, &elevations, &request.distances_m)?;
+    let mut records = fan_tracer.trace_fan(h0, &elevations, &request.distances_m)?;
+    let envelope = BouguerEnvelope::new(
+        atmosphere,
+        request.tracer.earth_radius_m,
+        request.tracer.top_m,
+    );
+    let trapped = settle_fates(atmosphere, &envelope, request, &mut records)?;
 
     let rays: Vec<RayReport> = records
         .iter()
-        .map(|r| RayReport::from_record(r, request.distances_m.len()))
+        .zip(&trapped)
+        .map(|(r, &trapped)| RayReport {
+            trapped,
+            ..RayReport::from_record(r, request.distances_m.len())
+        })
         .collect();
     // Images, one job per (distance, height), in parallel; the order is fixed by the job list.
     let jobs: Vec<(usize, f64)> = (0..request.distances_m.len())

@@ -11,6 +11,7 @@
 //!   paths can be checked against each other.
 //! * [`straight_ray`] — exact straight-line geometry (n ≡ 1), the paper's Figure 1.
 
+mod bouguer;
 mod breaks;
 mod dopri;
 mod ray;
@@ -20,6 +21,7 @@ mod system;
 use glam::{DVec3, DVec4};
 use rayon::prelude::*;
 
+pub use bouguer::{BouguerEnvelope, Fate};
 pub use ray::{
     HookAction, NoHook, RayHook, RayPoint, RayRecord, StopAboveClimbing, Termination, TracerConfig,
     TracerError,

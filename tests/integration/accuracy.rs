@@ -252,3 +252,35 @@ fn tolerance_bounds_the_error_at_every_target() {
         }
     }
 }
+
+/// Bouguer's invariant decides a ray's fate (issue 8, item 2): the horizon ray through US1976 to
+/// its 86 km top climbs for ≈ 1 100 km. It used to stop at the 1 000 km trap distance and be
+/// reported trapped; now it escapes, with the horizontal refraction of palRefro (33.000′; the
+/// issue's reference trace 33.009′) within 0.002′ of 33.009′, and no ray of the fan is trapped.
+#[test]
+fn us1976_horizon_ray_to_86_km_escapes_with_its_refraction() {
+    use ghostship::analysis::{TraceRequest, trace_report};
+    use ghostship::profile::StandardAtmosphere;
+    let atm = RefractiveAtmosphere::new(Arc::new(StandardAtmosphere::default()), 550.0).unwrap();
+    let request = TraceRequest {
+        observer_height_m: 0.0,
+        elevation_min_deg: 0.0,
+        elevation_max_deg: 1.0,
+        elevation_count: 3,
+        distances_m: vec![10_000.0],
+        target_heights_m: vec![20.0],
+        tracer: TracerConfig {
+            top_m: 86_000.0,
+            ..TracerConfig::default()
+        },
+        ..TraceRequest::default()
+    };
+    let report = trace_report(&atm, &request).unwrap();
+    for ray in &report.rays {
+        assert_eq!(ray.termination.name(), "escaped", "{:?}", ray.elevation_deg);
+        assert!(!ray.trapped);
+    }
+    let horizon = report.rays[0].refraction_deg.unwrap() * 60.0;
+    eprintln!("US1976 to 86 km, horizon refraction {horizon:.4}′");
+    assert!((horizon - 33.009).abs() < 0.002, "{horizon}′");
+}

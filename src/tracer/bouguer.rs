@@ -1,0 +1,246 @@
+//! Stage 4 (trace), the fate of a ray from Bouguer's invariant. In a spherically stratified
+//! field c = n·r·cos ψ is constant along a ray, and the ray can be at radius r only where
+//! g(r) = n(r)·r ≥ c. So whether a ray turns, escapes through the top or meets the ground is
+//! decided by the profile g(h) alone: a climbing ray turns below the first height above it where
+//! g falls to c, and escapes if there is none; a descending ray likewise turns or meets the
+//! ground. A ray with a turning point on both sides oscillates between them for ever: trapped.
+//!
+//! In: a [`StratifiedIndex`] and the Earth radius. Out: a [`BouguerEnvelope`] — g on a grid
+//! (0.25 m to 4 km above the surface, 5 m above) with running minima from the ground up and from
+//! the top down, and a bound on how far g can dip between two nodes — and [`Fate`] queries.
+//! A fate is only claimed when the grid proves it: "turns" needs a node with g < c; "does not
+//! turn" needs every node above (or below) to clear c by more than the dip bound. Otherwise the
+//! answer is [`Fate::Undecided`] and the caller keeps integrating.
+
+use super::StratifiedIndex;
+
+/// Node spacing (m) up to [`FINE_TOP_M`], then [`COARSE_STEP_M`].
+const FINE_STEP_M: f64 = 0.25;
+const FINE_TOP_M: f64 = 4_000.0;
+const COARSE_STEP_M: f64 = 5.0;
+
+/// Relative slack on the invariant (its drift along a traced ray is ~1e-12).
+const INVARIANT_SLACK: f64 = 1e-10;
+
+/// What a ray will do, by Bouguer's invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fate {
+    /// It leaves the top of the atmosphere (after at most one turning point below).
+    Escapes,
+    /// It reaches the ground (after at most one turning point above).
+    MeetsGround,
+    /// It has turning points above and below: it oscillates in a duct for ever.
+    Trapped,
+    /// The grid cannot prove either (the ray grazes a level where g ≈ c).
+    Undecided,
+}
+
+/// g(h) = n(h)·(R + h) on a grid, with the running minima and dip bounds the fate needs.
+#[derive(Debug, Clone)]
+pub struct BouguerEnvelope {
+    heights_m: Vec<f64>,
+    /// min of g over nodes 0..=i.
+    min_below: Vec<f64>,
+    /// min of g over nodes i.. .
+    min_above: Vec<f64>,
+    /// The largest dip of g between two nodes at or below i (m).
+    dip_below: Vec<f64>,
+    /// The largest dip of g between two nodes at or above i (m).
+    dip_above: Vec<f64>,
+}
+
+impl BouguerEnvelope {
+    /// Scan `index` from the ground to `top_m` over a sphere of `earth_radius_m`.
+    pub fn new<S: StratifiedIndex + ?Sized>(index: &S, earth_radius_m: f64, top_m: f64) -> Self {
+        let mut heights_m = Vec::new();
+        let mut h = 0.0;
+        while h < top_m {
+            heights_m.push(h);
+            h += if h < FINE_TOP_M {
+                FINE_STEP_M
+            } else {
+                COARSE_STEP_M
+            };
+        }
+        heights_m.push(top_m);
+        let (g, slope): (Vec<f64>, Vec<f64>) = heights_m
+            .iter()
+            .map(|&h| {
+                let (n, dn) = index.index_and_derivative(h);
+                let r = earth_radius_m + h;
+                (n * r, n + r * dn)
+            })
+            .unzip();
+        // How far g can fall between nodes a and b below the lower node value: where the slope
+        // keeps its sign (monotone cell), by the curvature, Δ·|g'(b) − g'(a)|/8; where it changes
+        // sign (a minimum inside), by Δ·(|g'(a)| + |g'(b)|)/2. Non-finite slopes: unbounded.
+        let dips: Vec<f64> = (0..heights_m.len())
+            .map(|i| {
+                if i + 1 >= heights_m.len() {
+                    return 0.0;
+                }
+                let d = heights_m[i + 1] - heights_m[i];
+                let (a, b) = (slope[i], slope[i + 1]);
+                let dip = if (a > 0.0) == (b > 0.0) {
+                    d * (b - a).abs() / 8.0
+                } else {
+                    d * (a.abs() + b.abs()) / 2.0
+                };
+                if dip.is_finite() { dip } else { f64::INFINITY }
+            })
+            .collect();
+        let nan_safe = |v: f64| if v.is_nan() { f64::NEG_INFINITY } else { v };
+        let scan = |values: &[f64], forward: bool, op: fn(f64, f64) -> f64| {
+            let mut out = vec![0.0; values.len()];
+            let mut acc: Option<f64> = None;
+            let idx: Vec<usize> = if forward {
+                (0..values.len()).collect()
+            } else {
+                (0..values.len()).rev().collect()
+            };
+            for i in idx {
+                let v = nan_safe(values[i]);
+                acc = Some(acc.map_or(v, |a| op(a, v)));
+                out[i] = acc.unwrap_or(v);
+            }
+            out
+        };
+        BouguerEnvelope {
+            min_below: scan(&g, true, f64::min),
+            min_above: scan(&g, false, f64::min),
+            dip_below: scan(&dips, true, f64::max),
+            dip_above: scan(&dips, false, f64::max),
+            heights_m,
+        }
+    }
+
+    /// The fate of a ray at `height_m`, climbing or not, with invariant `invariant_m`
+    /// (n·r·cos ψ, metres).
+    pub fn fate(&self, height_m: f64, climbing: bool, invariant_m: f64) -> Fate {
+        if !(height_m.is_finite() && invariant_m.is_finite()) {
+            return Fate::Undecided;
+        }
+        let slack = INVARIANT_SLACK * invariant_m.abs();
+        let above = self.heights_m.partition_point(|&h| h < height_m);
+        let below = above.saturating_sub(1);
+        let side = |turns: bool, clear: bool| match (turns, clear) {
+            (true, _) => Some(true),
+            (false, true) => Some(false),
+            _ => None,
+        };
+        let turns_above = if above >= self.heights_m.len() {
+            Some(false)
+        } else {
+            side(
+                self.min_above[above] < invariant_m - slack,
+                self.min_above[above] > invariant_m + slack + self.dip_above[below],
+            )
+        };
+        let turns_below = side(
+            self.min_below[below] < invariant_m - slack,
+            self.min_below[below]
+                > invariant_m + slack + self.dip_below[below.min(self.dip_below.len() - 1)],
+        );
+        match (climbing, turns_above, turns_below) {
+            (true, Some(false), _) => Fate::Escapes,
+            (false, _, Some(false)) => Fate::MeetsGround,
+            (_, Some(true), Some(true)) => Fate::Trapped,
+            (true, Some(true), Some(false)) => Fate::MeetsGround,
+            (false, Some(false), Some(true)) => Fate::Escapes,
+            _ => Fate::Undecided,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// n = 1 + a − b·h below `duct_top_m` (a trapping gradient), normal above.
+    struct Duct {
+        top_m: f64,
+    }
+    impl StratifiedIndex for Duct {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            let (a, strong, weak) = (3e-4, 4e-7, 4e-8);
+            if h < self.top_m {
+                (1.0 + a - strong * h, -strong)
+            } else {
+                (
+                    1.0 + a - strong * self.top_m - weak * (h - self.top_m),
+                    -weak,
+                )
+            }
+        }
+    }
+
+    #[test]
+    fn level_ray_in_a_surface_duct_is_trapped_only_if_it_turns_above_the_ground() {
+        let r = 6_371_000.0;
+        let field = Duct { top_m: 100.0 };
+        let env = BouguerEnvelope::new(&field, r, 40_000.0);
+        let g = |h: f64| {
+            let (n, _) = field.index_and_derivative(h);
+            n * (r + h)
+        };
+        // In the duct, g decreases with height: a level ray at 50 m turns back down at once
+        // and meets the ground (no turning point below, g grows downwards).
+        assert_eq!(env.fate(50.0, false, g(50.0)), Fate::MeetsGround);
+        // Above the duct g grows: a level ray at 500 m with g(500) has no turning point above
+        // (it climbs away); below, g dips under it in the duct? g(100) < g(500) → turns below.
+        assert_eq!(
+            env.fate(500.0, true, g(500.0) * (1.0 - 1e-9)),
+            Fate::Escapes
+        );
+        let c = g(300.0) * (1.0 - 1e-9);
+        assert_eq!(
+            env.fate(300.0, false, c),
+            Fate::Escapes,
+            "turns in the duct, then climbs"
+        );
+        // A ray inside a duct that cannot reach the ground: an elevated duct 1000–1200 m.
+        let elevated = ElevatedDuct;
+        let env = BouguerEnvelope::new(&elevated, r, 40_000.0);
+        let g = |h: f64| {
+            let (n, _) = elevated.index_and_derivative(h);
+            n * (r + h)
+        };
+        assert_eq!(
+            env.fate(1100.0, true, g(1100.0) * (1.0 - 1e-10)),
+            Fate::Trapped
+        );
+        assert_eq!(
+            env.fate(1100.0, false, g(1100.0) * (1.0 - 1e-10)),
+            Fate::Trapped
+        );
+        // Steeper rays (smaller c) leave: up through the top, or down to the ground.
+        assert_eq!(
+            env.fate(1100.0, true, g(1100.0) * (1.0 - 1e-4)),
+            Fate::Escapes
+        );
+        assert_eq!(
+            env.fate(1100.0, false, g(1100.0) * (1.0 - 1e-4)),
+            Fate::MeetsGround
+        );
+        assert_eq!(env.fate(f64::NAN, true, 1.0), Fate::Undecided);
+    }
+
+    /// A trapping layer between 1000 and 1200 m over normal air.
+    struct ElevatedDuct;
+    impl StratifiedIndex for ElevatedDuct {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            let (weak, strong) = (4e-8, 4e-7);
+            let n0 = 1.0 + 3e-4;
+            if h < 1000.0 {
+                (n0 - weak * h, -weak)
+            } else if h < 1200.0 {
+                (n0 - weak * 1000.0 - strong * (h - 1000.0), -strong)
+            } else {
+                (
+                    n0 - weak * 1000.0 - strong * 200.0 - weak * (h - 1200.0),
+                    -weak,
+                )
+            }
+        }
+    }
+}
