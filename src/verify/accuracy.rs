@@ -579,6 +579,22 @@ fn plot_err<E: std::fmt::Display>(e: E) -> AccuracyError {
     AccuracyError::Plot(e.to_string())
 }
 
+/// Line colours, dark enough to read on white, distinct for the twelve standard cases.
+const LINE_COLOURS: [RGBColor; 12] = [
+    RGBColor(220, 20, 60),
+    RGBColor(34, 139, 34),
+    RGBColor(218, 145, 0),
+    RGBColor(31, 119, 180),
+    RGBColor(255, 100, 0),
+    RGBColor(128, 0, 128),
+    RGBColor(0, 160, 160),
+    RGBColor(230, 0, 200),
+    RGBColor(120, 120, 0),
+    RGBColor(140, 86, 75),
+    RGBColor(0, 0, 0),
+    RGBColor(100, 100, 255),
+];
+
 /// Smallest error drawn (m): a run identical to the reference has error 0.
 const PLOT_FLOOR_M: f64 = 1e-10;
 
@@ -635,7 +651,17 @@ pub fn time_vs_error_png(
             .configure_mesh()
             .x_desc("time per ray (µs, one thread)")
             .y_desc("max error at 26 km (m)")
-            .x_label_formatter(&|v| format!("{v:.0}"))
+            .x_labels(30)
+            .y_labels(12)
+            .x_label_formatter(&|v| {
+                // Label 1, 2 and 5 of each decade only (the others crowd).
+                let m = v / 10f64.powf(v.log10().floor());
+                if [1.0, 2.0, 5.0, 10.0].iter().any(|k| (m - k).abs() < 1e-6) {
+                    format!("{v:.0}")
+                } else {
+                    String::new()
+                }
+            })
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .label_style((font, 16))
             .axis_desc_style((font, 18))
@@ -655,7 +681,7 @@ pub fn time_vs_error_png(
                 PathElement::new(vec![(x, y), (x + 18, y)], guide.stroke_width(2))
             });
         for (i, (r, pts)) in results.iter().zip(&points).enumerate() {
-            let colour = Palette99::pick(i).to_rgba();
+            let colour = LINE_COLOURS[i % LINE_COLOURS.len()];
             let line: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
             chart
                 .draw_series(LineSeries::new(line, colour.stroke_width(2)))
@@ -676,6 +702,12 @@ pub fn time_vs_error_png(
                 }))
                 .map_err(plot_err)?;
         }
+        root.draw(&Text::new(
+            "each line: tolerance 10 m (top left) … 1e-5 m; points labelled on the first line",
+            (110, height as i32 - 95),
+            (font, 15).into_font(),
+        ))
+        .map_err(plot_err)?;
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
