@@ -1,6 +1,7 @@
 //! One integration-test binary (keeps link time low); each file is a module.
 mod support;
 
+mod accuracy;
 mod cli;
 mod end_to_end;
 mod images;
