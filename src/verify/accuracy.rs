@@ -118,9 +118,9 @@ pub enum AccuracyError {
     Atmosphere {
         /// The case.
         name: String,
-        /// Why.
+        /// Why (boxed: the loader's error is large).
         #[source]
-        source: crate::atmosphere::AtmosphereError,
+        source: Box<crate::atmosphere::AtmosphereError>,
     },
     /// The tracer refused the input.
     #[error("cannot trace benchmark atmosphere {name}")]
@@ -440,7 +440,7 @@ pub fn measure_case(
     let atm = load_atmosphere(&case.source, &case.options).map_err(|source| {
         AccuracyError::Atmosphere {
             name: case.name.clone(),
-            source,
+            source: Box::new(source),
         }
     })?;
     let (rows, reference_steps_per_ray) =
