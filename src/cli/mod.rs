@@ -1,8 +1,9 @@
 //! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
 //! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis),
-//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three). Errors go back to
+//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three) and [`bench`] (time against error). Errors go back to
 //! `main` as one `anyhow` chain.
 
+pub mod bench;
 pub mod pipeline;
 pub mod profile;
 pub mod render;
@@ -44,6 +45,9 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
+    /// Benchmarks: `bench accuracy` measures the tracer's error against its time per ray and
+    /// writes BENCHMARKS.md with a log-log plot.
+    Bench(bench::BenchArgs),
 }
 
 /// Parse the process arguments (usage errors print clap's message and exit with status 2).
@@ -58,6 +62,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Trace(args) => trace::run(args, cli.quiet),
         Command::Render(args) => render::run(args, cli.quiet),
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
+        Command::Bench(args) => bench::run(args, cli.quiet),
     }
 }
 

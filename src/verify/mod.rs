@@ -2,5 +2,9 @@
 //! layered TOMLs, shipped soundings, and the layered stress soundings built here). Out: ray
 //! heights at target distances, traced at a range of tolerances and compared with a tight
 //! reference run, for the `bench` command and the tests.
+//!
+//! * [`stress`] — layered stress soundings as CSV text;
+//! * [`accuracy`] — time against error: the `bench accuracy` study, `BENCHMARKS.md` and its plot.
 
+pub mod accuracy;
 pub mod stress;

@@ -742,3 +742,55 @@ fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
     let p = layers["surface"]["pressure_hpa"].as_f64().unwrap();
     assert!((p - 1008.40).abs() < 1e-6, "{p}");
 }
+
+#[test]
+fn bench_accuracy_quick_writes_the_table_and_the_plot() {
+    let out = tempfile::tempdir().unwrap();
+    let data = crate::support::data::data_dir();
+    let r = ok(&[
+        "bench",
+        "accuracy",
+        "--quick",
+        "--out",
+        out.path().to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("BENCHMARKS.md"), "{}", r.stderr);
+    let png = out.path().join("docs/time_vs_error.png");
+    assert_eq!(png_size(&png), (1400, 900));
+    let md = std::fs::read_to_string(out.path().join("BENCHMARKS.md")).unwrap();
+    assert!(md.contains("ghostship bench accuracy --quick"), "{md}");
+    // One table per atmosphere (4 paper, 2 soundings, 6 stress), each with a row per tolerance.
+    let tables: Vec<&str> = md.split("\n## ").skip(1).collect();
+    assert_eq!(tables.len(), 12, "{md}");
+    for table in tables {
+        let rows: Vec<&str> = table
+            .lines()
+            .filter(|l| l.starts_with("| ") && !l.starts_with("| tolerance"))
+            .collect();
+        let tolerances: Vec<&str> = rows
+            .iter()
+            .map(|l| l.split('|').nth(1).unwrap().trim())
+            .collect();
+        assert_eq!(tolerances, ["1", "1e-2", "1e-4"], "{table}");
+        for row in rows {
+            // tolerance, 4 distances, p95, near-fold/compared, µs, steps, rays/s, steps/s.
+            assert_eq!(row.split('|').count(), 13, "{row}");
+        }
+    }
+    // --quiet prints nothing on success.
+    let q = ok(&[
+        "-q",
+        "bench",
+        "accuracy",
+        "--quick",
+        "--rays",
+        "5",
+        "--out",
+        out.path().to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]);
+    assert!(q.stderr.is_empty() && q.stdout.is_empty(), "{}", q.stderr);
+}

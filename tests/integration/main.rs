@@ -2,7 +2,7 @@
 mod support;
 
 mod accuracy;
-
+mod bench_accuracy;
 mod cli;
 mod end_to_end;
 mod images;
