@@ -49,8 +49,10 @@ pub struct TraceArgs {
     /// of [0, H] are found (erect or inverted, with magnification).
     #[arg(long, value_name = "M,...", value_delimiter = ',', default_values_t = [20.0])]
     pub target_height_m: Vec<f64>,
-    /// Integration error tolerance on position per step, in metres (the paper used 1 cm).
-    #[arg(long, value_name = "M", default_value_t = 0.01)]
+    /// Error tolerance on the ray heights at the requested distances, in metres (the paper used
+    /// 1 cm per step; the default 1 mm is the knee of the time-against-error curve, see
+    /// BENCHMARKS.md).
+    #[arg(long, value_name = "M", default_value_t = 1e-3)]
     pub tolerance_m: f64,
     /// Vacuum wavelength for the refractive index, in nanometres (300–1700).
     #[arg(long, value_name = "NM", default_value_t = DEFAULT_WAVELENGTH_NM)]

@@ -75,7 +75,7 @@ impl Default for TracerConfig {
         TracerConfig {
             earth_radius_m: crate::units::EARTH_RADIUS_M,
             top_m: 40_000.0,
-            tolerance_m: 0.01,
+            tolerance_m: 1e-3,
             error_length_m: 30_000.0,
             max_step_m: 2_000.0,
             min_step_m: 1e-7,
