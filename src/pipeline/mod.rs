@@ -152,7 +152,8 @@ pub struct TraceJob {
     pub atmosphere: String,
     /// Observer height above the surface (m).
     pub observer_height_m: f64,
-    /// Elevation fan `FROM:TO:STEP` in degrees.
+    /// Elevations in degrees, as `trace --elevation-deg` reads them: one value, an ascending
+    /// comma-separated list or a fan `FROM:TO:STEP`.
     pub elevation_deg: String,
     /// Target ground distances (m).
     pub distances_m: Vec<f64>,

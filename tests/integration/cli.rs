@@ -246,6 +246,7 @@ fn trace_reports_json_with_the_expected_keys() {
         "images",
         "horizons",
         "trapped_elevations_deg",
+        "notes",
     ] {
         assert!(v.get(key).is_some(), "trace JSON lacks {key}");
     }
@@ -343,9 +344,69 @@ fn trace_csv_and_plot() {
 }
 
 #[test]
+fn one_ray_and_short_lists_report_their_rays_and_say_why_there_are_no_images() {
+    let base = [
+        "trace",
+        "--atmosphere",
+        "us1976",
+        "--observer-height-m",
+        "10",
+        "--distance-m",
+        "5000,20000",
+        "--target-height-m",
+        "30",
+        "--elevation-deg",
+    ];
+    for (spec, elevations) in [
+        ("0.5", vec![0.5]),
+        ("-0.1,0.25", vec![-0.1, 0.25]),
+        ("0.2:0.2:0.1", vec![0.2]),
+    ] {
+        let mut args = base.to_vec();
+        args.push(spec);
+        let v = trace_json(&args);
+        let rays = v["rays"].as_array().unwrap();
+        let got: Vec<f64> = rays
+            .iter()
+            .map(|r| r["elevation_deg"].as_f64().unwrap())
+            .collect();
+        assert_eq!(got, elevations, "{spec}");
+        assert_eq!(rays[0]["heights_m"].as_array().unwrap().len(), 2, "{spec}");
+        assert!(v["images"].as_array().unwrap().is_empty(), "{spec}");
+        assert!(v["horizons"].as_array().unwrap().is_empty(), "{spec}");
+        let notes = v["notes"].as_array().unwrap();
+        assert_eq!(notes.len(), 1, "{spec}: {notes:?}");
+        let note = notes[0].as_str().unwrap();
+        assert!(note.contains("at least 3 rays"), "{spec}: {note}");
+        // The CSV form and the plot work for one ray too.
+        args.extend(["--format", "csv"]);
+        let r = ok(&args);
+        assert_eq!(r.stdout.lines().count(), 1 + elevations.len(), "{spec}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("one.png");
+    let mut args = base.to_vec();
+    args.extend(["0.5", "--plot", plot.to_str().unwrap()]);
+    ok(&args);
+    assert!(png_size(&plot).0 > 100);
+    // A listed fan of 3 or more rays is analysed like a range: images and horizons.
+    let mut args = base.to_vec();
+    args.push("-0.2,-0.1,0,0.05,0.1,0.2");
+    let v = trace_json(&args);
+    assert_eq!(v["rays"].as_array().unwrap().len(), 6);
+    assert_eq!(v["horizons"].as_array().unwrap().len(), 3);
+    assert!(!v["images"].as_array().unwrap().is_empty());
+    assert!(v["notes"].as_array().unwrap().is_empty());
+}
+
+#[test]
 fn bad_elevation_specs_are_explained() {
     for (spec, needle) in [
-        ("0.5:-0.5:0.01", "TO must be greater than FROM"),
+        ("0.5:-0.5:0.01", "TO must not be below FROM"),
+        ("0.2,0.1", "strictly ascending order"),
+        ("0.1,0.1", "strictly ascending order"),
+        ("0.1,x", "not a number of degrees"),
+        ("95", "between -90° and 90°"),
         ("-0.5:0.5:0", "STEP must be > 0"),
         ("-0.5:0.5", "FROM:TO:STEP"),
         ("-1:1:0.00001", "at most 100000"),
@@ -438,7 +499,14 @@ fn help_mentions_units_and_usage_errors_exit_2() {
         assert!(r.stdout.contains(needle), "profile --help lacks {needle}");
     }
     let r = ok(&["trace", "--help"]);
-    for needle in ["degrees", "metres", "FROM:TO:STEP", "--straight"] {
+    for needle in [
+        "degrees",
+        "metres",
+        "FROM:TO:STEP",
+        "--straight",
+        "comma-separated",
+        "at least 3 rays",
+    ] {
         assert!(r.stdout.contains(needle), "trace --help lacks {needle}");
     }
     let r = run(&["trace", "--no-such-option"]);
