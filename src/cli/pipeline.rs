@@ -231,16 +231,17 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     if !quiet {
-        println!(
-            "pipeline {}: {} job(s), {} file(s) in {}",
+        let mut text = format!(
+            "pipeline {}: {} job(s), {} file(s) in {}\n",
             pipeline.name,
             total,
             written.len(),
             out.display()
         );
         for path in &written {
-            println!("  {}", path.display());
+            text.push_str(&format!("  {}\n", path.display()));
         }
+        super::print_stdout(&text)?;
     }
     Ok(())
 }

@@ -313,10 +313,11 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
     )?;
     let atm = load_atmosphere(&options.source, &options.atmosphere)?;
     let (report, png) = trace_products(&atm, &options, args.plot.is_some())?;
-    match args.format {
-        TraceFormat::Json => println!("{}", report.to_json()?),
-        TraceFormat::Csv => print!("{}", String::from_utf8_lossy(&report.rays_csv()?)),
-    }
+    let text = match args.format {
+        TraceFormat::Json => report.to_json()? + "\n",
+        TraceFormat::Csv => String::from_utf8_lossy(&report.rays_csv()?).into_owned(),
+    };
+    super::print_stdout(&text)?;
     if let (Some(path), Some(png)) = (&args.plot, png) {
         write_atomic(path, &png)?;
         if !quiet {

@@ -824,3 +824,105 @@ fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
     let p = layers["surface"]["pressure_hpa"].as_f64().unwrap();
     assert!((p - 1008.40).abs() < 1e-6, "{p}");
 }
+
+/// Run ghostship with `args`, its stdout a pipe whose reader reads `read` bytes (none: closes it
+/// at once) and then goes away, like `ghostship … | head -c 10`; returns the exit status and
+/// stderr.
+fn with_closed_stdout(args: &[&str], read: usize) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ghostship"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary starts");
+    let mut stdout = child.stdout.take().unwrap();
+    let mut head = vec![0u8; read];
+    stdout
+        .read_exact(&mut head)
+        .expect("the first bytes arrive");
+    drop(stdout);
+    let out = child.wait_with_output().expect("binary ends");
+    (
+        out.status,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_closed_stdout_pipe_ends_every_command_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    // trace: ≈ 1 MB of JSON (and of CSV), far more than a pipe holds, so the writer is still
+    // writing when the reader goes after 10 bytes.
+    for format in ["json", "csv"] {
+        let (status, stderr) = with_closed_stdout(
+            &[
+                "trace",
+                "-a",
+                "us1976",
+                "--observer-height-m",
+                "10",
+                "--elevation-deg=-0.5:0.5:0.0005",
+                "--format",
+                format,
+            ],
+            10,
+        );
+        assert_eq!(status.code(), Some(0), "trace {format}: {stderr}");
+        assert!(stderr.is_empty(), "trace {format}: {stderr}");
+    }
+    // The same through a shell pipe into `head -c 10`; the group records ghostship's own status.
+    let (status_file, err_file) = (dir.path().join("status"), dir.path().join("err"));
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "{{ '{}' trace -a us1976 --observer-height-m 10 --elevation-deg=-0.5:0.5:0.0005 \
+             2>'{}'; echo $? >'{}'; }} | head -c 10 >/dev/null",
+            env!("CARGO_BIN_EXE_ghostship"),
+            err_file.display(),
+            status_file.display()
+        ))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    assert_eq!(std::fs::read_to_string(&status_file).unwrap().trim(), "0");
+    let stderr = std::fs::read_to_string(&err_file).unwrap();
+    assert!(stderr.is_empty(), "{stderr}");
+    // profile, pipeline run and --help print less than a pipe holds: the reader closes at once,
+    // before they print. profile still writes its files.
+    let prof = dir.path().join("prof");
+    let (status, stderr) = with_closed_stdout(
+        &["profile", "us1976", "-q", "--out", prof.to_str().unwrap()],
+        0,
+    );
+    assert_eq!(status.code(), Some(0), "profile: {stderr}");
+    assert!(stderr.is_empty(), "profile: {stderr}");
+    assert!(prof.join("profile.csv").is_file());
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 10\nelevation_deg = \"0:0.2:0.1\"\ndistances_m = [1000.0]\n",
+    )
+    .unwrap();
+    let out_dir = dir.path().join("o");
+    let (status, stderr) = with_closed_stdout(
+        &[
+            "pipeline",
+            "run",
+            pipeline.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ],
+        0,
+    );
+    assert_eq!(status.code(), Some(0), "pipeline: {stderr}");
+    assert!(stderr.is_empty(), "pipeline: {stderr}");
+    assert!(out_dir.join("us1976_transfer.json").is_file());
+    for args in [&["--help"][..], &["trace", "--help"][..]] {
+        let (status, stderr) = with_closed_stdout(args, 0);
+        assert_eq!(status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+    }
+}
