@@ -133,6 +133,9 @@ fn render_job(
     let options = RenderOptions {
         samples_per_pixel: job.spp,
         quiet: true,
+        tolerance_m: job
+            .tolerance_m
+            .unwrap_or(RenderOptions::default().tolerance_m),
         ..RenderOptions::default()
     };
     let film = render_film(&scene, &options)?;

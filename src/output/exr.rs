@@ -5,7 +5,7 @@
 //!
 //! Provenance: `software` = `"ghostship VERSION"`, `comments` = the scene hash, and ONE extra
 //! attribute `ghostship` (a string vector of `key=value` lines: program version, scene sha256,
-//! observer height, wavelength, fan tolerance, …). One attribute, because `exr` keeps extra
+//! observer height, wavelength, fan tolerance, tracer tolerance, …). One attribute, because `exr` keeps extra
 //! attributes in a `HashMap` and writes them in its (per-process random) iteration order: several
 //! would break byte reproducibility.
 
@@ -32,6 +32,8 @@ pub struct ExrMetadata {
     pub wavelength_nm: f64,
     /// Fan tolerance (pixels); `None` in exact mode.
     pub tolerance_px: Option<f64>,
+    /// The ray tracer's position tolerance per step (m).
+    pub tracer_tolerance_m: f64,
     /// Further `key=value` entries (Latin-1; other characters become `?`).
     pub extra: Vec<(String, String)>,
 }
@@ -61,6 +63,7 @@ impl ExrMetadata {
                 Some(t) => format!("fan_tolerance_px={t}"),
                 None => "fan_tolerance_px=exact".to_string(),
             },
+            format!("tracer_tolerance_m={}", self.tracer_tolerance_m),
         ];
         v.extend(self.extra.iter().map(|(k, val)| format!("{k}={val}")));
         v

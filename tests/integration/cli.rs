@@ -926,3 +926,109 @@ fn a_closed_stdout_pipe_ends_every_command_quietly() {
         assert!(stderr.is_empty(), "{args:?}: {stderr}");
     }
 }
+
+/// The `ghostship` provenance lines of an EXR file.
+fn exr_provenance(path: &Path) -> Vec<String> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).unwrap();
+    match meta.headers[0]
+        .own_attributes
+        .other
+        .get(&exr::meta::attribute::Text::from("ghostship"))
+    {
+        Some(exr::meta::attribute::AttributeValue::TextVector(v)) => {
+            v.iter().map(|t| t.to_string()).collect()
+        }
+        other => panic!("{}: no provenance attribute: {other:?}", path.display()),
+    }
+}
+
+#[test]
+fn render_tolerance_is_validated_used_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = data("scenes/fig08_inferior_mirage.toml");
+    let render = |tolerance: Option<&str>, stem: &str| {
+        let png = dir.path().join(format!("{stem}.png"));
+        let exr = dir.path().join(format!("{stem}.exr"));
+        let mut args = vec![
+            "render".to_string(),
+            scene.to_str().unwrap().into(),
+            "--size".into(),
+            "80x40".into(),
+            "--spp".into(),
+            "1".into(),
+            "-q".into(),
+            "-o".into(),
+            png.to_str().unwrap().into(),
+            "-o".into(),
+            exr.to_str().unwrap().into(),
+        ];
+        if let Some(t) = tolerance {
+            args.extend(["--tolerance-m".into(), t.into()]);
+        }
+        ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        (image::open(&png).unwrap().to_rgb8(), exr_provenance(&exr))
+    };
+    let (default_png, default_lines) = render(None, "default");
+    let (fine_png, fine_lines) = render(Some("0.001"), "fine");
+    let (coarse_png, coarse_lines) = render(Some("1"), "coarse");
+    assert!(
+        default_lines.contains(&"tracer_tolerance_m=0.01".to_string()),
+        "{default_lines:?}"
+    );
+    assert!(
+        fine_lines.contains(&"tracer_tolerance_m=0.001".to_string()),
+        "{fine_lines:?}"
+    );
+    assert!(
+        coarse_lines.contains(&"tracer_tolerance_m=1".to_string()),
+        "{coarse_lines:?}"
+    );
+    for img in [&fine_png, &coarse_png] {
+        assert_eq!(img.dimensions(), default_png.dimensions());
+    }
+    // 1 mm and 1 cm agree to far below a pixel here: at most a few edge pixels may move.
+    let differing = default_png
+        .pixels()
+        .zip(fine_png.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differing <= 40,
+        "{differing} of 3200 pixels differ between 1 cm and 1 mm"
+    );
+    for bad in ["0", "-0.01", "nan", "inf", "11", "1e-7"] {
+        let r = fails(&[
+            "render",
+            scene.to_str().unwrap(),
+            &format!("--tolerance-m={bad}"),
+            "-o",
+            dir.path().join("bad.png").to_str().unwrap(),
+        ]);
+        assert!(r.stderr.contains("--tolerance-m"), "{bad}: {}", r.stderr);
+        assert!(r.stderr.contains("1e-6 to 10"), "{bad}: {}", r.stderr);
+    }
+    // The pipeline's render jobs take it too, and record it.
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[render]]\nscene = {:?}\nname = \"f\"\nsizes = [\"40x20\"]\nspp = 1\ntolerance_m = 0.05\nformats = [\"exr\"]\n",
+            scene.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("o");
+    ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let lines = exr_provenance(&out.join("f_40x20.exr"));
+    assert!(
+        lines.contains(&"tracer_tolerance_m=0.05".to_string()),
+        "{lines:?}"
+    );
+}
