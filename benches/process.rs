@@ -11,13 +11,16 @@
 //!
 //! `cargo bench --bench process` (builds the binary in the bench profile first). Environment:
 //! `GHOSTSHIP_BENCH_RUNS` (runs per scene and output set, default 7), `GHOSTSHIP_BENCH_BIN`
-//! (another binary to time, e.g. an older build); a further argument filters scenes by name.
+//! (other binaries to time instead, separated by `:`, e.g. an older build and this one: their
+//! runs are interleaved, so a busy spell of a shared machine hits them alike); a further
+//! argument filters scenes by name.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 use ghostship::atmosphere::load_scene_atmosphere;
+use ghostship::output::film::write_films;
 use ghostship::output::{exr, png, write_atomic};
 use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
 use ghostship::scene::Scene;
@@ -76,8 +79,9 @@ fn timed<T>(f: impl FnOnce() -> T) -> (f64, T) {
 }
 
 /// In-process stage times (s) of one 1920×1080, 1 spp frame of `scene_path`: scene, atmosphere,
-/// tracer, render, png, exr, write (both files).
-fn stages(scene_path: &Path, dir: &Path) -> [f64; 7] {
+/// tracer, render, png encoding, exr encoding, writing both files; then both encoded and written
+/// as `ghostship render` does it (`write_films`: PNG and EXR in parallel).
+fn stages(scene_path: &Path, dir: &Path) -> [f64; 8] {
     let (t_scene, scene) = timed(|| {
         let mut scene = Scene::from_file(scene_path).expect("scene");
         scene.camera.width = 1920;
@@ -102,13 +106,19 @@ fn stages(scene_path: &Path, dir: &Path) -> [f64; 7] {
         write_atomic(&dir.join("stage.png"), &png_bytes).expect("write");
         write_atomic(&dir.join("stage.exr"), &exr_bytes).expect("write");
     });
-    [t_scene, t_atm, t_tracer, t_render, t_png, t_exr, t_write]
+    let paths = [dir.join("joined.png"), dir.join("joined.exr")];
+    let (t_joined, ()) =
+        timed(|| write_films(&film, &paths, &meta, png::DEFAULT_EXPOSURE).expect("write_films"));
+    [
+        t_scene, t_atm, t_tracer, t_render, t_png, t_exr, t_write, t_joined,
+    ]
 }
 
 fn main() {
-    let bin = std::env::var_os("GHOSTSHIP_BENCH_BIN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_ghostship")));
+    let bins: Vec<PathBuf> = match std::env::var_os("GHOSTSHIP_BENCH_BIN") {
+        Some(list) => std::env::split_paths(&list).collect(),
+        None => vec![PathBuf::from(env!("CARGO_BIN_EXE_ghostship"))],
+    };
     let runs: usize = std::env::var("GHOSTSHIP_BENCH_RUNS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -122,55 +132,66 @@ fn main() {
     let exr = tmp.path().join("frame.exr");
     let both = [png.clone(), exr];
     let png_only = [png];
-    println!(
-        "whole process, 1920x1080, 1 spp, median of {runs} runs ({}):",
-        bin.display()
-    );
-    println!(
-        "{:<38} {:>12} {:>12}  {:>6}",
-        "scene", "png+exr", "png only", "≤ 0.1 s"
-    );
-    let (mut all_both, mut all_png) = (Vec::new(), Vec::new());
-    for name in SCENES {
-        if filter.as_deref().is_some_and(|f| !name.contains(f)) {
-            continue;
-        }
+    let scenes: Vec<&str> = SCENES
+        .into_iter()
+        .filter(|name| filter.as_deref().is_none_or(|f| name.contains(f)))
+        .collect();
+    // medians[bin][scene] = (png+exr, png only)
+    let mut medians = vec![Vec::new(); bins.len()];
+    for name in &scenes {
         let scene = scenes_dir.join(format!("{name}.toml"));
-        // One warm-up run (page cache, binary mapped), not counted.
-        run_once(&bin, &scene, &both);
-        let mut t_both = Vec::with_capacity(runs);
-        let mut t_png = Vec::with_capacity(runs);
-        // Interleaved, so a slow spell of the shared machine hits both sets alike.
-        for _ in 0..runs {
-            t_both.push(run_once(&bin, &scene, &both));
-            t_png.push(run_once(&bin, &scene, &png_only));
+        for bin in &bins {
+            // One warm-up run (page cache, binary mapped), not counted.
+            run_once(bin, &scene, &both);
         }
-        let (mb, mp) = (median(t_both), median(t_png));
-        all_both.push(mb);
-        all_png.push(mp);
-        println!(
-            "{name:<38} {:>9.1} ms {:>9.1} ms  {:>6}",
-            mb * 1e3,
-            mp * 1e3,
-            if mb <= TARGET_S { "yes" } else { "no" }
-        );
+        let mut t_both = vec![Vec::with_capacity(runs); bins.len()];
+        let mut t_png = vec![Vec::with_capacity(runs); bins.len()];
+        // Interleaved, so a slow spell of the shared machine hits every binary and set alike.
+        for _ in 0..runs {
+            for (b, bin) in bins.iter().enumerate() {
+                t_both[b].push(run_once(bin, &scene, &both));
+                t_png[b].push(run_once(bin, &scene, &png_only));
+            }
+        }
+        for b in 0..bins.len() {
+            medians[b].push((
+                median(std::mem::take(&mut t_both[b])),
+                median(std::mem::take(&mut t_png[b])),
+            ));
+        }
     }
-    if !all_both.is_empty() {
+    for (bin, per_scene) in bins.iter().zip(&medians) {
         println!(
-            "{:<38} {:>9.1} ms {:>9.1} ms",
-            "median over scenes",
-            median(all_both) * 1e3,
-            median(all_png) * 1e3
+            "whole process, 1920x1080, 1 spp, median of {runs} runs ({}):",
+            bin.display()
         );
+        println!(
+            "{:<38} {:>12} {:>12}  {:>6}",
+            "scene", "png+exr", "png only", "≤ 0.1 s"
+        );
+        for (name, &(mb, mp)) in scenes.iter().zip(per_scene) {
+            println!(
+                "{name:<38} {:>9.1} ms {:>9.1} ms  {:>6}",
+                mb * 1e3,
+                mp * 1e3,
+                if mb <= TARGET_S { "yes" } else { "no" }
+            );
+        }
+        if !per_scene.is_empty() {
+            println!(
+                "{:<38} {:>9.1} ms {:>9.1} ms\n",
+                "median over scenes",
+                median(per_scene.iter().map(|m| m.0).collect()) * 1e3,
+                median(per_scene.iter().map(|m| m.1).collect()) * 1e3
+            );
+        }
     }
+    let bin = bins.last().expect("a binary");
 
     let startup: Vec<f64> = (0..runs)
         .map(|_| {
             let start = Instant::now();
-            let out = Command::new(&bin)
-                .arg("--version")
-                .output()
-                .expect("binary");
+            let out = Command::new(bin).arg("--version").output().expect("binary");
             assert!(out.status.success());
             start.elapsed().as_secs_f64()
         })
@@ -181,20 +202,17 @@ fn main() {
     );
     println!("in-process stages of the same frame (library, median of {runs} runs, ms):");
     let names = [
-        "scene", "atmosph", "tracer", "render", "png", "exr", "write",
+        "scene", "atmosph", "tracer", "render", "png", "exr", "write", "png||exr",
     ];
     print!("{:<38}", "scene");
     for n in names {
         print!(" {n:>8}");
     }
     println!();
-    for name in SCENES {
-        if filter.as_deref().is_some_and(|f| !name.contains(f)) {
-            continue;
-        }
+    for name in &scenes {
         let scene = scenes_dir.join(format!("{name}.toml"));
         stages(&scene, tmp.path()); // warm-up
-        let samples: Vec<[f64; 7]> = (0..runs).map(|_| stages(&scene, tmp.path())).collect();
+        let samples: Vec<[f64; 8]> = (0..runs).map(|_| stages(&scene, tmp.path())).collect();
         print!("{name:<38}");
         for k in 0..names.len() {
             print!(

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
-use ghostship::output::film::write_film;
+use ghostship::output::film::write_films;
 use ghostship::output::png::DEFAULT_EXPOSURE;
 use ghostship::output::write_atomic;
 use ghostship::pipeline::{ImageFormat, ProfileJob, RenderJob, ResolvedPipeline, TraceJob};
@@ -140,16 +140,19 @@ fn render_job(
     };
     let film = render_film(&scene, &options)?;
     let meta = provenance(&scene, &options);
-    let mut written = Vec::new();
-    for format in &job.formats {
-        let ext = match format {
-            ImageFormat::Png => "png",
-            ImageFormat::Exr => "exr",
-        };
-        let path = out.join(format!("{label}.{ext}"));
-        write_film(&film, &path, &meta, DEFAULT_EXPOSURE)?;
-        written.push(path);
-    }
+    let written: Vec<PathBuf> = job
+        .formats
+        .iter()
+        .map(|format| {
+            let ext = match format {
+                ImageFormat::Png => "png",
+                ImageFormat::Exr => "exr",
+            };
+            out.join(format!("{label}.{ext}"))
+        })
+        .collect();
+    // PNG and EXR are encoded (and written) in parallel.
+    write_films(&film, &written, &meta, DEFAULT_EXPOSURE)?;
     Ok(written)
 }
 

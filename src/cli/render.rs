@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use ghostship::atmosphere::load_scene_atmosphere;
-use ghostship::output::film::{FilmFormat, write_film};
+use ghostship::output::film::{FilmFormat, write_films};
 use ghostship::output::png::DEFAULT_EXPOSURE;
 use ghostship::pipeline::parse_size;
 use ghostship::render::{
@@ -101,9 +101,10 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
         .with_context(|| format!("cannot render {}", args.scene.display()))?;
     let render_s = start.elapsed().as_secs_f64();
     let meta = provenance(&scene, &options);
-    for path in &outputs {
-        write_film(&film, path, &meta, args.exposure)?;
-        if !quiet {
+    // PNG and EXR are encoded (and written) in parallel.
+    write_films(&film, &outputs, &meta, args.exposure)?;
+    if !quiet {
+        for path in &outputs {
             eprintln!("wrote {}", path.display());
         }
     }
