@@ -126,10 +126,13 @@ pub fn trace_plot_png(
             }
         }
         // Transfer curves.
-        let (amin, amax) = (
-            request.elevation_min_deg * 60.0,
-            request.elevation_max_deg * 60.0,
-        );
+        // The fan's span in arcmin; a single ray gets ±1′ around it.
+        let (first, last) = (elevations.first().copied(), elevations.last().copied());
+        let (amin, amax) = match (first, last) {
+            (Some(a), Some(b)) if b > a => (a.to_degrees() * 60.0, b.to_degrees() * 60.0),
+            (Some(a), _) => (a.to_degrees() * 60.0 - 1.0, a.to_degrees() * 60.0 + 1.0),
+            _ => (-1.0, 1.0),
+        };
         let mut chart = ChartBuilder::on(&right)
             .caption("Transfer curves h(D; α)", (PLOT_FONT, 20))
             .margin(10)

@@ -23,10 +23,14 @@ pub struct TraceRequest {
     pub observer_height_m: f64,
     /// Lowest apparent elevation of the fan (deg).
     pub elevation_min_deg: f64,
-    /// Highest apparent elevation of the fan (deg).
+    /// Highest apparent elevation of the fan (deg); equal to the lowest for a single ray.
     pub elevation_max_deg: f64,
-    /// Number of rays in the fan (≥ 3), evenly spaced.
+    /// Number of rays in the fan (≥ 1), evenly spaced. Images and apparent horizons need at
+    /// least [`MIN_ANALYSIS_RAYS`].
     pub elevation_count: usize,
+    /// Explicit apparent elevations (deg), strictly ascending; when not empty they are the fan
+    /// and the three fields above are ignored.
+    pub elevations_deg: Vec<f64>,
     /// Ground distances at which heights are reported (m), ascending.
     pub distances_m: Vec<f64>,
     /// Heights of targets standing at every distance (m): images of [0, H] are searched.
@@ -45,6 +49,15 @@ pub struct TraceRequest {
 /// because a ducted Novaya Zemlya sun ray must be followed until it escapes.)
 pub const DEFAULT_TRACE_TRAP_DISTANCE_M: f64 = 1_000_000.0;
 
+/// Fewest rays for which a report searches images and apparent horizons: a fold of the transfer
+/// curve (where an inverted image begins) shows only as a turning point of three consecutive
+/// rays, and a horizon needs a ray on each side. A smaller fan still reports every ray, with
+/// empty `images` and `horizons` and a note saying why.
+pub const MIN_ANALYSIS_RAYS: usize = 3;
+
+/// Most rays a fan may have.
+pub const MAX_FAN_RAYS: usize = 100_000;
+
 impl Default for TraceRequest {
     fn default() -> Self {
         TraceRequest {
@@ -52,6 +65,7 @@ impl Default for TraceRequest {
             elevation_min_deg: -0.5,
             elevation_max_deg: 0.5,
             elevation_count: 1001,
+            elevations_deg: Vec::new(),
             distances_m: vec![10_000.0, 20_000.0, 30_000.0],
             target_heights_m: vec![20.0],
             wavelength_nm: 550.0,
@@ -62,28 +76,59 @@ impl Default for TraceRequest {
 }
 
 impl TraceRequest {
+    /// The fan's apparent elevations (deg), ascending: the explicit list, or `elevation_count`
+    /// evenly spaced from `elevation_min_deg` to `elevation_max_deg` (just the lowest for one).
+    pub fn elevations_deg(&self) -> Vec<f64> {
+        if !self.elevations_deg.is_empty() {
+            return self.elevations_deg.clone();
+        }
+        let (lo, hi) = (self.elevation_min_deg, self.elevation_max_deg);
+        match self.elevation_count {
+            0 => Vec::new(),
+            1 => vec![lo],
+            n => (0..n)
+                .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
+                .collect(),
+        }
+    }
+
     /// The fan's apparent elevations (rad), ascending.
     pub fn elevations_rad(&self) -> Vec<f64> {
-        let n = self.elevation_count.max(2);
-        let (lo, hi) = (self.elevation_min_deg, self.elevation_max_deg);
-        (0..n)
-            .map(|i| (lo + (hi - lo) * i as f64 / (n - 1) as f64).to_radians())
+        self.elevations_deg()
+            .into_iter()
+            .map(f64::to_radians)
             .collect()
     }
 
     /// Check the request.
     pub fn validate(&self) -> Result<(), AnalysisError> {
         let bad = |m: &str| Err(AnalysisError::InvalidRequest(m.to_string()));
-        if self.elevation_count < 3 {
-            return bad("elevation_count must be at least 3");
-        }
-        if !(self.elevation_min_deg.is_finite()
-            && self.elevation_max_deg.is_finite()
-            && self.elevation_min_deg < self.elevation_max_deg
-            && self.elevation_min_deg > -90.0
-            && self.elevation_max_deg < 90.0)
-        {
-            return bad("need -90 < elevation_min_deg < elevation_max_deg < 90");
+        let inside = |a: f64| a.is_finite() && a > -90.0 && a < 90.0;
+        if self.elevations_deg.is_empty() {
+            if !(1..=MAX_FAN_RAYS).contains(&self.elevation_count) {
+                return bad(&format!("elevation_count must be from 1 to {MAX_FAN_RAYS}"));
+            }
+            let ordered = if self.elevation_count == 1 {
+                self.elevation_min_deg <= self.elevation_max_deg
+            } else {
+                self.elevation_min_deg < self.elevation_max_deg
+            };
+            if !(inside(self.elevation_min_deg) && inside(self.elevation_max_deg) && ordered) {
+                return bad(
+                    "need -90 < elevation_min_deg < elevation_max_deg < 90 (equal for one ray)",
+                );
+            }
+        } else {
+            if self.elevations_deg.len() > MAX_FAN_RAYS {
+                return bad(&format!("elevations_deg has more than {MAX_FAN_RAYS} rays"));
+            }
+            if !self.elevations_deg.iter().all(|&a| inside(a))
+                || self.elevations_deg.windows(2).any(|w| w[1] <= w[0])
+            {
+                return bad(
+                    "elevations_deg must lie strictly between -90 and 90 and be strictly ascending",
+                );
+            }
         }
         if self
             .distances_m
@@ -200,6 +245,9 @@ pub struct TraceReport {
     pub horizons: Vec<Horizon>,
     /// Elevations (deg) of the fan rays that are trapped.
     pub trapped_elevations_deg: Vec<f64>,
+    /// What the report leaves out and why (e.g. no images or horizons for a fan of fewer than
+    /// [`MIN_ANALYSIS_RAYS`] rays); empty normally.
+    pub notes: Vec<String>,
 }
 
 /// The fate (by Bouguer's invariant) of each fan ray that stopped at the trap distance: rays
@@ -281,6 +329,36 @@ pub fn trace_report(
             ..RayReport::from_record(r, request.distances_m.len())
         })
         .collect();
+    let trapped_elevations_deg = rays
+        .iter()
+        .filter(|r| r.trapped)
+        .map(|r| r.elevation_deg)
+        .collect();
+    let mut report = TraceReport {
+        observer_height_m: h0,
+        tolerance_m: request.tracer.tolerance_m,
+        fold_threshold_m: FoldTest::default().threshold_m(request.tracer.tolerance_m),
+        retrace_tolerance_m: FoldTest::default().retrace_tolerance_m(request.tracer.tolerance_m),
+        wavelength_nm: request.wavelength_nm,
+        earth_radius_m: request.tracer.earth_radius_m,
+        top_m: request.tracer.top_m,
+        trap_distance_m: request.trap_distance_m,
+        distances_m: request.distances_m.clone(),
+        target_heights_m: request.target_heights_m.clone(),
+        rays,
+        images: Vec::new(),
+        horizons: Vec::new(),
+        trapped_elevations_deg,
+        notes: Vec::new(),
+    };
+    if elevations.len() < MIN_ANALYSIS_RAYS {
+        report.notes.push(format!(
+            "images and apparent horizons need a fan of at least {MIN_ANALYSIS_RAYS} rays; this \
+             one has {}, so only the rays are reported",
+            elevations.len()
+        ));
+        return Ok(report);
+    }
     // Images, one job per (distance, height), in parallel; the order is fixed by the job list.
     let jobs: Vec<(usize, f64)> = (0..request.distances_m.len())
         .flat_map(|j| request.target_heights_m.iter().map(move |&h| (j, h)))
@@ -302,7 +380,7 @@ pub fn trace_report(
     let mut horizon_targets: Vec<Option<f64>> =
         request.distances_m.iter().copied().map(Some).collect();
     horizon_targets.push(None);
-    let horizons = horizon_targets
+    let horizons: Vec<Horizon> = horizon_targets
         .par_iter()
         .map(|&d| {
             // From the fan: a ray is clear of the ground before D if it has a height there; clear
@@ -332,27 +410,9 @@ pub fn trace_report(
             }
         })
         .collect();
-    let trapped_elevations_deg = rays
-        .iter()
-        .filter(|r| r.trapped)
-        .map(|r| r.elevation_deg)
-        .collect();
-    Ok(TraceReport {
-        observer_height_m: h0,
-        tolerance_m: request.tracer.tolerance_m,
-        fold_threshold_m: FoldTest::default().threshold_m(request.tracer.tolerance_m),
-        retrace_tolerance_m: FoldTest::default().retrace_tolerance_m(request.tracer.tolerance_m),
-        wavelength_nm: request.wavelength_nm,
-        earth_radius_m: request.tracer.earth_radius_m,
-        top_m: request.tracer.top_m,
-        trap_distance_m: request.trap_distance_m,
-        distances_m: request.distances_m.clone(),
-        target_heights_m: request.target_heights_m.clone(),
-        rays,
-        images,
-        horizons,
-        trapped_elevations_deg,
-    })
+    report.images = images;
+    report.horizons = horizons;
+    Ok(report)
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -412,5 +472,70 @@ impl TraceReport {
         }
         w.into_inner()
             .map_err(|e| AnalysisError::Csv(e.into_error().into()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::atmosphere::UniformIndex;
+
+    fn request(count: usize, lo: f64, hi: f64, list: Vec<f64>) -> TraceRequest {
+        TraceRequest {
+            elevation_min_deg: lo,
+            elevation_max_deg: hi,
+            elevation_count: count,
+            elevations_deg: list,
+            distances_m: vec![5_000.0],
+            ..TraceRequest::default()
+        }
+    }
+
+    #[test]
+    fn small_fans_report_rays_without_images_or_horizons() {
+        for (req, n) in [
+            (request(1, 0.1, 0.1, vec![]), 1),
+            (request(2, -0.1, 0.1, vec![]), 2),
+            (request(0, 0.0, 0.0, vec![0.3]), 1),
+            (request(0, 0.0, 0.0, vec![-0.2, 0.3]), 2),
+        ] {
+            let report = trace_report(&UniformIndex, &req).unwrap();
+            assert_eq!(report.rays.len(), n);
+            assert!(report.images.is_empty() && report.horizons.is_empty());
+            assert_eq!(report.notes.len(), 1);
+            assert!(report.notes[0].contains("at least 3"), "{:?}", report.notes);
+        }
+        let report = trace_report(&UniformIndex, &request(3, -0.1, 0.1, vec![])).unwrap();
+        assert_eq!(report.rays.len(), 3);
+        assert_eq!(report.horizons.len(), 2);
+        assert!(report.notes.is_empty());
+    }
+
+    #[test]
+    fn explicit_elevations_are_the_fan() {
+        let req = request(7, -1.0, 1.0, vec![-0.1, 0.0, 0.25]);
+        assert_eq!(req.elevations_deg(), vec![-0.1, 0.0, 0.25]);
+        let report = trace_report(&UniformIndex, &req).unwrap();
+        let got: Vec<f64> = report.rays.iter().map(|r| r.elevation_deg).collect();
+        assert_eq!(got, vec![-0.1, 0.0, 0.25]);
+        // An even fan is unchanged by the new field.
+        let even = request(3, -0.1, 0.1, vec![]).elevations_deg();
+        assert_eq!(even, vec![-0.1, 0.0, 0.1]);
+    }
+
+    #[test]
+    fn bad_fans_are_refused() {
+        for req in [
+            request(0, 0.0, 1.0, vec![]),
+            request(2, 0.1, 0.1, vec![]),
+            request(3, 0.2, 0.1, vec![]),
+            request(MAX_FAN_RAYS + 1, 0.0, 1.0, vec![]),
+            request(0, 0.0, 0.0, vec![0.2, 0.1]),
+            request(0, 0.0, 0.0, vec![0.1, 0.1]),
+            request(0, 0.0, 0.0, vec![f64::NAN]),
+            request(0, 0.0, 0.0, vec![90.0]),
+        ] {
+            assert!(req.validate().is_err(), "{req:?}");
+        }
     }
 }

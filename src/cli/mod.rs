@@ -9,6 +9,9 @@ pub mod profile;
 pub mod render;
 pub mod trace;
 
+use std::io::Write;
+
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 /// Turn real radiosonde soundings (or synthetic paper-style layers) into the refractive
@@ -66,6 +69,23 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// Write `text` to standard output through one lock, and flush it. Every command's data output
+/// goes through here (never `println!`, which panics on a closed pipe). A closed pipe — the
+/// reader, e.g. `head -c 10`, has stopped reading — is not an error: the rest of the text is
+/// dropped, and the command goes on with its files and exits with status 0, silently.
+pub fn print_stdout(text: &str) -> anyhow::Result<()> {
+    write_quietly(&mut std::io::stdout().lock(), text.as_bytes())
+        .context("cannot write to standard output")
+}
+
+/// `text` to `out`, flushed; a broken pipe counts as written.
+fn write_quietly(out: &mut impl Write, text: &[u8]) -> std::io::Result<()> {
+    match out.write_all(text).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    }
+}
+
 /// The error and its causes on one line, `outer: inner: …` (like anyhow's `{:#}`), leaving out a
 /// cause whose text the message so far already ends with: several stage errors print their
 /// source inside their own message *and* expose it as the source, which would repeat it.
@@ -92,6 +112,41 @@ mod tests {
     struct Repeats {
         #[source]
         source: std::io::Error,
+    }
+
+    /// A writer whose reader has gone after `room` bytes.
+    struct ClosedAfter {
+        room: usize,
+        kind: std::io::ErrorKind,
+    }
+
+    impl Write for ClosedAfter {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.room == 0 {
+                return Err(std::io::Error::from(self.kind));
+            }
+            let n = buf.len().min(self.room);
+            self.room -= n;
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_closed_pipe_is_a_quiet_end_other_errors_are_not() {
+        let mut pipe = ClosedAfter {
+            room: 4,
+            kind: std::io::ErrorKind::BrokenPipe,
+        };
+        assert!(write_quietly(&mut pipe, b"0123456789").is_ok());
+        assert!(write_quietly(&mut pipe, b"more").is_ok());
+        let mut full = ClosedAfter {
+            room: 4,
+            kind: std::io::ErrorKind::StorageFull,
+        };
+        assert!(write_quietly(&mut full, b"0123456789").is_err());
     }
 
     #[test]

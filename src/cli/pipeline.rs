@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
-use ghostship::output::film::write_film;
+use ghostship::output::film::write_films;
 use ghostship::output::png::DEFAULT_EXPOSURE;
 use ghostship::output::write_atomic;
 use ghostship::pipeline::{ImageFormat, ProfileJob, RenderJob, ResolvedPipeline, TraceJob};
@@ -133,20 +133,26 @@ fn render_job(
     let options = RenderOptions {
         samples_per_pixel: job.spp,
         quiet: true,
+        tolerance_m: job
+            .tolerance_m
+            .unwrap_or(RenderOptions::default().tolerance_m),
         ..RenderOptions::default()
     };
     let film = render_film(&scene, &options)?;
     let meta = provenance(&scene, &options);
-    let mut written = Vec::new();
-    for format in &job.formats {
-        let ext = match format {
-            ImageFormat::Png => "png",
-            ImageFormat::Exr => "exr",
-        };
-        let path = out.join(format!("{label}.{ext}"));
-        write_film(&film, &path, &meta, DEFAULT_EXPOSURE)?;
-        written.push(path);
-    }
+    let written: Vec<PathBuf> = job
+        .formats
+        .iter()
+        .map(|format| {
+            let ext = match format {
+                ImageFormat::Png => "png",
+                ImageFormat::Exr => "exr",
+            };
+            out.join(format!("{label}.{ext}"))
+        })
+        .collect();
+    // PNG and EXR are encoded (and written) in parallel.
+    write_films(&film, &written, &meta, DEFAULT_EXPOSURE)?;
     Ok(written)
 }
 
@@ -231,16 +237,17 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     if !quiet {
-        println!(
-            "pipeline {}: {} job(s), {} file(s) in {}",
+        let mut text = format!(
+            "pipeline {}: {} job(s), {} file(s) in {}\n",
             pipeline.name,
             total,
             written.len(),
             out.display()
         );
         for path in &written {
-            println!("  {}", path.display());
+            text.push_str(&format!("  {}\n", path.display()));
         }
+        super::print_stdout(&text)?;
     }
     Ok(())
 }

@@ -185,21 +185,23 @@ pub fn run(args: ProfileArgs, quiet: bool) -> anyhow::Result<()> {
     options.validate()?;
     let atm = load_atmosphere(&options.source, &options.atmosphere)?;
     let products = profile_products(&atm, &options)?;
-    match args.format {
+    let text = match args.format {
         SummaryFormat::Table => {
             let summary = summary_text(&products.report);
-            println!("{}\n{}", atm.description, summary.trim_end());
+            let mut text = format!("{}\n{}\n", atm.description, summary.trim_end());
             if let Some(s) = &atm.sounding {
                 for w in &s.warnings {
-                    println!("Ingest note: {w}");
+                    text.push_str(&format!("Ingest note: {w}\n"));
                 }
             }
+            text
         }
         SummaryFormat::Json => {
             let json = summary_json(&products.report);
-            println!("{}", String::from_utf8_lossy(&json).trim_end());
+            format!("{}\n", String::from_utf8_lossy(&json).trim_end())
         }
-    }
+    };
+    super::print_stdout(&text)?;
     let written = write_profile(&out_dir, &products)?;
     if !quiet {
         for path in written {

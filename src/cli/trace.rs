@@ -14,7 +14,7 @@ use ghostship::refractivity::DEFAULT_WAVELENGTH_NM;
 use ghostship::tracer::{StratifiedIndex, TracerConfig};
 
 /// Most rays a fan may have.
-pub const MAX_RAYS: usize = 100_000;
+pub const MAX_RAYS: usize = ghostship::analysis::MAX_FAN_RAYS;
 
 /// Default distance beyond which rays still in the air count as trapped (m): the library's.
 pub const DEFAULT_TRAP_DISTANCE_M: f64 = ghostship::analysis::DEFAULT_TRACE_TRAP_DISTANCE_M;
@@ -37,9 +37,16 @@ pub struct TraceArgs {
     /// Observer (eye) height in metres above the atmosphere's surface level.
     #[arg(long, value_name = "M")]
     pub observer_height_m: f64,
-    /// The fan of apparent elevations in degrees, FROM:TO:STEP (e.g. -0.4:0.6:0.001): rays at
-    /// FROM, FROM+STEP, … up to TO; at least 3 and at most 100 000 rays.
-    #[arg(long, value_name = "FROM:TO:STEP", allow_hyphen_values = true)]
+    /// Apparent elevations of the rays, in degrees: one value (0.5), a comma-separated list in
+    /// strictly ascending order (-0.1,0,0.25; refused if out of order), or a fan FROM:TO:STEP
+    /// (-0.4:0.6:0.001: rays at FROM, FROM+STEP, … up to TO). 1 to 100 000 rays. Every ray is
+    /// reported; images and apparent horizons need a fan of at least 3 rays (with fewer, the
+    /// JSON has empty `images` and `horizons` and says so in `notes`).
+    #[arg(
+        long,
+        value_name = "DEG|DEG,DEG,...|FROM:TO:STEP",
+        allow_hyphen_values = true
+    )]
     pub elevation_deg: String,
     /// Ground distances of the targets in metres, comma-separated (heights of every ray are
     /// reported there; images are searched there).
@@ -81,20 +88,68 @@ pub struct TraceArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// A fan of elevations: `count` rays from `from_deg` to `to_deg`, evenly spaced.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ElevationFan {
-    /// Lowest elevation (deg).
-    pub from_deg: f64,
-    /// Highest elevation (deg): FROM + (count − 1)·STEP, at most TO.
-    pub to_deg: f64,
-    /// Number of rays.
-    pub count: usize,
+/// The rays to trace, as given on the command line.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ElevationFan {
+    /// `count` rays from `from_deg` to `to_deg`, evenly spaced (`FROM:TO:STEP`).
+    Range {
+        /// Lowest elevation (deg).
+        from_deg: f64,
+        /// Highest elevation (deg): FROM + (count − 1)·STEP, at most TO.
+        to_deg: f64,
+        /// Number of rays (≥ 1).
+        count: usize,
+    },
+    /// Explicit elevations (deg), strictly ascending: one value or a comma-separated list.
+    List(Vec<f64>),
 }
 
-/// Parse `FROM:TO:STEP` (degrees). STEP > 0, TO > FROM, 3 to [`MAX_RAYS`] rays. When
-/// (TO − FROM)/STEP is not a whole number the fan stops at the last step below TO.
+/// Parse the `--elevation-deg` value (degrees): one elevation (`0.5`), a comma-separated list in
+/// strictly ascending order (`-0.1,0,0.25`; a list out of order, or with a repeated value, is
+/// refused rather than silently sorted, so the rows of the report are the rays as listed), or
+/// an evenly spaced fan `FROM:TO:STEP` (STEP > 0, TO ≥ FROM; when (TO − FROM)/STEP is not a whole
+/// number the fan stops at the last step below TO). 1 to [`MAX_RAYS`] rays, every elevation
+/// strictly between −90° and 90°.
 pub fn parse_elevation_fan(text: &str) -> Result<ElevationFan, String> {
+    let inside = |v: f64| v > -90.0 && v < 90.0;
+    if !text.contains(':') {
+        let mut list = Vec::new();
+        for item in text.split(',') {
+            let v = item
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    format!(
+                        "elevation {item:?} in {text:?} is not a number of degrees (give one \
+                         elevation, a comma-separated list like \"-0.1,0,0.25\" or a fan \
+                         FROM:TO:STEP like \"-0.4:0.6:0.001\")"
+                    )
+                })?;
+            if !inside(v) {
+                return Err(format!(
+                    "elevation {v} in {text:?}: elevations must lie strictly between -90° and 90°"
+                ));
+            }
+            if let Some(&last) = list.last()
+                && v <= last
+            {
+                return Err(format!(
+                    "elevations {text:?} must be listed in strictly ascending order ({v} follows \
+                     {last})"
+                ));
+            }
+            list.push(v);
+        }
+        if list.len() > MAX_RAYS {
+            return Err(format!(
+                "elevation list {text:?} has {} rays; at most {MAX_RAYS} are allowed",
+                list.len()
+            ));
+        }
+        return Ok(ElevationFan::List(list));
+    }
     let parts: Vec<&str> = text.split(':').collect();
     let [from, to, step] = parts.as_slice() else {
         return Err(format!(
@@ -112,12 +167,10 @@ pub fn parse_elevation_fan(text: &str) -> Result<ElevationFan, String> {
     if step <= 0.0 {
         return Err(format!("elevation fan {text:?}: STEP must be > 0"));
     }
-    if to <= from {
-        return Err(format!(
-            "elevation fan {text:?}: TO must be greater than FROM"
-        ));
+    if to < from {
+        return Err(format!("elevation fan {text:?}: TO must not be below FROM"));
     }
-    if from <= -90.0 || to >= 90.0 {
+    if !(inside(from) && inside(to)) {
         return Err(format!(
             "elevation fan {text:?}: elevations must lie strictly between -90° and 90°"
         ));
@@ -131,12 +184,7 @@ pub fn parse_elevation_fan(text: &str) -> Result<ElevationFan, String> {
         ));
     }
     let count = intervals as usize + 1;
-    if count < 3 {
-        return Err(format!(
-            "elevation fan {text:?} has {count} ray(s); at least 3 are needed (use a smaller STEP)"
-        ));
-    }
-    Ok(ElevationFan {
+    Ok(ElevationFan::Range {
         from_deg: from,
         to_deg: from + (count - 1) as f64 * step,
         count,
@@ -157,7 +205,8 @@ pub struct TraceOptions {
 }
 
 impl TraceOptions {
-    /// Build and check the request from its parts; `elevation_deg` is `FROM:TO:STEP`.
+    /// Build and check the request from its parts; `elevation_deg` is what
+    /// [`parse_elevation_fan`] reads (one value, an ascending list or `FROM:TO:STEP`).
     #[allow(clippy::too_many_arguments)] // one argument per request field
     pub fn new(
         source: AtmosphereSource,
@@ -178,11 +227,23 @@ impl TraceOptions {
             anyhow::bail!("give at least one target distance");
         }
         distances_m.sort_by(f64::total_cmp);
+        let (elevation_min_deg, elevation_max_deg, elevation_count, elevations_deg) = match fan {
+            ElevationFan::Range {
+                from_deg,
+                to_deg,
+                count,
+            } => (from_deg, to_deg, count, Vec::new()),
+            ElevationFan::List(list) => {
+                let (lo, hi) = (list[0], list[list.len() - 1]);
+                (lo, hi, list.len(), list)
+            }
+        };
         let request = TraceRequest {
             observer_height_m,
-            elevation_min_deg: fan.from_deg,
-            elevation_max_deg: fan.to_deg,
-            elevation_count: fan.count,
+            elevation_min_deg,
+            elevation_max_deg,
+            elevation_count,
+            elevations_deg,
             distances_m,
             target_heights_m,
             wavelength_nm: atmosphere.wavelength_nm,
@@ -254,10 +315,11 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
     )?;
     let atm = load_atmosphere(&options.source, &options.atmosphere)?;
     let (report, png) = trace_products(&atm, &options, args.plot.is_some())?;
-    match args.format {
-        TraceFormat::Json => println!("{}", report.to_json()?),
-        TraceFormat::Csv => print!("{}", String::from_utf8_lossy(&report.rays_csv()?)),
-    }
+    let text = match args.format {
+        TraceFormat::Json => report.to_json()? + "\n",
+        TraceFormat::Csv => String::from_utf8_lossy(&report.rays_csv()?).into_owned(),
+    };
+    super::print_stdout(&text)?;
     if let (Some(path), Some(png)) = (&args.plot, png) {
         write_atomic(path, &png)?;
         if !quiet {
@@ -271,24 +333,81 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
+    fn rays(text: &str) -> usize {
+        match parse_elevation_fan(text).unwrap() {
+            ElevationFan::Range { count, .. } => count,
+            ElevationFan::List(v) => v.len(),
+        }
+    }
+
     #[test]
     fn fan_spec() {
-        let f = parse_elevation_fan("-0.4:0.6:0.001").unwrap();
-        assert_eq!(f.count, 1001);
-        assert!((f.to_deg - 0.6).abs() < 1e-12);
-        let f = parse_elevation_fan("0:1:0.3").unwrap();
-        assert_eq!(f.count, 4);
-        assert!((f.to_deg - 0.9).abs() < 1e-12);
+        let ElevationFan::Range {
+            from_deg,
+            to_deg,
+            count,
+        } = parse_elevation_fan("-0.4:0.6:0.001").unwrap()
+        else {
+            panic!("a range")
+        };
+        assert_eq!((from_deg, count), (-0.4, 1001));
+        assert!((to_deg - 0.6).abs() < 1e-12);
+        let ElevationFan::Range { to_deg, count, .. } = parse_elevation_fan("0:1:0.3").unwrap()
+        else {
+            panic!("a range")
+        };
+        assert_eq!(count, 4);
+        assert!((to_deg - 0.9).abs() < 1e-12);
+        // Fewer than 3 rays are fine now: the report says what it cannot analyse.
+        assert_eq!(rays("0:1:1"), 2);
+        assert_eq!(rays("0.5:0.5:0.1"), 1);
         for bad in [
             "1:0:0.1",
             "0:1:0",
             "0:1:-1",
             "0:1",
+            "0:1:0.1:2",
             "a:1:0.1",
-            "0:1:1",
             "0:10:0.00001",
+            "-90:0:1",
         ] {
             assert!(parse_elevation_fan(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn single_elevations_and_lists() {
+        assert_eq!(
+            parse_elevation_fan("0.5").unwrap(),
+            ElevationFan::List(vec![0.5])
+        );
+        assert_eq!(
+            parse_elevation_fan("-0.1,0, 0.25").unwrap(),
+            ElevationFan::List(vec![-0.1, 0.0, 0.25])
+        );
+        let err = parse_elevation_fan("0.2,0.1").unwrap_err();
+        assert!(err.contains("ascending"), "{err}");
+        let err = parse_elevation_fan("0.1,0.1").unwrap_err();
+        assert!(err.contains("ascending"), "{err}");
+        for bad in ["", "0.1,", "x", "0.1,,0.2", "95", "nan", "inf"] {
+            assert!(parse_elevation_fan(bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn a_list_becomes_the_request_fan() {
+        let options = TraceOptions::new(
+            AtmosphereSource::Us1976,
+            AtmosphereOptions::default(),
+            10.0,
+            "-0.1,0,0.25",
+            vec![1000.0],
+            vec![20.0],
+            TracerConfig::default(),
+            DEFAULT_TRAP_DISTANCE_M,
+            false,
+        )
+        .unwrap();
+        assert_eq!(options.request.elevations_deg(), vec![-0.1, 0.0, 0.25]);
     }
 }

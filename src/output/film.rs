@@ -60,6 +60,45 @@ pub fn encode_film(
     })
 }
 
+/// Encode `film` once per format that `paths` name (PNG and EXR in parallel, `rayon::join`)
+/// and write every path atomically; each format's files are written as soon as it is encoded.
+/// Nothing is written if a path names no known format. The bytes do not depend on the thread
+/// count. On failure the first error is returned (PNG's before EXR's), and the other format's
+/// files may already be written.
+pub fn write_films<P: AsRef<Path> + Sync>(
+    film: &Film,
+    paths: &[P],
+    meta: &ExrMetadata,
+    exposure: f64,
+) -> Result<(), FilmExportError> {
+    let mut by_format: [(FilmFormat, Vec<&Path>); 2] =
+        [(FilmFormat::Png, Vec::new()), (FilmFormat::Exr, Vec::new())];
+    for path in paths {
+        let path = path.as_ref();
+        let format = FilmFormat::from_path(path)
+            .ok_or_else(|| FilmExportError::UnknownFormat(path.into()))?;
+        let slot = by_format.iter_mut().find(|(f, _)| *f == format);
+        if let Some((_, list)) = slot {
+            list.push(path);
+        }
+    }
+    let encode_and_write = |(format, paths): &(FilmFormat, Vec<&Path>)| {
+        if paths.is_empty() {
+            return Ok(());
+        }
+        let bytes = encode_film(film, *format, meta, exposure)?;
+        for path in paths {
+            write_atomic(path, &bytes)?;
+        }
+        Ok::<(), FilmExportError>(())
+    };
+    let (png, exr) = rayon::join(
+        || encode_and_write(&by_format[0]),
+        || encode_and_write(&by_format[1]),
+    );
+    png.and(exr)
+}
+
 /// Encode `film` in the format named by `path`'s extension and write it atomically.
 pub fn write_film(
     film: &Film,
@@ -109,6 +148,34 @@ mod tests {
         }
         let err = write_film(&film, &dir.path().join("x.tif"), &meta, 1.0).unwrap_err();
         assert!(err.to_string().contains("x.tif"));
+    }
+
+    #[test]
+    fn write_films_writes_each_format_once_encoded_and_refuses_unknown_ones() {
+        let film = Film {
+            width: 4,
+            height: 3,
+            pixels: (0..12).map(|i| [i as f32 / 12.0, 0.5, 2.0, 1.0]).collect(),
+            stats: Default::default(),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let meta = ExrMetadata::default();
+        let paths = [
+            dir.path().join("a.png"),
+            dir.path().join("b.exr"),
+            dir.path().join("c.PNG"),
+        ];
+        write_films(&film, &paths, &meta, 0.85).unwrap();
+        let png = encode_film(&film, FilmFormat::Png, &meta, 0.85).unwrap();
+        let exr = encode_film(&film, FilmFormat::Exr, &meta, 0.85).unwrap();
+        assert_eq!(std::fs::read(&paths[0]).unwrap(), png);
+        assert_eq!(std::fs::read(&paths[1]).unwrap(), exr);
+        assert_eq!(std::fs::read(&paths[2]).unwrap(), png);
+        // An unknown extension anywhere: an error before anything is written.
+        let more = [dir.path().join("d.png"), dir.path().join("e.tif")];
+        let err = write_films(&film, &more, &meta, 0.85).unwrap_err();
+        assert!(err.to_string().contains("e.tif"), "{err}");
+        assert!(!more[0].exists());
     }
 
     #[test]

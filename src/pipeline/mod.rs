@@ -9,6 +9,8 @@
 //! name = "fig04_superior_mirage"      # optional; default: the scene file stem
 //! sizes = ["400x200", "1920x1080"]    # optional; default: the scene's own size
 //! formats = ["png", "exr"]            # optional; default: ["png", "exr"]
+//! spp = 4                             # optional; default: the scene's samples per pixel
+//! tolerance_m = 0.001                 # optional; the tracer's tolerance, default 1 mm
 //! [[profile]]
 //! atmosphere = "../data/superior_mirage.toml"
 //! # optional on profile and trace jobs: wavelength_nm, smooth_m, and igra2_time = "YYYY-MM-DD HH"
@@ -76,6 +78,7 @@ struct RenderJobFile {
     sizes: Option<Vec<String>>,
     formats: Option<Vec<String>>,
     spp: Option<u32>,
+    tolerance_m: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -126,6 +129,8 @@ pub struct RenderJob {
     pub formats: Vec<ImageFormat>,
     /// Samples per pixel override.
     pub spp: Option<u32>,
+    /// Tracer tolerance (m) override; default the renderer's 1 cm.
+    pub tolerance_m: Option<f64>,
 }
 
 /// A profile job: the `profile` command's outputs for one atmosphere, into `<out>/<name>/`.
@@ -152,7 +157,8 @@ pub struct TraceJob {
     pub atmosphere: String,
     /// Observer height above the surface (m).
     pub observer_height_m: f64,
-    /// Elevation fan `FROM:TO:STEP` in degrees.
+    /// Elevations in degrees, as `trace --elevation-deg` reads them: one value, an ascending
+    /// comma-separated list or a fan `FROM:TO:STEP`.
     pub elevation_deg: String,
     /// Target ground distances (m).
     pub distances_m: Vec<f64>,
@@ -263,12 +269,21 @@ impl ResolvedPipeline {
                     crate::scene::MAX_SAMPLES_PER_PIXEL
                 )));
             }
+            if let Some(t) = job.tolerance_m
+                && crate::render::check_tracer_tolerance(t).is_err()
+            {
+                let (lo, hi) = crate::render::TRACER_TOLERANCE_RANGE_M;
+                return Err(invalid(format!(
+                    "{at}: tolerance_m must be a finite number of metres from {lo:e} to {hi}, got {t}"
+                )));
+            }
             renders.push(RenderJob {
                 name,
                 scene: folder.join(&job.scene),
                 sizes,
                 formats,
                 spp: job.spp,
+                tolerance_m: job.tolerance_m,
             });
         }
 
@@ -405,9 +420,22 @@ distances_m = [1000.0]
             p.renders[0].formats,
             vec![ImageFormat::Png, ImageFormat::Exr]
         );
+        assert_eq!(p.renders[0].tolerance_m, None);
         assert_eq!(p.traces[0].atmosphere, "us1976");
         assert_eq!(p.traces[0].name, "us1976_transfer");
         assert_eq!(p.traces[0].target_heights_m, vec![20.0]);
+    }
+
+    #[test]
+    fn render_jobs_take_a_tracer_tolerance() {
+        let text = "[[render]]\nscene = \"a.toml\"\ntolerance_m = 0.05\n";
+        let p = ResolvedPipeline::from_toml_str(text, Path::new("p.toml")).unwrap();
+        assert_eq!(p.renders[0].tolerance_m, Some(0.05));
+        // A misspelt key is refused like every other unknown key.
+        let text = "[[render]]\nscene = \"a.toml\"\ntolerance = 0.05\n";
+        let err = ResolvedPipeline::from_toml_str(text, Path::new("p.toml")).unwrap_err();
+        let msg = format!("{err}: {}", std::error::Error::source(&err).unwrap());
+        assert!(msg.contains("tolerance"), "{msg}");
     }
 
     #[test]
@@ -434,6 +462,18 @@ distances_m = [1000.0]
             ("[[render]]\nscene = \"a.toml\"\nspp = 0\n", "spp"),
             ("[[render]]\nscene = \"a.toml\"\nspp = 3\n", "square"),
             ("[[render]]\nscene = \"a.toml\"\nspp = 4096\n", "square"),
+            (
+                "[[render]]\nscene = \"a.toml\"\ntolerance_m = 0\n",
+                "tolerance_m",
+            ),
+            (
+                "[[render]]\nscene = \"a.toml\"\ntolerance_m = 100.0\n",
+                "tolerance_m",
+            ),
+            (
+                "[[render]]\nscene = \"a.toml\"\ntolerance_m = nan\n",
+                "tolerance_m",
+            ),
             (
                 "name = \"../x\"\n[[render]]\nscene = \"a.toml\"\n",
                 "plain file name",

@@ -38,7 +38,7 @@ use crate::scene::{Scene, samples_per_pixel_root};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use fan::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AngleTable, Shader, ViewCard, wrap_pi};
-pub use traced::{CurvedRays, ExactRays, PrepareError, prepare_tracer};
+pub use traced::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +53,24 @@ pub struct RenderOptions {
     pub tolerance_px: f64,
     /// Cap on fan bisections per base interval.
     pub max_refine_depth: u32,
+    /// The ray tracer's error tolerance on position per step (m), within
+    /// [`TRACER_TOLERANCE_RANGE_M`]; default [`render_tracer_config`]'s (1 cm). Straight rays
+    /// (closed form) do not use it.
+    pub tolerance_m: f64,
+}
+
+/// The tracer tolerances (m) a render accepts: 1 µm (far below any visible effect, and slow) to
+/// 10 m (coarser than a pixel of most frames; only for quick looks).
+pub const TRACER_TOLERANCE_RANGE_M: (f64, f64) = (1e-6, 10.0);
+
+/// Check a tracer tolerance (m) against [`TRACER_TOLERANCE_RANGE_M`].
+pub fn check_tracer_tolerance(tolerance_m: f64) -> Result<(), RenderError> {
+    let (lo, hi) = TRACER_TOLERANCE_RANGE_M;
+    if tolerance_m.is_finite() && (lo..=hi).contains(&tolerance_m) {
+        Ok(())
+    } else {
+        Err(RenderError::TracerTolerance(tolerance_m))
+    }
 }
 
 impl Default for RenderOptions {
@@ -63,6 +81,7 @@ impl Default for RenderOptions {
             quiet: false,
             tolerance_px: 0.1,
             max_refine_depth: 12,
+            tolerance_m: render_tracer_config(crate::units::EARTH_RADIUS_M).tolerance_m,
         }
     }
 }
@@ -77,6 +96,11 @@ pub enum RenderError {
     /// The tolerance must be finite and > 0.
     #[error("fan tolerance must be > 0 pixels, got {0}")]
     Tolerance(f64),
+    /// The tracer tolerance is outside [`TRACER_TOLERANCE_RANGE_M`].
+    #[error(
+        "tracer tolerance must be a finite number of metres from 1e-6 to 10 (default 0.01), got {0}"
+    )]
+    TracerTolerance(f64),
 }
 
 /// Counters from one render.
@@ -360,7 +384,7 @@ fn card_column_range(
 }
 
 /// Provenance for an EXR of `scene` rendered with `options` (scene hash, observer height,
-/// wavelength, fan tolerance or "exact", samples per pixel).
+/// wavelength, fan tolerance or "exact", tracer tolerance, samples per pixel).
 pub fn provenance(scene: &Scene, options: &RenderOptions) -> crate::output::exr::ExrMetadata {
     let spp = options
         .samples_per_pixel
@@ -370,6 +394,7 @@ pub fn provenance(scene: &Scene, options: &RenderOptions) -> crate::output::exr:
         observer_height_m: scene.camera.height_m,
         wavelength_nm: scene.atmosphere.wavelength_nm,
         tolerance_px: (!options.exact).then_some(options.tolerance_px),
+        tracer_tolerance_m: options.tolerance_m,
         extra: vec![
             ("samples_per_pixel".into(), spp.to_string()),
             (
@@ -394,6 +419,7 @@ pub fn render_scene(
     if !(options.tolerance_px.is_finite() && options.tolerance_px > 0.0) {
         return Err(RenderError::Tolerance(options.tolerance_px));
     }
+    check_tracer_tolerance(options.tolerance_m)?;
     let cam = &scene.camera;
     let frame = cam.frame();
     let pixel_rad = 1.0 / frame.focal_px;
@@ -647,6 +673,23 @@ pub fn render_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tracer_tolerance_default_range_and_refusal() {
+        assert_eq!(RenderOptions::default().tolerance_m, 1e-3);
+        for ok in [1e-6, 0.01, 10.0] {
+            assert!(check_tracer_tolerance(ok).is_ok(), "{ok}");
+        }
+        for bad in [0.0, -0.01, 9e-7, 10.5, f64::NAN, f64::INFINITY] {
+            assert!(
+                matches!(
+                    check_tracer_tolerance(bad),
+                    Err(RenderError::TracerTolerance(_))
+                ),
+                "{bad}"
+            );
+        }
+    }
 
     #[test]
     fn jitter_hash_is_uniform_enough() {

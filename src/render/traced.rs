@@ -360,6 +360,9 @@ pub enum PrepareError {
     /// The straight-ray model rejected the Earth radius.
     #[error(transparent)]
     RayModel(#[from] RayModelError),
+    /// A render option is out of range (the tracer tolerance).
+    #[error(transparent)]
+    Options(#[from] super::RenderError),
 }
 
 /// Highest card top in `scene` (m above the surface; 0 without cards).
@@ -375,7 +378,8 @@ pub fn cards_top_m(scene: &Scene) -> f64 {
 ///
 /// * `scene.atmosphere.straight` → [`StraightRays`] (no atmosphere needed; `atmosphere` ignored);
 /// * otherwise, `options.exact` → [`ExactRays`] (3-D per sample), else [`CurvedRays`] (fan);
-///   both through `atmosphere` with [`render_tracer_config`]`(scene.earth_radius_m)`.
+///   both through `atmosphere` with [`render_tracer_config`]`(scene.earth_radius_m)`, its
+///   tolerance set to `options.tolerance_m` (checked by [`check_tracer_tolerance`](super::check_tracer_tolerance)).
 ///
 /// The camera must be inside the traced atmosphere (below its top, 40 km for both back-ends):
 /// otherwise every curved ray would be refused by the tracer and shaded as the fallback horizon
@@ -385,7 +389,11 @@ pub fn prepare_tracer<'a>(
     atmosphere: Option<&'a RefractiveAtmosphere>,
     options: &RenderOptions,
 ) -> Result<Box<dyn RayTracer + 'a>, PrepareError> {
-    let config = render_tracer_config(scene.earth_radius_m);
+    super::check_tracer_tolerance(options.tolerance_m)?;
+    let config = TracerConfig {
+        tolerance_m: options.tolerance_m,
+        ..render_tracer_config(scene.earth_radius_m)
+    };
     let camera_height_m = scene.camera.height_m;
     if !(camera_height_m >= 0.0 && camera_height_m < config.top_m) {
         return Err(PrepareError::Tracer(TracerError::ObserverOutside {
@@ -469,6 +477,19 @@ mod tests {
         // Just below the top it is fine (straight rays need no atmosphere).
         let scene = scene_with_camera_at(top - 1.0, true);
         assert!(prepare_tracer(&scene, None, &RenderOptions::default()).is_ok());
+    }
+
+    #[test]
+    fn prepare_refuses_a_bad_tracer_tolerance() {
+        let scene = scene_with_camera_at(10.0, true);
+        let options = RenderOptions {
+            tolerance_m: 0.0,
+            ..RenderOptions::default()
+        };
+        assert!(matches!(
+            prepare_tracer(&scene, None, &options),
+            Err(PrepareError::Options(_))
+        ));
     }
 
     #[test]

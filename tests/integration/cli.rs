@@ -238,6 +238,7 @@ fn trace_reports_json_with_the_expected_keys() {
         "images",
         "horizons",
         "trapped_elevations_deg",
+        "notes",
     ] {
         assert!(v.get(key).is_some(), "trace JSON lacks {key}");
     }
@@ -335,9 +336,69 @@ fn trace_csv_and_plot() {
 }
 
 #[test]
+fn one_ray_and_short_lists_report_their_rays_and_say_why_there_are_no_images() {
+    let base = [
+        "trace",
+        "--atmosphere",
+        "us1976",
+        "--observer-height-m",
+        "10",
+        "--distance-m",
+        "5000,20000",
+        "--target-height-m",
+        "30",
+        "--elevation-deg",
+    ];
+    for (spec, elevations) in [
+        ("0.5", vec![0.5]),
+        ("-0.1,0.25", vec![-0.1, 0.25]),
+        ("0.2:0.2:0.1", vec![0.2]),
+    ] {
+        let mut args = base.to_vec();
+        args.push(spec);
+        let v = trace_json(&args);
+        let rays = v["rays"].as_array().unwrap();
+        let got: Vec<f64> = rays
+            .iter()
+            .map(|r| r["elevation_deg"].as_f64().unwrap())
+            .collect();
+        assert_eq!(got, elevations, "{spec}");
+        assert_eq!(rays[0]["heights_m"].as_array().unwrap().len(), 2, "{spec}");
+        assert!(v["images"].as_array().unwrap().is_empty(), "{spec}");
+        assert!(v["horizons"].as_array().unwrap().is_empty(), "{spec}");
+        let notes = v["notes"].as_array().unwrap();
+        assert_eq!(notes.len(), 1, "{spec}: {notes:?}");
+        let note = notes[0].as_str().unwrap();
+        assert!(note.contains("at least 3 rays"), "{spec}: {note}");
+        // The CSV form and the plot work for one ray too.
+        args.extend(["--format", "csv"]);
+        let r = ok(&args);
+        assert_eq!(r.stdout.lines().count(), 1 + elevations.len(), "{spec}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("one.png");
+    let mut args = base.to_vec();
+    args.extend(["0.5", "--plot", plot.to_str().unwrap()]);
+    ok(&args);
+    assert!(png_size(&plot).0 > 100);
+    // A listed fan of 3 or more rays is analysed like a range: images and horizons.
+    let mut args = base.to_vec();
+    args.push("-0.2,-0.1,0,0.05,0.1,0.2");
+    let v = trace_json(&args);
+    assert_eq!(v["rays"].as_array().unwrap().len(), 6);
+    assert_eq!(v["horizons"].as_array().unwrap().len(), 3);
+    assert!(!v["images"].as_array().unwrap().is_empty());
+    assert!(v["notes"].as_array().unwrap().is_empty());
+}
+
+#[test]
 fn bad_elevation_specs_are_explained() {
     for (spec, needle) in [
-        ("0.5:-0.5:0.01", "TO must be greater than FROM"),
+        ("0.5:-0.5:0.01", "TO must not be below FROM"),
+        ("0.2,0.1", "strictly ascending order"),
+        ("0.1,0.1", "strictly ascending order"),
+        ("0.1,x", "not a number of degrees"),
+        ("95", "between -90° and 90°"),
         ("-0.5:0.5:0", "STEP must be > 0"),
         ("-0.5:0.5", "FROM:TO:STEP"),
         ("-1:1:0.00001", "at most 100000"),
@@ -430,7 +491,14 @@ fn help_mentions_units_and_usage_errors_exit_2() {
         assert!(r.stdout.contains(needle), "profile --help lacks {needle}");
     }
     let r = ok(&["trace", "--help"]);
-    for needle in ["degrees", "metres", "FROM:TO:STEP", "--straight"] {
+    for needle in [
+        "degrees",
+        "metres",
+        "FROM:TO:STEP",
+        "--straight",
+        "comma-separated",
+        "at least 3 rays",
+    ] {
         assert!(r.stdout.contains(needle), "trace --help lacks {needle}");
     }
     let r = run(&["trace", "--no-such-option"]);
@@ -793,4 +861,213 @@ fn bench_accuracy_quick_writes_the_table_and_the_plot() {
         data.to_str().unwrap(),
     ]);
     assert!(q.stderr.is_empty() && q.stdout.is_empty(), "{}", q.stderr);
+}
+
+/// Run ghostship with `args`, its stdout a pipe whose reader reads `read` bytes (none: closes it
+/// at once) and then goes away, like `ghostship … | head -c 10`; returns the exit status and
+/// stderr.
+fn with_closed_stdout(args: &[&str], read: usize) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ghostship"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary starts");
+    let mut stdout = child.stdout.take().unwrap();
+    let mut head = vec![0u8; read];
+    stdout
+        .read_exact(&mut head)
+        .expect("the first bytes arrive");
+    drop(stdout);
+    let out = child.wait_with_output().expect("binary ends");
+    (
+        out.status,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_closed_stdout_pipe_ends_every_command_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    // trace: ≈ 1 MB of JSON (and of CSV), far more than a pipe holds, so the writer is still
+    // writing when the reader goes after 10 bytes.
+    for format in ["json", "csv"] {
+        let (status, stderr) = with_closed_stdout(
+            &[
+                "trace",
+                "-a",
+                "us1976",
+                "--observer-height-m",
+                "10",
+                "--elevation-deg=-0.5:0.5:0.0005",
+                "--format",
+                format,
+            ],
+            10,
+        );
+        assert_eq!(status.code(), Some(0), "trace {format}: {stderr}");
+        assert!(stderr.is_empty(), "trace {format}: {stderr}");
+    }
+    // The same through a shell pipe into `head -c 10`; the group records ghostship's own status.
+    let (status_file, err_file) = (dir.path().join("status"), dir.path().join("err"));
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "{{ '{}' trace -a us1976 --observer-height-m 10 --elevation-deg=-0.5:0.5:0.0005 \
+             2>'{}'; echo $? >'{}'; }} | head -c 10 >/dev/null",
+            env!("CARGO_BIN_EXE_ghostship"),
+            err_file.display(),
+            status_file.display()
+        ))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    assert_eq!(std::fs::read_to_string(&status_file).unwrap().trim(), "0");
+    let stderr = std::fs::read_to_string(&err_file).unwrap();
+    assert!(stderr.is_empty(), "{stderr}");
+    // profile, pipeline run and --help print less than a pipe holds: the reader closes at once,
+    // before they print. profile still writes its files.
+    let prof = dir.path().join("prof");
+    let (status, stderr) = with_closed_stdout(
+        &["profile", "us1976", "-q", "--out", prof.to_str().unwrap()],
+        0,
+    );
+    assert_eq!(status.code(), Some(0), "profile: {stderr}");
+    assert!(stderr.is_empty(), "profile: {stderr}");
+    assert!(prof.join("profile.csv").is_file());
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 10\nelevation_deg = \"0:0.2:0.1\"\ndistances_m = [1000.0]\n",
+    )
+    .unwrap();
+    let out_dir = dir.path().join("o");
+    let (status, stderr) = with_closed_stdout(
+        &[
+            "pipeline",
+            "run",
+            pipeline.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ],
+        0,
+    );
+    assert_eq!(status.code(), Some(0), "pipeline: {stderr}");
+    assert!(stderr.is_empty(), "pipeline: {stderr}");
+    assert!(out_dir.join("us1976_transfer.json").is_file());
+    for args in [&["--help"][..], &["trace", "--help"][..]] {
+        let (status, stderr) = with_closed_stdout(args, 0);
+        assert_eq!(status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+    }
+}
+
+/// The `ghostship` provenance lines of an EXR file.
+fn exr_provenance(path: &Path) -> Vec<String> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).unwrap();
+    match meta.headers[0]
+        .own_attributes
+        .other
+        .get(&exr::meta::attribute::Text::from("ghostship"))
+    {
+        Some(exr::meta::attribute::AttributeValue::TextVector(v)) => {
+            v.iter().map(|t| t.to_string()).collect()
+        }
+        other => panic!("{}: no provenance attribute: {other:?}", path.display()),
+    }
+}
+
+#[test]
+fn render_tolerance_is_validated_used_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = data_file("scenes/fig08_inferior_mirage.toml");
+    let render = |tolerance: Option<&str>, stem: &str| {
+        let png = dir.path().join(format!("{stem}.png"));
+        let exr = dir.path().join(format!("{stem}.exr"));
+        let mut args = vec![
+            "render".to_string(),
+            scene.to_str().unwrap().into(),
+            "--size".into(),
+            "80x40".into(),
+            "--spp".into(),
+            "1".into(),
+            "-q".into(),
+            "-o".into(),
+            png.to_str().unwrap().into(),
+            "-o".into(),
+            exr.to_str().unwrap().into(),
+        ];
+        if let Some(t) = tolerance {
+            args.extend(["--tolerance-m".into(), t.into()]);
+        }
+        ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        (image::open(&png).unwrap().to_rgb8(), exr_provenance(&exr))
+    };
+    let (default_png, default_lines) = render(None, "default");
+    let (fine_png, fine_lines) = render(Some("0.01"), "fine");
+    let (coarse_png, coarse_lines) = render(Some("1"), "coarse");
+    assert!(
+        default_lines.contains(&"tracer_tolerance_m=0.001".to_string()),
+        "{default_lines:?}"
+    );
+    assert!(
+        fine_lines.contains(&"tracer_tolerance_m=0.01".to_string()),
+        "{fine_lines:?}"
+    );
+    assert!(
+        coarse_lines.contains(&"tracer_tolerance_m=1".to_string()),
+        "{coarse_lines:?}"
+    );
+    for img in [&fine_png, &coarse_png] {
+        assert_eq!(img.dimensions(), default_png.dimensions());
+    }
+    // The default 1 mm and the paper's 1 cm agree to far below a pixel here: at most a few edge
+    // pixels may move.
+    let differing = default_png
+        .pixels()
+        .zip(fine_png.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differing <= 40,
+        "{differing} of 3200 pixels differ between 1 cm and 1 mm"
+    );
+    for bad in ["0", "-0.01", "nan", "inf", "11", "1e-7"] {
+        let r = fails(&[
+            "render",
+            scene.to_str().unwrap(),
+            &format!("--tolerance-m={bad}"),
+            "-o",
+            dir.path().join("bad.png").to_str().unwrap(),
+        ]);
+        assert!(r.stderr.contains("--tolerance-m"), "{bad}: {}", r.stderr);
+        assert!(r.stderr.contains("1e-6 to 10"), "{bad}: {}", r.stderr);
+    }
+    // The pipeline's render jobs take it too, and record it.
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[render]]\nscene = {:?}\nname = \"f\"\nsizes = [\"40x20\"]\nspp = 1\ntolerance_m = 0.05\nformats = [\"exr\"]\n",
+            scene.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("o");
+    ok(&[
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let lines = exr_provenance(&out.join("f_40x20.exr"));
+    assert!(
+        lines.contains(&"tracer_tolerance_m=0.05".to_string()),
+        "{lines:?}"
+    );
 }

@@ -418,6 +418,7 @@ fn exr_round_trip_keeps_pixels_and_provenance() {
         observer_height_m: 10.0,
         wavelength_nm: 550.0,
         tolerance_px: Some(0.1),
+        tracer_tolerance_m: 0.01,
         extra: vec![("tracer".into(), "straight".into())],
     };
     let bytes = exr::encode_exr(&film, &meta).unwrap();
@@ -464,6 +465,7 @@ fn exr_round_trip_keeps_pixels_and_provenance() {
         "observer_height_m=10".to_string(),
         "wavelength_nm=550".to_string(),
         "fan_tolerance_px=0.1".to_string(),
+        "tracer_tolerance_m=0.01".to_string(),
         "tracer=straight".to_string(),
         format!("version={}", env!("CARGO_PKG_VERSION")),
     ] {
