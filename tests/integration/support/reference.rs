@@ -162,8 +162,15 @@ pub fn reference_heights(
     elevation_rad: f64,
     distances_m: &[f64],
 ) -> Vec<RefReach> {
-    let ray = Ray::new(index, earth_radius_m, top_m, ReferenceSteps::default());
-    ray.trace(observer_height_m, elevation_rad, distances_m)
+    reference_heights_with_steps(
+        index,
+        earth_radius_m,
+        top_m,
+        observer_height_m,
+        elevation_rad,
+        distances_m,
+        ReferenceSteps::default(),
+    )
 }
 
 /// As [`reference_heights`] with the given step limits.
