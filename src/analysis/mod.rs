@@ -14,8 +14,7 @@ pub mod transfer;
 
 pub use plot::trace_plot_png;
 pub use report::{
-    DEFAULT_TRACE_TRAP_DISTANCE_M, MAX_FAN_RAYS, MIN_ANALYSIS_RAYS, RayReport, TraceReport,
-    TraceRequest, trace_report,
+    MAX_FAN_RAYS, MIN_ANALYSIS_RAYS, RayReport, TraceReport, TraceRequest, trace_report,
 };
 pub use transfer::{
     FoldTest, Image, Reach, TransferCurve, apparent_horizon, find_images, find_images_with,

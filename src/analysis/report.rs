@@ -11,9 +11,7 @@ use serde::Serialize;
 
 use super::AnalysisError;
 use super::transfer::{FoldTest, Image, Reach, TransferCurve, apparent_horizon, find_images};
-use crate::tracer::{
-    BouguerEnvelope, Fate, RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig,
-};
+use crate::tracer::{RayRecord, StratifiedIndex, Termination, Tracer, TracerConfig};
 
 /// What to trace.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -37,17 +35,11 @@ pub struct TraceRequest {
     pub target_heights_m: Vec<f64>,
     /// Wavelength the atmosphere was built for (nm); recorded in the report.
     pub wavelength_nm: f64,
-    /// Rays still inside the atmosphere, off the ground, at this ground distance are "trapped" (m).
-    pub trap_distance_m: f64,
-    /// Tracer settings (tolerance, Earth radius, top, ...).
+    /// Tracer settings (tolerance, Earth radius, top, ...). Its `max_distance_m` is only a
+    /// safety limit (none by default): a ray is trapped when Bouguer's invariant proves it
+    /// ([`Termination::Trapped`]), not at a distance.
     pub tracer: TracerConfig,
 }
-
-/// Default ground distance (m) at which a ray still in the air counts as trapped in a trace
-/// report. (The renderer uses its own, longer limit,
-/// [`render::traced::DEFAULT_TRAP_DISTANCE_M`](crate::render::traced::DEFAULT_TRAP_DISTANCE_M),
-/// because a ducted Novaya Zemlya sun ray must be followed until it escapes.)
-pub const DEFAULT_TRACE_TRAP_DISTANCE_M: f64 = 1_000_000.0;
 
 /// Fewest rays for which a report searches images and apparent horizons: a fold of the transfer
 /// curve (where an inverted image begins) shows only as a turning point of three consecutive
@@ -69,7 +61,6 @@ impl Default for TraceRequest {
             distances_m: vec![10_000.0, 20_000.0, 30_000.0],
             target_heights_m: vec![20.0],
             wavelength_nm: 550.0,
-            trap_distance_m: DEFAULT_TRACE_TRAP_DISTANCE_M,
             tracer: TracerConfig::default(),
         }
     }
@@ -145,10 +136,10 @@ impl TraceRequest {
         {
             return bad("target_heights_m must be finite and > 0");
         }
-        if !(self.trap_distance_m.is_finite()
-            && self.trap_distance_m >= self.distances_m.last().copied().unwrap_or(0.0))
+        if let Some(d) = self.tracer.max_distance_m
+            && d < self.distances_m.last().copied().unwrap_or(0.0)
         {
-            return bad("trap_distance_m must be finite and at least the largest distance");
+            return bad("max_distance_m must be at least the largest distance");
         }
         self.tracer.validate()?;
         Ok(())
@@ -160,7 +151,7 @@ impl TraceRequest {
 pub struct RayReport {
     /// Apparent elevation (deg).
     pub elevation_deg: f64,
-    /// Why the ray stopped (traced out to the trap distance).
+    /// Why the ray stopped (traced to its end: ground, top, or trapped by Bouguer's invariant).
     pub termination: Termination,
     /// Height at each requested distance (m), null where the ray ended before it.
     pub heights_m: Vec<Option<f64>>,
@@ -178,9 +169,8 @@ pub struct RayReport {
     pub rejected_steps: u32,
     /// Largest relative drift of Bouguer's invariant along the ray.
     pub invariant_drift: f64,
-    /// Trapped in a duct: it reached the trap distance with turning points above and below it
-    /// (Bouguer's invariant proves it oscillates there for ever). A ray that reaches the trap
-    /// distance but provably escapes or meets the ground is traced on to its end instead.
+    /// Trapped in a duct: past the last distance it has turning points above and below it
+    /// (Bouguer's invariant proves it oscillates there for ever); `termination` is `trapped`.
     pub trapped: bool,
 }
 
@@ -198,7 +188,7 @@ impl RayReport {
             steps: r.steps(),
             rejected_steps: r.rejected_steps,
             invariant_drift: r.invariant_drift,
-            trapped: false,
+            trapped: termination == Termination::Trapped,
         }
     }
 }
@@ -231,8 +221,9 @@ pub struct TraceReport {
     pub earth_radius_m: f64,
     /// Top of the atmosphere (m).
     pub top_m: f64,
-    /// Distance beyond which rays still in the air count as trapped (m).
-    pub trap_distance_m: f64,
+    /// The tracer's safety limit on ground distance (m), if any; rays stopped there end
+    /// `max_distance` (their fate undecided), not trapped.
+    pub max_distance_m: Option<f64>,
     /// Requested distances (m).
     pub distances_m: Vec<f64>,
     /// Target heights (m).
@@ -250,49 +241,6 @@ pub struct TraceReport {
     pub notes: Vec<String>,
 }
 
-/// The fate (by Bouguer's invariant) of each fan ray that stopped at the trap distance: rays
-/// that provably escape or meet the ground are traced on without a distance limit (so an escaped
-/// ray gets its refraction however long its path); the others are trapped if the invariant
-/// proves it, else left as they are. Returns the trapped flag of every record.
-fn settle_fates(
-    atmosphere: &dyn StratifiedIndex,
-    envelope: &BouguerEnvelope,
-    request: &TraceRequest,
-    records: &mut [RayRecord],
-) -> Result<Vec<bool>, AnalysisError> {
-    let radius = request.tracer.earth_radius_m;
-    let open_cfg = TracerConfig {
-        stop_after_last_target: false,
-        max_distance_m: None,
-        ..request.tracer.clone()
-    };
-    let open = Tracer::new(atmosphere, open_cfg)?;
-    let mut trapped = vec![false; records.len()];
-    for (record, trapped) in records.iter_mut().zip(trapped.iter_mut()) {
-        if record.termination != Some(Termination::MaxDistance) {
-            continue;
-        }
-        let end = record.end;
-        let (n, _) = atmosphere.index_and_derivative(end.height_m);
-        let invariant = n * (radius + end.height_m) * end.elevation_rad.cos();
-        match envelope.fate(end.height_m, end.elevation_rad > 0.0, invariant) {
-            Fate::Trapped => *trapped = true,
-            Fate::Escapes | Fate::MeetsGround => {
-                let elevation = record.elevation_rad;
-                *record = open
-                    .trace_fan(
-                        request.observer_height_m,
-                        &[elevation],
-                        &request.distances_m,
-                    )?
-                    .remove(0);
-            }
-            Fate::Undecided => {}
-        }
-    }
-    Ok(trapped)
-}
-
 /// Trace the request's fan through `atmosphere` and analyse it.
 pub fn trace_report(
     atmosphere: &dyn StratifiedIndex,
@@ -301,7 +249,6 @@ pub fn trace_report(
     request.validate()?;
     let fan_cfg = TracerConfig {
         stop_after_last_target: false,
-        max_distance_m: Some(request.trap_distance_m),
         ..request.tracer.clone()
     };
     let probe_cfg = TracerConfig {
@@ -309,25 +256,14 @@ pub fn trace_report(
         max_distance_m: None,
         ..request.tracer.clone()
     };
-    let fan_tracer = Tracer::new(atmosphere, fan_cfg)?;
+    let fan_tracer = Tracer::new(atmosphere, fan_cfg)?.with_fates();
     let probe_tracer = Tracer::new(atmosphere, probe_cfg)?;
     let h0 = request.observer_height_m;
     let elevations = request.elevations_rad();
-    let mut records = fan_tracer.trace_fan(h0, &elevations, &request.distances_m)?;
-    let envelope = BouguerEnvelope::new(
-        atmosphere,
-        request.tracer.earth_radius_m,
-        request.tracer.top_m,
-    );
-    let trapped = settle_fates(atmosphere, &envelope, request, &mut records)?;
-
+    let records = fan_tracer.trace_fan(h0, &elevations, &request.distances_m)?;
     let rays: Vec<RayReport> = records
         .iter()
-        .zip(&trapped)
-        .map(|(r, &trapped)| RayReport {
-            trapped,
-            ..RayReport::from_record(r, request.distances_m.len())
-        })
+        .map(|r| RayReport::from_record(r, request.distances_m.len()))
         .collect();
     let trapped_elevations_deg = rays
         .iter()
@@ -342,7 +278,7 @@ pub fn trace_report(
         wavelength_nm: request.wavelength_nm,
         earth_radius_m: request.tracer.earth_radius_m,
         top_m: request.tracer.top_m,
-        trap_distance_m: request.trap_distance_m,
+        max_distance_m: request.tracer.max_distance_m,
         distances_m: request.distances_m.clone(),
         target_heights_m: request.target_heights_m.clone(),
         rays,
@@ -384,7 +320,7 @@ pub fn trace_report(
         .par_iter()
         .map(|&d| {
             // From the fan: a ray is clear of the ground before D if it has a height there; clear
-            // of it altogether if it did not end on the ground (out to the trap distance).
+            // of it altogether if it did not end on the ground.
             let clear: Vec<bool> = records
                 .iter()
                 .map(|r| match d {
@@ -401,7 +337,7 @@ pub fn trace_report(
                 .collect();
             Horizon {
                 distance_m: d,
-                // The sea horizon is refined with the fan's own settings (out to the trap distance).
+                // The sea horizon is refined with the fan's own settings (and fate rule).
                 elevation_deg: match d {
                     Some(_) => apparent_horizon(&probe_tracer, h0, &elevations, &clear, d),
                     None => apparent_horizon(&fan_tracer, h0, &elevations, &clear, d),

@@ -21,7 +21,7 @@ use super::profile::{
     DEFAULT_LAYERS_TOP_M, DEFAULT_PLOT_TOP_M, ProfileOptions, profile_products, write_profile,
 };
 use super::render::render_film;
-use super::trace::{DEFAULT_TRAP_DISTANCE_M, TraceOptions, trace_products};
+use super::trace::{TraceOptions, trace_products};
 
 /// Arguments of `ghostship pipeline`.
 #[derive(Debug, clap::Args)]
@@ -97,7 +97,6 @@ fn trace_options(job: &TraceJob) -> anyhow::Result<TraceOptions> {
         job.distances_m.clone(),
         job.target_heights_m.clone(),
         tracer,
-        DEFAULT_TRAP_DISTANCE_M,
         false,
     )
 }

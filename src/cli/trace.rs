@@ -16,9 +16,6 @@ use ghostship::tracer::{StratifiedIndex, TracerConfig};
 /// Most rays a fan may have.
 pub const MAX_RAYS: usize = ghostship::analysis::MAX_FAN_RAYS;
 
-/// Default distance beyond which rays still in the air count as trapped (m): the library's.
-pub const DEFAULT_TRAP_DISTANCE_M: f64 = ghostship::analysis::DEFAULT_TRACE_TRAP_DISTANCE_M;
-
 /// How the report is printed on stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum TraceFormat {
@@ -73,10 +70,12 @@ pub struct TraceArgs {
     /// Top of the atmosphere in metres above the surface: rays above it have escaped.
     #[arg(long, value_name = "M", default_value_t = 40_000.0)]
     pub top_m: f64,
-    /// Rays still in the air (neither escaped nor on the ground) at this ground distance, in
-    /// metres, are reported as trapped.
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_TRAP_DISTANCE_M)]
-    pub trap_distance_m: f64,
+    /// Safety limit on a ray's ground distance, in metres (default: none). Rays are traced to
+    /// the ground or the top; one that provably oscillates in a duct past the last target
+    /// distance ends `trapped` (Bouguer's invariant). A ray stopped at this limit ends
+    /// `max_distance`, its fate undecided.
+    #[arg(long, value_name = "M")]
+    pub max_distance_m: Option<f64>,
     /// Straight rays: refractive index 1 everywhere (no refraction), for comparison.
     #[arg(long)]
     pub straight: bool,
@@ -216,7 +215,6 @@ impl TraceOptions {
         mut distances_m: Vec<f64>,
         target_heights_m: Vec<f64>,
         tracer: TracerConfig,
-        trap_distance_m: f64,
         straight: bool,
     ) -> anyhow::Result<Self> {
         let fan = parse_elevation_fan(elevation_deg).map_err(anyhow::Error::msg)?;
@@ -247,7 +245,6 @@ impl TraceOptions {
             distances_m,
             target_heights_m,
             wavelength_nm: atmosphere.wavelength_nm,
-            trap_distance_m,
             tracer,
         };
         request.validate()?;
@@ -296,6 +293,7 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
     let tracer = TracerConfig {
         tolerance_m: args.tolerance_m,
         top_m: args.top_m,
+        max_distance_m: args.max_distance_m,
         ..TracerConfig::default()
     };
     let options = TraceOptions::new(
@@ -310,7 +308,6 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
         args.distance_m,
         args.target_height_m,
         tracer,
-        args.trap_distance_m,
         args.straight,
     )?;
     let atm = load_atmosphere(&options.source, &options.atmosphere)?;
@@ -404,7 +401,6 @@ mod tests {
             vec![1000.0],
             vec![20.0],
             TracerConfig::default(),
-            DEFAULT_TRAP_DISTANCE_M,
             false,
         )
         .unwrap();

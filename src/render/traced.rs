@@ -11,15 +11,13 @@
 //!   per pixel sample), to validate the fan and as the benchmark baseline.
 //! * [`prepare_tracer`] — picks one of these, or [`StraightRays`], from a scene and options.
 //!
-//! **Early stop.** Without a sun the final sky direction does not matter, so a ray that is above
-//! every card and can never come down again is stopped and reported as [`FanEnd::Sky`]. When can
-//! a climbing ray never come down? Along a ray in spherically stratified air Bouguer's invariant
-//! I = n(r)·r·cos ψ is conserved (ψ the local elevation). A ray climbing (ψ > 0) at radius r₁ has
-//! I < n(r₁)·r₁; it can only turn down at a radius r₂ > r₁ where n(r₂)·r₂ = I, i.e. where n·r has
-//! dropped below its value at r₁. If d(n·r)/dr = n + r·dn/dh > 0 everywhere above r₁ — no
-//! trapping layer (dn/dh < −n/r ≈ −1/R) above it — n·r only grows and the ray climbs until it
-//! leaves the atmosphere. So the stop height is the larger of the highest card top and the top of
-//! the highest trapping layer, found by scanning n + r·dn/dh on a fine grid (0.25 m).
+//! **Early stops** follow the tracer's one fate rule, [`FateWatch`] (Bouguer's invariant over a
+//! [`BouguerEnvelope`] of the field, built once per tracer): past the last card a ray that
+//! provably oscillates in a duct ends [`Termination::Trapped`] ([`FanEnd::Lost`], shaded as the
+//! horizon sky). Without a sun the final sky direction does not matter, so a ray that provably
+//! escapes also ends as soon as nothing is left for it to meet — past the last card, or climbing
+//! above every card top without another turning point ([`FanEnd::Sky`]). Every other ray is
+//! traced to the sea or the top, however far: there is no trap distance.
 
 use std::cell::RefCell;
 
@@ -30,57 +28,20 @@ use super::fan::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
-    Ground, NoHook, RayHook, RayRecord, Spherical, StopAboveClimbing, StratifiedIndex, Termination,
-    Tracer, TracerConfig, TracerError, trace_field,
+    BouguerEnvelope, FateWatch, Ground, RayRecord, Spherical, StratifiedIndex, Termination, Tracer,
+    TracerConfig, TracerError, trace_field,
 };
 
-/// Grid step (m) of the scan for trapping layers (see the module docs).
-pub const TRAPPING_SCAN_STEP_M: f64 = 0.25;
-
-/// Default ground distance (m) after which a ray still inside the atmosphere counts as trapped
-/// ([`FanEnd::Lost`]). Novaya Zemlya rays travel a few hundred kilometres in their duct before
-/// they escape, so the limit is generous.
-pub const DEFAULT_TRAP_DISTANCE_M: f64 = 2_000_000.0;
-
-/// Trap distance (m) when no sky direction is needed (no sun): a ray still below the highest
-/// trapping layer this far out is [`FanEnd::Lost`] (shaded as horizon sky). Rays trapped in a
-/// surface duct otherwise bounce for thousands of kilometres before they hit the sea, at a
-/// cost of several hundred steps each; 300 km is ten times the farthest card of the paper.
-pub const NO_SUN_TRAP_DISTANCE_M: f64 = 300_000.0;
-
-/// The tracer settings the renderer uses: [`TracerConfig::default`] (1 cm tolerance, top at
+/// The tracer settings the renderer uses: [`TracerConfig::default`] (its tolerance, top at
 /// 40 km) over `earth_radius_m`, never stopping at the last card (the renderer needs to know
-/// whether the ray ends in the sea or the sky), trapped after [`DEFAULT_TRAP_DISTANCE_M`].
+/// whether the ray ends in the sea or the sky), with no distance limit (see the module docs).
 pub fn render_tracer_config(earth_radius_m: f64) -> TracerConfig {
     TracerConfig {
         earth_radius_m,
         stop_after_last_target: false,
-        max_distance_m: Some(DEFAULT_TRAP_DISTANCE_M),
+        max_distance_m: None,
         ..TracerConfig::default()
     }
-}
-
-/// Height (m above the surface) of the top of the highest trapping layer below `top_m` — where
-/// n + r·dn/dh ≤ 0, r = R + h — scanned every [`TRAPPING_SCAN_STEP_M`]; 0 if there is none.
-/// Non-finite values of the field count as trapping (conservative). A layer thinner than the
-/// step can be missed.
-pub fn highest_trapping_top_m<S: StratifiedIndex + ?Sized>(
-    index: &S,
-    earth_radius_m: f64,
-    top_m: f64,
-) -> f64 {
-    let count = (top_m / TRAPPING_SCAN_STEP_M).ceil().clamp(0.0, 1e8) as usize;
-    let mut highest = 0.0f64;
-    for i in 0..=count {
-        let h = (i as f64 * TRAPPING_SCAN_STEP_M).min(top_m);
-        let (n, dn) = index.index_and_derivative(h);
-        let growth = n + (earth_radius_m + h) * dn;
-        if growth.is_nan() || growth <= 0.0 {
-            // The layer reaches at least to the next grid point.
-            highest = (h + TRAPPING_SCAN_STEP_M).min(top_m);
-        }
-    }
-    highest
 }
 
 /// Turn a traced record into the renderer's [`FanRay`] (non-finite values become `None` /
@@ -118,24 +79,58 @@ fn fan_ray(record: &RayRecord, elevation_rad: f64, n_distances: usize) -> FanRay
     }
 }
 
-fn capped_trap_distance(config: &TracerConfig) -> TracerConfig {
-    TracerConfig {
-        max_distance_m: Some(
-            config
-                .max_distance_m
-                .unwrap_or(f64::INFINITY)
-                .min(NO_SUN_TRAP_DISTANCE_M),
-        ),
-        ..config.clone()
-    }
-}
-
 fn lost(elevation_rad: f64, n_distances: usize) -> FanRay {
     FanRay {
         elevation_rad,
         heights_m: vec![None; n_distances],
         end: FanEnd::Lost,
         monotone: false,
+    }
+}
+
+/// The fate rule shared by both back-ends: what the renderer needs of one ray.
+#[derive(Debug, Clone)]
+struct Fates {
+    envelope: BouguerEnvelope,
+    earth_radius_m: f64,
+    cards_top_m: f64,
+}
+
+impl Fates {
+    fn new<S: StratifiedIndex + ?Sized>(
+        index: &S,
+        config: &TracerConfig,
+        cards_top_m: f64,
+    ) -> Self {
+        Fates {
+            envelope: BouguerEnvelope::new(index, config.earth_radius_m, config.top_m),
+            earth_radius_m: config.earth_radius_m,
+            cards_top_m: cards_top_m.max(0.0),
+        }
+    }
+
+    /// The watch for one ray; escaping rays stop early when the sky direction is not needed.
+    fn watch<S: StratifiedIndex + ?Sized>(
+        &self,
+        index: &S,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FateWatch<'_> {
+        let watch = FateWatch::new(
+            &self.envelope,
+            index,
+            self.earth_radius_m,
+            camera_height_m,
+            elevation_rad,
+            distances_m.last().copied().unwrap_or(0.0),
+        );
+        if need_sky_direction {
+            watch
+        } else {
+            watch.stop_escaping_above(self.cards_top_m)
+        }
     }
 }
 
@@ -148,10 +143,7 @@ thread_local! {
 #[derive(Clone)]
 pub struct CurvedRays<'a, S: StratifiedIndex + ?Sized> {
     tracer: Tracer<'a, S>,
-    /// The same with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`], for rays whose
-    /// final sky direction is not needed.
-    tracer_no_sky: Tracer<'a, S>,
-    stop_height_m: f64,
+    fates: Fates,
 }
 
 impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
@@ -160,20 +152,11 @@ impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
     /// end [`FanEnd::Lost`]). `cards_top_m`: the highest card top above the surface (m), 0
     /// without cards.
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
-        let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
-        let capped = capped_trap_distance(&config);
-        let tracer = Tracer::new(index, config)?;
-        let tracer_no_sky = Tracer::new(index, capped)?;
+        let fates = Fates::new(index, &config, cards_top_m);
         Ok(Self {
-            tracer,
-            tracer_no_sky,
-            stop_height_m: trap_top.max(cards_top_m.max(0.0)),
+            tracer: Tracer::new(index, config)?,
+            fates,
         })
-    }
-
-    /// Height (m) above which climbing rays are stopped early when no sky direction is needed.
-    pub fn stop_height_m(&self) -> f64 {
-        self.stop_height_m
     }
 
     /// The underlying tracer.
@@ -190,64 +173,29 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FanRay {
-        SCRATCH.with(|cell| {
-            let Ok(mut record) = cell.try_borrow_mut() else {
-                // Re-entered on this thread (cannot happen through the renderer): no scratch.
-                let mut record = RayRecord::default();
-                return self.trace_with(
-                    &mut record,
-                    camera_height_m,
-                    elevation_rad,
-                    distances_m,
-                    need_sky_direction,
-                );
-            };
-            self.trace_with(
-                &mut record,
-                camera_height_m,
-                elevation_rad,
-                distances_m,
-                need_sky_direction,
-            )
-        })
-    }
-}
-
-impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
-    fn trace_with(
-        &self,
-        record: &mut RayRecord,
-        camera_height_m: f64,
-        elevation_rad: f64,
-        distances_m: &[f64],
-        need_sky_direction: bool,
-    ) -> FanRay {
-        let result = if need_sky_direction {
-            self.tracer.trace_into(
-                camera_height_m,
-                elevation_rad,
-                distances_m,
-                &mut NoHook,
-                record,
-                None,
-            )
-        } else {
-            let mut hook = StopAboveClimbing {
-                height_m: self.stop_height_m,
-            };
-            self.tracer_no_sky.trace_into(
-                camera_height_m,
-                elevation_rad,
-                distances_m,
-                &mut hook,
-                record,
-                None,
-            )
-        };
-        match result {
+        let mut watch = self.fates.watch(
+            self.tracer.field(),
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        );
+        let mut run = |record: &mut RayRecord| match self.tracer.trace_into(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            &mut watch,
+            record,
+            None,
+        ) {
             Ok(()) => fan_ray(record, elevation_rad, distances_m.len()),
             Err(_) => lost(elevation_rad, distances_m.len()),
-        }
+        };
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut record) => run(&mut record),
+            // Re-entered on this thread (cannot happen through the renderer): no scratch.
+            Err(_) => run(&mut RayRecord::default()),
+        })
     }
 }
 
@@ -264,24 +212,20 @@ impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
 pub struct ExactRays<'a, S: StratifiedIndex + ?Sized> {
     field: Spherical<&'a S>,
     config: TracerConfig,
-    /// `config` with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`] (as [`CurvedRays`]).
-    config_no_sky: TracerConfig,
-    stop_height_m: f64,
+    fates: Fates,
 }
 
 impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
     /// As [`CurvedRays::new`].
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
         config.validate()?;
-        let trap_top = highest_trapping_top_m(index, config.earth_radius_m, config.top_m);
         Ok(Self {
             field: Spherical {
                 index,
                 earth_radius_m: config.earth_radius_m,
             },
-            config_no_sky: capped_trap_distance(&config),
+            fates: Fates::new(index, &config, cards_top_m),
             config,
-            stop_height_m: trap_top.max(cards_top_m.max(0.0)),
         })
     }
 
@@ -300,28 +244,21 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         let (sin_e, cos_e) = elevation_rad.sin_cos();
         let (sin_a, cos_a) = azimuth_rad.sin_cos();
         let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
-        let mut stop = StopAboveClimbing {
-            height_m: self.stop_height_m,
-        };
-        let mut none = NoHook;
-        let hook: &mut dyn RayHook = if need_sky_direction {
-            &mut none
-        } else {
-            &mut stop
-        };
-        let config = if need_sky_direction {
-            &self.config
-        } else {
-            &self.config_no_sky
-        };
+        let mut watch = self.fates.watch(
+            self.field.index,
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        );
         trace_field(
             &self.field,
             Ground::Sphere { radius_m: radius },
-            config,
+            &self.config,
             origin,
             direction,
             distances_m,
-            hook,
+            &mut watch,
             None,
         )
     }
@@ -493,32 +430,6 @@ mod tests {
     }
 
     #[test]
-    fn trapping_scan_finds_the_layer_top() {
-        // −1/R ≈ −1.57e-7 per m: a −3e-7 layer between 80 and 120 m traps.
-        let duct = Layered {
-            g: -3e-7,
-            lo: 80.0,
-            hi: 120.0,
-        };
-        let top = highest_trapping_top_m(&duct, EARTH_RADIUS_M, 40_000.0);
-        assert!(
-            (120.0..=120.0 + TRAPPING_SCAN_STEP_M).contains(&top),
-            "{top}"
-        );
-        assert_eq!(
-            highest_trapping_top_m(&plain(), EARTH_RADIUS_M, 40_000.0),
-            0.0
-        );
-        // A super-refractive but not trapping layer (−1e-7 per m) does not count.
-        let weak = Layered {
-            g: -1e-7,
-            lo: 80.0,
-            hi: 120.0,
-        };
-        assert_eq!(highest_trapping_top_m(&weak, EARTH_RADIUS_M, 40_000.0), 0.0);
-    }
-
-    #[test]
     fn early_stop_gives_the_same_heights_and_end_kind() {
         // With a strong duct at 80–120 m (Δn = −4e-5, like +10 K over 15 m), rays from 10 m that
         // rise above the cards (30 m) up to α ≈ 7 mrad are still bent back to the sea; the early stop must not report them as sky.
@@ -529,7 +440,6 @@ mod tests {
         };
         let rays =
             CurvedRays::new(&duct, render_tracer_config(EARTH_RADIUS_M), 30.0).expect("tracer");
-        assert!(rays.stop_height_m() >= 120.0);
         let d = [5_000.0, 15_000.0, 26_000.0];
         let mut grounds = 0;
         for i in 0..200 {

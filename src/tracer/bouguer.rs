@@ -11,8 +11,16 @@
 //! A fate is only claimed when the grid proves it: "turns" needs a node with g < c; "does not
 //! turn" needs every node above (or below) to clear c by more than the dip bound. Otherwise the
 //! answer is [`Fate::Undecided`] and the caller keeps integrating.
+//!
+//! [`FateWatch`] applies the fates along a ray, as a [`RayHook`]: the one rule by which every
+//! caller (the trace report, the renderer) ends rays early. Past its last target a ray that
+//! provably oscillates ends [`Termination::Trapped`](super::Termination::Trapped); when the
+//! caller does not need a ray's final direction, a ray that provably escapes ends as soon as
+//! nothing is left for it to meet. A ray whose fate stays undecided runs on to its natural end
+//! (ground, top) or the tracer's safety limits (`max_length_m`, `max_steps`).
 
 use super::StratifiedIndex;
+use super::ray::{HookAction, RayHook, RayPoint};
 
 /// Node spacing (m) up to [`FINE_TOP_M`], then [`COARSE_STEP_M`].
 const FINE_STEP_M: f64 = 0.25;
@@ -152,6 +160,98 @@ impl BouguerEnvelope {
     }
 }
 
+/// The Bouguer fate rule along one ray (a [`RayHook`]); see the module docs.
+#[derive(Debug, Clone, Copy)]
+pub struct FateWatch<'e> {
+    envelope: &'e BouguerEnvelope,
+    invariant_m: f64,
+    targets_end_m: f64,
+    escape_above_m: Option<f64>,
+}
+
+impl<'e> FateWatch<'e> {
+    /// Watch the ray launched at `elevation_rad` from `observer_height_m` through `index` (the
+    /// field `envelope` was built from, over `earth_radius_m`), whose last target is at ground
+    /// distance `targets_end_m` (0 without targets). Escaping rays are traced to the top.
+    pub fn new<S: StratifiedIndex + ?Sized>(
+        envelope: &'e BouguerEnvelope,
+        index: &S,
+        earth_radius_m: f64,
+        observer_height_m: f64,
+        elevation_rad: f64,
+        targets_end_m: f64,
+    ) -> Self {
+        let (n0, _) = index.index_and_derivative(observer_height_m);
+        FateWatch {
+            envelope,
+            invariant_m: n0 * (earth_radius_m + observer_height_m) * elevation_rad.cos(),
+            targets_end_m,
+            escape_above_m: None,
+        }
+    }
+
+    /// Also end (with [`HookAction::Stop`]) a ray that provably escapes once it is past its last
+    /// target, or climbing above `height_m` (above every object, so it never meets one again):
+    /// for callers that do not need the final direction.
+    pub fn stop_escaping_above(self, height_m: f64) -> Self {
+        FateWatch {
+            escape_above_m: Some(height_m),
+            ..self
+        }
+    }
+
+    /// The ray's invariant n·r·cos ψ (m), from its launch.
+    pub fn invariant_m(&self) -> f64 {
+        self.invariant_m
+    }
+
+    /// The action for a ray now at `point`.
+    pub fn action(&self, point: &RayPoint) -> HookAction {
+        let done = point.distance_m >= self.targets_end_m;
+        let climbing = point.elevation_rad > 0.0;
+        let clear = self
+            .escape_above_m
+            .is_some_and(|h| climbing && point.height_m > h);
+        if !(done || clear) {
+            return HookAction::Continue;
+        }
+        match self
+            .envelope
+            .fate(point.height_m, climbing, self.invariant_m)
+        {
+            Fate::Trapped if done => HookAction::Trapped,
+            // Past the targets, or climbing for good above every object: nothing left to meet.
+            Fate::Escapes if self.escape_above_m.is_some() => HookAction::Stop,
+            _ => HookAction::Continue,
+        }
+    }
+}
+
+impl RayHook for FateWatch<'_> {
+    fn after_step(&mut self, _from: &RayPoint, to: &RayPoint) -> HookAction {
+        self.action(to)
+    }
+}
+
+/// A caller's hook followed by an optional [`FateWatch`] (the watch acts only where the hook
+/// lets the ray go on).
+pub(crate) struct Watched<'h, 'e, H: RayHook + ?Sized> {
+    pub hook: &'h mut H,
+    pub watch: Option<FateWatch<'e>>,
+}
+
+impl<H: RayHook + ?Sized> RayHook for Watched<'_, '_, H> {
+    fn event(&self, point: &RayPoint) -> Option<f64> {
+        self.hook.event(point)
+    }
+    fn after_step(&mut self, from: &RayPoint, to: &RayPoint) -> HookAction {
+        match self.hook.after_step(from, to) {
+            HookAction::Continue => self.watch.map_or(HookAction::Continue, |w| w.action(to)),
+            other => other,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -223,6 +323,56 @@ mod tests {
             Fate::MeetsGround
         );
         assert_eq!(env.fate(f64::NAN, true, 1.0), Fate::Undecided);
+    }
+
+    #[test]
+    fn the_watch_ends_trapped_rays_past_their_targets_and_escaping_ones_when_asked() {
+        use crate::tracer::{Termination, Tracer, TracerConfig};
+        let r = 6_371_000.0;
+        let cfg = TracerConfig {
+            stop_after_last_target: false,
+            tolerance_m: 1e-3,
+            ..TracerConfig::default()
+        };
+        let tracer = Tracer::new(&ElevatedDuct, cfg.clone())
+            .unwrap()
+            .with_fates();
+        // A level ray in the middle of the elevated duct oscillates in it: trapped, but only
+        // once it is past its last target (its heights there are still reported).
+        let rec = tracer.trace(1100.0, 0.0, &[50_000.0]).unwrap();
+        assert_eq!(rec.termination, Some(Termination::Trapped), "{rec:?}");
+        assert!(
+            rec.heights_m[0].is_some_and(|h| h > 500.0 && h < 1200.0),
+            "{rec:?}"
+        );
+        assert!(rec.end.distance_m >= 50_000.0 && rec.end.distance_m < 60_000.0);
+        // A steeper ray climbs out of the top: traced there, with its refraction.
+        let up = tracer.trace(1100.0, 0.02, &[50_000.0]).unwrap();
+        assert_eq!(up.termination, Some(Termination::Escaped));
+        // Without the envelope the trapped ray runs on to a safety limit.
+        let plain = Tracer::new(
+            &ElevatedDuct,
+            TracerConfig {
+                max_distance_m: Some(500_000.0),
+                ..cfg.clone()
+            },
+        )
+        .unwrap();
+        let rec = plain.trace(1100.0, 0.0, &[50_000.0]).unwrap();
+        assert_eq!(rec.termination, Some(Termination::MaxDistance));
+        // Asked to stop escaping rays above 1500 m, the watch ends the steep ray there.
+        let envelope = tracer.fates().unwrap();
+        let mut watch = FateWatch::new(envelope, &ElevatedDuct, r, 1100.0, 0.02, 50_000.0)
+            .stop_escaping_above(1500.0);
+        let mut rec = crate::tracer::RayRecord::default();
+        plain
+            .trace_into(1100.0, 0.02, &[50_000.0], &mut watch, &mut rec, None)
+            .unwrap();
+        assert_eq!(rec.termination, Some(Termination::LeftRegion));
+        assert!(
+            rec.end.height_m > 1500.0 && rec.end.height_m < 2000.0,
+            "{rec:?}"
+        );
     }
 
     /// A trapping layer between 1000 and 1200 m over normal air.

@@ -18,13 +18,14 @@ mod ray;
 mod straight;
 mod system;
 
+use std::sync::Arc;
+
 use glam::{DVec3, DVec4};
 use rayon::prelude::*;
 
-pub use bouguer::{BouguerEnvelope, Fate};
+pub use bouguer::{BouguerEnvelope, Fate, FateWatch};
 pub use ray::{
-    HookAction, NoHook, RayHook, RayPoint, RayRecord, StopAboveClimbing, Termination, TracerConfig,
-    TracerError,
+    HookAction, NoHook, RayHook, RayPoint, RayRecord, Termination, TracerConfig, TracerError,
 };
 pub use straight::straight_ray;
 pub use system::Ground;
@@ -93,13 +94,35 @@ impl<S: StratifiedIndex> IndexField for Spherical<S> {
 pub struct Tracer<'a, S: StratifiedIndex + ?Sized> {
     field: &'a S,
     config: TracerConfig,
+    fates: Option<Arc<BouguerEnvelope>>,
 }
 
 impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
     /// A tracer through `field` with `config` (validated).
     pub fn new(field: &'a S, config: TracerConfig) -> Result<Self, TracerError> {
         config.validate()?;
-        Ok(Tracer { field, config })
+        Ok(Tracer {
+            field,
+            config,
+            fates: None,
+        })
+    }
+
+    /// The same tracer, ending every ray that provably oscillates past its last target with
+    /// [`Termination::Trapped`] ([`FateWatch`] over a [`BouguerEnvelope`] of the field, built
+    /// here once and shared by clones).
+    pub fn with_fates(self) -> Self {
+        let envelope =
+            BouguerEnvelope::new(self.field, self.config.earth_radius_m, self.config.top_m);
+        Tracer {
+            fates: Some(Arc::new(envelope)),
+            ..self
+        }
+    }
+
+    /// The fate envelope, if [`Self::with_fates`] built one.
+    pub fn fates(&self) -> Option<&BouguerEnvelope> {
+        self.fates.as_deref()
     }
 
     /// The settings.
@@ -167,6 +190,19 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
             radius_m: self.config.earth_radius_m,
         };
         let (n0, _) = self.field.index_and_derivative(observer_height_m);
+        let mut hook = bouguer::Watched {
+            hook,
+            watch: self.fates.as_deref().map(|envelope| {
+                FateWatch::new(
+                    envelope,
+                    self.field,
+                    self.config.earth_radius_m,
+                    observer_height_m,
+                    elevation_rad,
+                    distances_m.last().copied().unwrap_or(0.0),
+                )
+            }),
+        };
         let (sin_a, cos_a) = elevation_rad.sin_cos();
         let state = DVec4::new(
             0.0,
@@ -180,7 +216,7 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
             elevation_rad,
             &self.config,
             distances_m,
-            hook,
+            &mut hook,
             record,
             path,
         );

@@ -186,7 +186,7 @@ pub enum Termination {
     Escaped,
     /// Reached the last requested ground distance.
     TargetsDone,
-    /// Reached `max_distance_m` still inside the atmosphere (trapped for the analysis).
+    /// Reached `max_distance_m` still inside the atmosphere, its fate undecided (a safety limit).
     MaxDistance,
     /// Travelled `max_length_m` along the path.
     MaxLength,
@@ -200,6 +200,9 @@ pub enum Termination {
     Event,
     /// The hook asked to stop (e.g. the ray is above every object and climbing).
     LeftRegion,
+    /// Past its last target, the ray provably oscillates between two turning points for ever
+    /// (Bouguer's invariant, [`super::BouguerEnvelope`]): it is trapped in a duct.
+    Trapped,
 }
 
 impl Termination {
@@ -216,6 +219,7 @@ impl Termination {
             Termination::NonFinite => "non_finite",
             Termination::Event => "event",
             Termination::LeftRegion => "left_region",
+            Termination::Trapped => "trapped",
         }
     }
 }
@@ -314,6 +318,8 @@ pub enum HookAction {
     Continue,
     /// Stop here with [`Termination::LeftRegion`].
     Stop,
+    /// Stop here with [`Termination::Trapped`].
+    Trapped,
 }
 
 /// Caller-side control of a ray (the renderer's object surfaces and early stops).
@@ -334,24 +340,6 @@ pub trait RayHook {
 pub struct NoHook;
 
 impl RayHook for NoHook {}
-
-/// Stop rays that are above `height_m` and climbing. Safe only where no ray can turn down again
-/// above that height (ray curvature less than Earth's there), which the caller must know.
-#[derive(Debug, Clone, Copy)]
-pub struct StopAboveClimbing {
-    /// Height above which climbing rays stop (m).
-    pub height_m: f64,
-}
-
-impl RayHook for StopAboveClimbing {
-    fn after_step(&mut self, _from: &RayPoint, to: &RayPoint) -> HookAction {
-        if to.height_m > self.height_m && to.elevation_rad > 0.0 {
-            HookAction::Stop
-        } else {
-            HookAction::Continue
-        }
-    }
-}
 
 fn finite<const N: usize>(y: &[f64; N]) -> bool {
     y.iter().all(|v| v.is_finite())
@@ -736,9 +724,10 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         s += h;
         obs = obs1;
         cur = next_point;
-        if action == HookAction::Stop {
-            finish(rec, Termination::LeftRegion, &obs, s, elevation0);
-            return;
+        match action {
+            HookAction::Continue => {}
+            HookAction::Stop => return finish(rec, Termination::LeftRegion, &obs, s, elevation0),
+            HookAction::Trapped => return finish(rec, Termination::Trapped, &obs, s, elevation0),
         }
         h = match aim.take() {
             Some(a) => a.next_step_m,

@@ -922,3 +922,57 @@ fn rays_between_unrefined_monotone_fan_rays_are_clear_in_every_paper_atmosphere(
     eprintln!("{checked} rays inside unrefined intervals checked");
     assert!(checked > 300, "{checked}");
 }
+
+/// Row of the sea horizon in the centre column of `film`: the first row of the sharpest change
+/// of the green channel between neighbouring rows (sky above, sea below).
+fn sharpest_row_change(film: &Film) -> (u32, f32) {
+    let x = film.width / 2;
+    (1..film.height)
+        .map(|y| (y, (film.pixel(x, y)[1] - film.pixel(x, y - 1)[1]).abs()))
+        .fold((0, 0.0), |best, c| if c.1 > best.1 { c } else { best })
+}
+
+#[test]
+fn high_camera_sea_horizon_matches_the_traced_one_with_and_without_a_sun() {
+    // Cameras at 10–39 km see the sea horizon 600–700 km away. Rays that graze it used to be cut
+    // at a fixed trap distance (300 km without a sun) and shaded as sky, drawing the horizon
+    // 0.1°–2.5° too low; now every ray runs to the sea or the top unless Bouguer's invariant
+    // proves it trapped, so the frame agrees with the traced horizon with or without a sun, on
+    // both back-ends.
+    let us1976 = RefractiveAtmosphere::new(Arc::new(StandardAtmosphere::default()), 550.0)
+        .expect("atmosphere");
+    let tracer = Tracer::new(&us1976, TracerConfig::default()).unwrap();
+    for height_m in [10_000.0, 20_000.0, 30_000.0, 39_000.0] {
+        let horizon_rad = crate::tracer::sea_horizon_rad(&tracer, height_m);
+        for sun in ["", "[sun]\nelevation_deg = 20.0\nazimuth_deg = 180.0\n"] {
+            // 0.01° per pixel; the horizon a third of a pixel above the centre line.
+            let (width, rows, hfov_deg) = (20u32, 100u32, 0.2f64);
+            let focal_px = 0.5 * width as f64 / (0.5 * hfov_deg).to_radians().tan();
+            let pitch_rad = horizon_rad - (0.3 / focal_px).atan();
+            let text = format!(
+                "[camera]\nheight_m = {height_m}\npitch_deg = {}\nhfov_deg = {hfov_deg}\n\
+                 width = {width}\nheight = {rows}\nsamples_per_pixel = 1\n\
+                 [atmosphere]\nstandard = \"us1976\"\nstraight = false\n{sun}",
+                pitch_rad.to_degrees()
+            );
+            let path = std::path::Path::new("high_camera.toml");
+            let scene = Scene::from_toml_str(&text, std::path::Path::new("."), path).unwrap();
+            let atm = atmosphere(&scene);
+            // Row j (centre j + 0.5) of the centre column looks at pitch + atan((rows/2 − j − 0.5)/f):
+            // sea where that is below the horizon.
+            let boundary = 0.5 * rows as f64 - focal_px * (horizon_rad - pitch_rad).tan();
+            let predicted = (boundary - 0.5).ceil() as i64;
+            for exact in [false, true] {
+                let film = render(&scene, &atm, exact);
+                let (row, jump) = sharpest_row_change(&film);
+                assert!(
+                    jump > 0.05 && (row as i64 - predicted).abs() <= 1,
+                    "camera {height_m} m, exact {exact}, sun {}: horizon row {row} (jump {jump}), \
+                     traced horizon {:.4}° → row {predicted}",
+                    !sun.is_empty(),
+                    horizon_rad.to_degrees()
+                );
+            }
+        }
+    }
+}

@@ -112,7 +112,8 @@ fn constant_index_gives_straight_lines() {
 /// the end-to-end checks.
 pub(crate) fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
     let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
-    let (mut lo, mut hi) = (-0.02, 0.0);
+    // −11.5° is below the sea horizon of any camera up to the 40 km top.
+    let (mut lo, mut hi) = (-0.2, 0.0);
     assert!(hits(lo) && !hits(hi));
     for _ in 0..60 {
         let mid = 0.5 * (lo + hi);
@@ -749,7 +750,18 @@ impl ghostship::tracer::RayHook for Wall {
 
 #[test]
 fn hooks_end_rays_on_events_and_early_stops() {
-    use ghostship::tracer::{RayRecord, StopAboveClimbing};
+    use ghostship::tracer::{HookAction, RayHook, RayPoint, RayRecord};
+    /// Stops a ray once it climbs above 50 m.
+    struct Ceiling;
+    impl RayHook for Ceiling {
+        fn after_step(&mut self, _from: &RayPoint, to: &RayPoint) -> HookAction {
+            if to.height_m > 50.0 && to.elevation_rad > 0.0 {
+                HookAction::Stop
+            } else {
+                HookAction::Continue
+            }
+        }
+    }
     let field = Constant(1.0);
     let tracer = Tracer::new(&field, config(0.01)).unwrap();
     let mut record = RayRecord::default();
@@ -779,14 +791,7 @@ fn hooks_end_rays_on_events_and_early_stops() {
     );
     let mut path = Vec::new();
     tracer
-        .trace_into(
-            5.0,
-            alpha,
-            &[],
-            &mut StopAboveClimbing { height_m: 50.0 },
-            &mut record,
-            Some(&mut path),
-        )
+        .trace_into(5.0, alpha, &[], &mut Ceiling, &mut record, Some(&mut path))
         .unwrap();
     assert_eq!(record.termination, Some(Termination::LeftRegion));
     assert!(record.end.height_m > 50.0 && record.end.height_m < 50.0 + 2.0 + 0.05 * 50.0 + 1.0);
