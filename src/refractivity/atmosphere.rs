@@ -45,7 +45,9 @@ pub struct TableSpec {
 }
 
 impl Default for TableSpec {
-    /// 0.25 m up to 4 km above the surface, 5 m up to 80 km, tolerances 1e-14. Why 1e-14: an
+    /// 0.25 m up to 4 km above the surface, 5 m up to 40 km (the default top of the traced
+    /// atmosphere: a frame builds no table it does not use; a trace to a higher top evaluates
+    /// the exact formula above), tolerances 1e-14. Why 1e-14: an
     /// error δ in dn/dh bends a ray by δ per metre, which grows to ½·δ·x² in height after x
     /// metres; at 1e-14 that is 3.4 µm at 26 km and 0.2 mm at 200 km, below every tolerance the
     /// tracer offers at the paper's distances (the smooth cells of the quintic table are far
@@ -55,7 +57,7 @@ impl Default for TableSpec {
             fine_step_m: 0.25,
             fine_top_agl_m: 4_000.0,
             coarse_step_m: 5.0,
-            coarse_top_agl_m: 80_000.0,
+            coarse_top_agl_m: 40_000.0,
             tolerance_n: 1e-14,
             tolerance_dndh_per_m: 1e-14,
         }
@@ -109,7 +111,7 @@ pub struct RefractiveSample {
 /// and terminate the ray.
 ///
 /// The table (see [`TableSpec`]): 0.25 m cells up to 4 km above the surface, 5 m cells up to
-/// 80 km, exact above; each cell a quintic Hermite through the exact (n − 1, dn/dh, d²n/dh²) at
+/// 40 km, exact above; each cell a quintic Hermite through the exact (n − 1, dn/dh, d²n/dh²) at
 /// its ends (C², so the ray equation stays smooth across nodes). At construction every cell is
 /// checked against the exact formula at three points; cells off by more than the spec's
 /// tolerances (1e-14 in n and in dn/dh per metre) evaluate the exact formula instead. The

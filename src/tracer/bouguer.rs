@@ -167,6 +167,9 @@ pub struct FateWatch<'e> {
     invariant_m: f64,
     targets_end_m: f64,
     escape_above_m: Option<f64>,
+    /// The fate once the envelope has decided it: it does not change along the ray (the
+    /// invariant is the launch value, so integration error cannot move it).
+    decided: Option<Fate>,
 }
 
 impl<'e> FateWatch<'e> {
@@ -187,6 +190,7 @@ impl<'e> FateWatch<'e> {
             invariant_m: n0 * (earth_radius_m + observer_height_m) * elevation_rad.cos(),
             targets_end_m,
             escape_above_m: None,
+            decided: None,
         }
     }
 
@@ -206,7 +210,7 @@ impl<'e> FateWatch<'e> {
     }
 
     /// The action for a ray now at `point`.
-    pub fn action(&self, point: &RayPoint) -> HookAction {
+    pub fn action(&mut self, point: &RayPoint) -> HookAction {
         let done = point.distance_m >= self.targets_end_m;
         let climbing = point.elevation_rad > 0.0;
         let clear = self
@@ -215,10 +219,19 @@ impl<'e> FateWatch<'e> {
         if !(done || clear) {
             return HookAction::Continue;
         }
-        match self
-            .envelope
-            .fate(point.height_m, climbing, self.invariant_m)
-        {
+        let fate = match self.decided {
+            Some(fate) => fate,
+            None => {
+                let fate = self
+                    .envelope
+                    .fate(point.height_m, climbing, self.invariant_m);
+                if fate != Fate::Undecided {
+                    self.decided = Some(fate);
+                }
+                fate
+            }
+        };
+        match fate {
             Fate::Trapped if done => HookAction::Trapped,
             // Past the targets, or climbing for good above every object: nothing left to meet.
             Fate::Escapes if self.escape_above_m.is_some() => HookAction::Stop,
@@ -246,7 +259,10 @@ impl<H: RayHook + ?Sized> RayHook for Watched<'_, '_, H> {
     }
     fn after_step(&mut self, from: &RayPoint, to: &RayPoint) -> HookAction {
         match self.hook.after_step(from, to) {
-            HookAction::Continue => self.watch.map_or(HookAction::Continue, |w| w.action(to)),
+            HookAction::Continue => self
+                .watch
+                .as_mut()
+                .map_or(HookAction::Continue, |w| w.action(to)),
             other => other,
         }
     }
