@@ -9,7 +9,11 @@
 //! Hermite tangents: `out_k = y_k + h_k·m_k/3`, `in_{k+1} = y_{k+1} − h_k·m_{k+1}/3` (h_k = the
 //! segment's width). `splines` has no derivative, so it is computed here from the same segment's
 //! controls, which keeps value and slope consistent. The tangent rule is written by hand because
-//! no crate offers PCHIP tangents over `splines` keys.
+//! no crate offers PCHIP tangents over `splines` keys. So is the segment search: `splines` finds
+//! the segment by a binary search over its 40-byte keys with a `partial_cmp().unwrap()` per probe
+//! and then evaluates the Bézier itself; the refractive table's build samples these curves some
+//! 10⁵ times per atmosphere, so the curve keeps its knot heights in a plain slice (one
+//! `partition_point`) and evaluates the same segment's Bézier controls once for value and slope.
 
 use splines::{Interpolation, Key, Spline};
 
@@ -17,6 +21,8 @@ use splines::{Interpolation, Key, Spline};
 #[derive(Debug, Clone)]
 pub(crate) struct MonotoneCubic {
     spline: Spline<f64, f64>,
+    /// The keys' heights, ascending (the segment search).
+    knots_m: Vec<f64>,
     /// (height, value, slope) of the first and last knot, for the ends the spline does not serve.
     first: (f64, f64, f64),
     last: (f64, f64, f64),
@@ -98,6 +104,7 @@ impl MonotoneCubic {
             .collect();
         MonotoneCubic {
             spline: Spline::from_vec(keys),
+            knots_m: x.to_vec(),
             first: (x[0], y[0], m[0]),
             last: (x[n - 1], y[n - 1], m[n - 1]),
         }
@@ -116,13 +123,14 @@ impl MonotoneCubic {
         if h >= self.last.0 {
             return (self.last.1, self.last.2);
         }
-        let Some(sampled) = self.spline.sample_with_key(h) else {
-            // Unreachable for first < h < last; hold the nearer end rather than panic.
-            return (self.last.1, self.last.2);
-        };
+        // first < h < last: the segment [k, k + 1] with knot k ≤ h < knot k + 1.
+        let k = self
+            .knots_m
+            .partition_point(|&t| t <= h)
+            .clamp(1, self.knots_m.len() - 1)
+            - 1;
         let keys = self.spline.keys();
-        let k0 = &keys[sampled.key];
-        let k1 = &keys[sampled.key + 1];
+        let (k0, k1) = (&keys[k], &keys[k + 1]);
         let (a, b) = (k0.value, k1.value);
         let u = match k0.interpolation {
             Interpolation::StrokeBezier(_, out) => out,
@@ -135,14 +143,37 @@ impl MonotoneCubic {
         let width = k1.t - k0.t;
         let s = (h - k0.t) / width;
         let r = 1.0 - s;
+        let value = a * r * r * r + 3.0 * s * r * (u * r + v * s) + b * s * s * s;
         let slope = 3.0 * ((u - a) * r * r + 2.0 * (v - u) * r * s + (b - v) * s * s) / width;
-        (sampled.value, slope)
+        (value, slope)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hand_search_and_evaluation_agree_with_the_splines_crate() {
+        let x = [0.0, 1.0, 2.5, 2.75, 7.0, 30.0];
+        let y = [3.0, -1.0, 4.0, 4.5, -2.0, 10.0];
+        let c = MonotoneCubic::new(&x, &y);
+        for i in 0..=3000 {
+            let h = 30.0 * i as f64 / 3000.0;
+            let (value, _) = c.value_slope(h);
+            // The crate's own evaluation, where it serves (inside the knots).
+            if let Some(reference) = c.spline.sample(h) {
+                assert!(
+                    (value - reference).abs() <= 1e-12,
+                    "h {h}: {value} vs {reference}"
+                );
+            }
+        }
+        // At the knots the curve passes through the data.
+        for (&h, &v) in x.iter().zip(&y) {
+            assert!((c.value_slope(h).0 - v).abs() <= 1e-12, "knot {h}");
+        }
+    }
 
     #[test]
     fn matches_scipy_pchip_tangents() {
