@@ -367,7 +367,12 @@ fn atmospheres() -> Vec<(String, RefractiveAtmosphere, f64, Column)> {
         ("novaya_zemlya", 5.0),
     ] {
         let s = synthetic(name);
-        out.push((name.to_string(), refractive(&s), h0, Column::Synthetic(s)));
+        out.push((
+            name.to_string(),
+            refractive(&s),
+            h0,
+            Column::Synthetic(Box::new(s)),
+        ));
     }
     for name in [
         "Bjornoya-01028_2024022611.csv",
@@ -394,7 +399,7 @@ fn atmospheres() -> Vec<(String, RefractiveAtmosphere, f64, Column)> {
 /// An owned column, lent to [`BreakSource`].
 enum Column {
     Profile(Box<Profile>),
-    Synthetic(SyntheticAtmosphere),
+    Synthetic(Box<SyntheticAtmosphere>),
     Standard(StandardAtmosphere),
 }
 
