@@ -673,7 +673,9 @@ pub struct FanCounts {
     pub fan_rays: usize,
     /// Time inside the tracer, summed over threads (s).
     pub tracer_s: f64,
-    /// Steps (accepted + rejected) per fan ray; `None` if they could not be reproduced.
+    /// Steps (accepted + rejected) per fan ray; `None` if they could not be reproduced (a
+    /// re-traced ray differs from the renderer's, or the recorded render's pixels from the timed
+    /// one's).
     pub steps_per_ray: Option<f64>,
 }
 
@@ -730,9 +732,9 @@ pub fn exact_proxy_size(size: (u32, u32), max_pixels: u64) -> (u32, u32) {
     }
 }
 
-/// The fan tracer's rays, time and steps inside one fan-path frame of `scene` at `tolerance_m`;
-/// `None` if the recorded render's pixels differ from `timed` (then the tracer built here is not
-/// the one `prepare_tracer` builds).
+/// The fan tracer's rays, time and steps inside one fan-path frame of `scene` at `tolerance_m`
+/// (`None` for a straight-ray scene). No steps if the recorded render's pixels differ from
+/// `timed` (then the tracer built here is not the one `prepare_tracer` builds).
 fn fan_counts(
     ps: &PaperScene,
     scene: &Scene,
@@ -758,14 +760,12 @@ fn fan_counts(
         calls: Mutex::new(Vec::new()),
     };
     let (_, film) = timed_render(&ps.name, scene, &recording, RenderPath::Fan, tolerance_m, 1)?;
-    if film.pixels != timed.pixels {
-        return Ok(None);
-    }
+    let same_pixels = film.pixels == timed.pixels;
     let calls = recording.calls.into_inner().unwrap_or_default();
     Ok(Some(FanCounts {
         fan_rays: calls.len(),
         tracer_s: recording.nanos.into_inner() as f64 * 1e-9,
-        steps_per_ray: fan_steps_per_ray(&rays, &calls),
+        steps_per_ray: fan_steps_per_ray(&rays, &calls).filter(|_| same_pixels),
     }))
 }
 

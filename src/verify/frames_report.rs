@@ -92,7 +92,7 @@ fn fan_tracer_markdown(timings: &[FrameTiming]) -> String {
          threads; rays/s and steps/s are per thread inside the tracer. *Steps/ray* (accepted + \
          rejected): every recorded ray re-traced with the planar tracer as the renderer's \
          `CurvedRays` traces it, checked bit for bit against the renderer's ray (– if any \
-         differs).\n\n\
+         differs, or the recorded render's pixels differ from the timed one's).\n\n\
          | scene | size | fan rays | tracer time (ms) | rays/s | steps/ray | steps/s |\n\
          |---|---|---:|---:|---:|---:|---:|\n",
     );
@@ -333,11 +333,13 @@ pub fn frame_time_vs_error_png(
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(3))
                 });
+            // Labels alternate above and below the line, so neighbours do not overlap.
             chart
-                .draw_series(pts.iter().map(|&(x, y, t)| {
+                .draw_series(pts.iter().enumerate().map(|(i, &(x, y, t))| {
+                    let dy = if i % 2 == 0 { -16 } else { 4 };
                     EmptyElement::at((x, clamp(y)))
                         + Circle::new((0, 0), 4, colour.filled())
-                        + Text::new(fmt_tol(t), (6, -14), (font, 13).into_font())
+                        + Text::new(fmt_tol(t), (7, dy), (font, 13).into_font())
                 }))
                 .map_err(plot_err)?;
         }
