@@ -97,13 +97,15 @@ pub fn compare_boundaries(run: &[Vec<Image>], reference: &[Vec<Image>]) -> Bound
             continue;
         }
         for (x, y) in a.iter().zip(b) {
-            let d = (x.elevation_min_deg - y.elevation_min_deg)
-                .abs()
-                .max((x.elevation_max_deg - y.elevation_max_deg).abs())
-                * ARCSEC_PER_DEG;
+            let lower = (x.elevation_min_deg - y.elevation_min_deg).abs();
+            let upper = (x.elevation_max_deg - y.elevation_max_deg).abs();
             out.compared += 1;
-            // A NaN boundary is as bad as can be: keep it visible.
-            let d = if d.is_nan() { f64::INFINITY } else { d };
+            // A NaN boundary is as bad as can be: keep it visible (`f64::max` would drop it).
+            let d = if lower.is_nan() || upper.is_nan() {
+                f64::INFINITY
+            } else {
+                lower.max(upper) * ARCSEC_PER_DEG
+            };
             out.max_arcsec = Some(out.max_arcsec.map_or(d, |m: f64| m.max(d)));
         }
     }
