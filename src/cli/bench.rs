@@ -1,6 +1,8 @@
-//! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] and the standard cases → measure
-//! every case ([`ghostship::verify::accuracy`]) with a progress bar → write `BENCHMARKS.md` and
-//! `docs/time_vs_error.png` under the output folder.
+//! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] with the standard cases and a
+//! [`FrameConfig`] with the paper scenes → measure every case ([`ghostship::verify::accuracy`])
+//! and every scene's frames ([`ghostship::verify::frames`]) with a progress bar → write
+//! `BENCHMARKS.md`, `docs/time_vs_error.png` and `docs/frame_time_vs_error.png` under the output
+//! folder.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -8,9 +10,14 @@ use std::path::PathBuf;
 use anyhow::Context;
 use ghostship::output::write_atomic;
 use ghostship::verify::accuracy::{
-    AccuracyConfig, CaseResult, benchmarks_markdown, measure_case, standard_cases,
+    AccuracyConfig, BenchCase, CaseResult, measure_case, rays_markdown, standard_cases,
     time_vs_error_png,
 };
+use ghostship::verify::benchmarks::benchmarks_markdown;
+use ghostship::verify::frames::{
+    FrameConfig, FrameTiming, PaperScene, SceneSweep, load_paper_scenes, sweep_scene, time_scene,
+};
+use ghostship::verify::frames_report::{frame_time_vs_error_png, frames_markdown};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `ghostship bench`.
@@ -26,24 +33,30 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Time against error: trace a fan through every paper atmosphere, two shipped soundings and
     /// the stress soundings at tolerances 10 m … 1e-5 m, compare the heights at 5, 10, 20 and
-    /// 26 km with a 1e-7 m reference run, time the rays; writes BENCHMARKS.md and
-    /// docs/time_vs_error.png.
+    /// 26 km and the image boundaries of a 20 m target with a 1e-7 m reference run, time the
+    /// rays; render the paper scenes (data/scenes) at those tolerances on the fan and exact 3-D
+    /// paths and compare the pixels with 1e-7 m renders; time frames at 400×200 and 1920×1080
+    /// on the fan, exact 3-D and straight-ray paths. Writes BENCHMARKS.md,
+    /// docs/time_vs_error.png and docs/frame_time_vs_error.png.
     Accuracy(AccuracyArgs),
 }
 
 /// Arguments of `ghostship bench accuracy`.
 #[derive(Debug, clap::Args)]
 pub struct AccuracyArgs {
-    /// Folder to write BENCHMARKS.md and docs/time_vs_error.png into.
+    /// Folder to write BENCHMARKS.md, docs/time_vs_error.png and docs/frame_time_vs_error.png
+    /// into.
     #[arg(long, value_name = "DIR", default_value = ".")]
     pub out: PathBuf,
-    /// Folder holding the paper atmospheres and shipped soundings.
+    /// Folder holding the paper atmospheres and shipped soundings, and the paper scenes in its
+    /// `scenes` folder.
     #[arg(long, value_name = "DIR", default_value = "data")]
     pub data: PathBuf,
     /// Rays in the fan (elevations −0.5°…0.5°). Default: 101 (21 with --quick).
     #[arg(long, value_name = "N")]
     pub rays: Option<usize>,
-    /// A quick run: tolerances 1, 1e-2 and 1e-4 m only, 21 rays.
+    /// A quick run that takes every code path: tolerances 1, 1e-2 and 1e-4 m only, 21 rays,
+    /// frames at small sizes (sweep 40×20, timed at 80×40 and 192×108), two runs per frame.
     #[arg(long)]
     pub quick: bool,
 }
@@ -56,10 +69,10 @@ pub fn run(args: BenchArgs, quiet: bool) -> anyhow::Result<()> {
 }
 
 fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
-    let mut config = if args.quick {
-        AccuracyConfig::quick()
+    let (mut config, frame_config) = if args.quick {
+        (AccuracyConfig::quick(), FrameConfig::quick())
     } else {
-        AccuracyConfig::full()
+        (AccuracyConfig::full(), FrameConfig::full())
     };
     if let Some(n) = args.rays {
         if !(3..=super::trace::MAX_RAYS).contains(&n) {
@@ -67,12 +80,29 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
         }
         config.rays = n;
     }
+    let scenes_dir = args.data.join("scenes");
+    let scenes = load_paper_scenes(&scenes_dir)
+        .with_context(|| format!("cannot load the paper scenes from {}", scenes_dir.display()))?;
     let stress_dir = std::env::temp_dir().join(format!("ghostship-stress-{}", std::process::id()));
     std::fs::create_dir_all(&stress_dir)
         .with_context(|| format!("cannot create {}", stress_dir.display()))?;
-    let measured = measure_all(&args, &config, &stress_dir, quiet);
+    let measured = standard_cases(&args.data, &stress_dir)
+        .map_err(anyhow::Error::from)
+        .and_then(|cases| {
+            let curved = scenes
+                .iter()
+                .filter(|s| !s.scene.atmosphere.straight)
+                .count();
+            let runs = cases.len() * (config.tolerances_m.len() + 1)
+                + scenes.len() * frame_config.timing_sizes.len()
+                + curved * (frame_config.tolerances_m.len() + 1);
+            let bar = progress_bar(quiet, runs as u64);
+            measure_rays(&cases, &config, &bar).map(|r| (r, bar))
+        });
     let _ = std::fs::remove_dir_all(&stress_dir);
-    let results = measured?;
+    let (results, bar) = measured?;
+    let (timings, sweeps) = measure_frames(&scenes, &frame_config, &bar)?;
+    bar.finish_and_clear();
 
     let mut command = String::from("ghostship bench accuracy");
     if args.quick {
@@ -81,42 +111,79 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     if let Some(n) = args.rays {
         command.push_str(&format!(" --rays {n}"));
     }
+    let md = benchmarks_markdown(
+        &command,
+        &[
+            frames_markdown(&timings, &sweeps, &frame_config, FRAME_PLOT),
+            rays_markdown(&results, &config, RAY_PLOT),
+        ],
+    );
+    let ray_png = time_vs_error_png(&results, 1400, 900)?;
+    let frame_png = frame_time_vs_error_png(&sweeps, &frame_config, 1400, 900)?;
     let md_path = args.out.join("BENCHMARKS.md");
-    let png_path = args.out.join("docs").join("time_vs_error.png");
-    let md = benchmarks_markdown(&results, &config, &command, "docs/time_vs_error.png");
-    let png = time_vs_error_png(&results, 1400, 900)?;
-    write_atomic(&png_path, &png)?;
-    write_atomic(&md_path, md.as_bytes())?;
+    let written = [
+        (args.out.join(RAY_PLOT), ray_png),
+        (args.out.join(FRAME_PLOT), frame_png),
+        (md_path, md.into_bytes()),
+    ];
+    for (path, bytes) in &written {
+        write_atomic(path, bytes)?;
+    }
     if !quiet {
-        eprintln!("wrote {}", md_path.display());
-        eprintln!("wrote {}", png_path.display());
+        for (path, _) in &written {
+            eprintln!("wrote {}", path.display());
+        }
     }
     Ok(())
 }
 
-fn measure_all(
-    args: &AccuracyArgs,
+/// The plots, relative to the output folder (and to BENCHMARKS.md in it).
+const RAY_PLOT: &str = "docs/time_vs_error.png";
+const FRAME_PLOT: &str = "docs/frame_time_vs_error.png";
+
+fn progress_bar(quiet: bool, len: u64) -> ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    if let Ok(style) =
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
+    {
+        bar.set_style(style);
+    }
+    bar
+}
+
+fn measure_rays(
+    cases: &[BenchCase],
     config: &AccuracyConfig,
-    stress_dir: &std::path::Path,
-    quiet: bool,
+    bar: &ProgressBar,
 ) -> anyhow::Result<Vec<CaseResult>> {
-    let cases = standard_cases(&args.data, stress_dir)?;
-    let bar = if quiet || !std::io::stderr().is_terminal() {
-        ProgressBar::hidden()
-    } else {
-        let bar = ProgressBar::new((cases.len() * (config.tolerances_m.len() + 1)) as u64);
-        if let Ok(style) =
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
-        {
-            bar.set_style(style);
-        }
-        bar
-    };
     let mut results = Vec::new();
-    for case in &cases {
-        bar.set_message(case.name.clone());
+    for case in cases {
+        bar.set_message(format!("rays: {}", case.name));
         results.push(measure_case(case, config, &mut || bar.inc(1))?);
     }
-    bar.finish_and_clear();
     Ok(results)
+}
+
+fn measure_frames(
+    scenes: &[PaperScene],
+    config: &FrameConfig,
+    bar: &ProgressBar,
+) -> anyhow::Result<(Vec<FrameTiming>, Vec<SceneSweep>)> {
+    let mut timings = Vec::new();
+    for &size in &config.timing_sizes {
+        for ps in scenes {
+            bar.set_message(format!("frames: {} at {}×{}", ps.name, size.0, size.1));
+            timings.push(time_scene(ps, size, config)?);
+            bar.inc(1);
+        }
+    }
+    let mut sweeps = Vec::new();
+    for ps in scenes {
+        bar.set_message(format!("tolerance sweep: {}", ps.name));
+        sweeps.extend(sweep_scene(ps, config, &mut || bar.inc(1))?);
+    }
+    Ok((timings, sweeps))
 }

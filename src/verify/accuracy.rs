@@ -18,6 +18,9 @@ use std::time::Instant;
 
 use plotters::prelude::*;
 
+use super::image_bounds::{BoundaryComparison, compare_boundaries, fan_images};
+use super::stats::{median, percentile_95};
+use crate::analysis::FoldTest;
 use crate::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
 use crate::tracer::{NoHook, RayRecord, StratifiedIndex, Tracer, TracerConfig, TracerError};
 
@@ -40,10 +43,14 @@ pub struct AccuracyConfig {
     pub repetitions: usize,
     /// A ray is near a fold at distance D when |∂h/∂α| exceeds this × D.
     pub fold_factor: f64,
+    /// Heights H (m) of the targets [0, H] standing at every distance whose images' boundaries
+    /// are compared ([`image_bounds`](super::image_bounds)).
+    pub target_heights_m: Vec<f64>,
 }
 
 impl AccuracyConfig {
-    /// The full study: 10 m … 1e-5 m, 101 rays over −0.5°…0.5°, 5/10/20/26 km, reference 1e-7 m.
+    /// The full study: 10 m … 1e-5 m, 101 rays over −0.5°…0.5°, 5/10/20/26 km, reference 1e-7 m,
+    /// images of a 20 m target (the height of the paper scenes' calibration boards).
     pub fn full() -> Self {
         AccuracyConfig {
             tolerances_m: vec![10.0, 1.0, 0.1, 0.01, 1e-3, 1e-4, 1e-5],
@@ -54,6 +61,7 @@ impl AccuracyConfig {
             distances_m: vec![5_000.0, 10_000.0, 20_000.0, 26_000.0],
             repetitions: 3,
             fold_factor: 3.0,
+            target_heights_m: vec![20.0],
         }
     }
 
@@ -94,6 +102,13 @@ impl AccuracyConfig {
                 .any(|d| !(d.is_finite() && *d > 0.0))
         {
             return bad("distances must be > 0 and ascending");
+        }
+        if self
+            .target_heights_m
+            .iter()
+            .any(|h| !(h.is_finite() && *h > 0.0))
+        {
+            return bad("target heights must be finite and > 0");
         }
         Ok(())
     }
@@ -245,6 +260,10 @@ pub struct ToleranceRow {
     pub us_per_ray: f64,
     /// Steps (accepted + rejected) per ray.
     pub steps_per_ray: f64,
+    /// The image boundaries of the targets against the reference run's.
+    pub boundaries: BoundaryComparison,
+    /// Wall-clock time of the image search on this fan (ms, all threads).
+    pub images_ms: f64,
 }
 
 impl ToleranceRow {
@@ -271,6 +290,8 @@ pub struct CaseResult {
     pub observer_height_m: f64,
     /// Steps per ray of the reference run.
     pub reference_steps_per_ray: f64,
+    /// Images the reference run finds, over all targets.
+    pub reference_images: usize,
     /// One row per tolerance, in the config's order.
     pub rows: Vec<ToleranceRow>,
 }
@@ -325,19 +346,53 @@ fn near_folds(
         .collect()
 }
 
-/// The value below which 95 % of `values` lie (nearest rank).
-fn percentile_95(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let rank = ((0.95 * values.len() as f64).ceil() as usize).clamp(1, values.len());
-    Some(values[rank - 1])
+/// The error at every distance of one run's fan `records` against the `reference` fan, with
+/// the reference's near-fold flags `folds` (per distance, per ray).
+fn distance_errors(
+    records: &[RayRecord],
+    reference: &[RayRecord],
+    folds: &[Vec<bool>],
+    distances: &[f64],
+) -> Vec<DistanceError> {
+    distances
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            let mut all = Vec::new();
+            let mut max: Option<f64> = None;
+            let mut near_fold = 0;
+            for (i, (rec, refr)) in records.iter().zip(reference).enumerate() {
+                let (Some(h), Some(r)) = (rec.heights_m[k], refr.heights_m[k]) else {
+                    continue;
+                };
+                let err = (h - r).abs();
+                all.push(err);
+                if folds[k][i] {
+                    near_fold += 1;
+                } else {
+                    max = Some(max.map_or(err, |m: f64| m.max(err)));
+                }
+            }
+            DistanceError {
+                distance_m: d,
+                compared: all.len(),
+                near_fold,
+                max_m: max,
+                p95_m: percentile_95(&mut all),
+            }
+        })
+        .collect()
 }
 
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
+/// What [`measure_index`] measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IndexResult {
+    /// One row per tolerance, in the config's order.
+    pub rows: Vec<ToleranceRow>,
+    /// Steps per ray of the reference run.
+    pub reference_steps_per_ray: f64,
+    /// Images the reference run finds, over all targets.
+    pub reference_images: usize,
 }
 
 /// Measure one atmosphere `index` with observer at `observer_m`. `progress` is called after the
@@ -347,9 +402,10 @@ pub fn measure_index(
     observer_m: f64,
     config: &AccuracyConfig,
     progress: &mut dyn FnMut(),
-) -> Result<(Vec<ToleranceRow>, f64), TracerError> {
+) -> Result<IndexResult, TracerError> {
     let elevations = config.elevations_rad();
     let distances = &config.distances_m;
+    let heights = &config.target_heights_m;
     let reference_tracer = Tracer::new(
         index,
         TracerConfig {
@@ -359,9 +415,17 @@ pub fn measure_index(
         },
     )?;
     let reference = reference_tracer.trace_fan(observer_m, &elevations, distances)?;
+    let reference_images = fan_images(
+        &reference_tracer,
+        observer_m,
+        &elevations,
+        &reference,
+        distances,
+        heights,
+    );
     progress();
-    let reference_steps =
-        reference.iter().map(|r| r.steps() as f64).sum::<f64>() / reference.len() as f64;
+    let n = elevations.len() as f64;
+    let reference_steps = reference.iter().map(|r| r.steps() as f64).sum::<f64>() / n;
     let folds: Vec<Vec<bool>> = distances
         .iter()
         .enumerate()
@@ -388,46 +452,31 @@ pub fn measure_index(
                 &mut records,
             )?);
         }
-        let seconds = median(&mut times);
-        let n = elevations.len() as f64;
+        let seconds = median(&mut times).unwrap_or(f64::NAN);
         let steps_per_ray = records.iter().map(|r| r.steps() as f64).sum::<f64>() / n;
-        let errors = distances
-            .iter()
-            .enumerate()
-            .map(|(k, &d)| {
-                let mut all = Vec::new();
-                let mut max: Option<f64> = None;
-                let mut near_fold = 0;
-                for (i, (rec, refr)) in records.iter().zip(&reference).enumerate() {
-                    let (Some(h), Some(r)) = (rec.heights_m[k], refr.heights_m[k]) else {
-                        continue;
-                    };
-                    let err = (h - r).abs();
-                    all.push(err);
-                    if folds[k][i] {
-                        near_fold += 1;
-                    } else {
-                        max = Some(max.map_or(err, |m: f64| m.max(err)));
-                    }
-                }
-                DistanceError {
-                    distance_m: d,
-                    compared: all.len(),
-                    near_fold,
-                    max_m: max,
-                    p95_m: percentile_95(&mut all),
-                }
-            })
-            .collect();
+        let images = fan_images(
+            &tracer,
+            observer_m,
+            &elevations,
+            &records,
+            distances,
+            heights,
+        );
         rows.push(ToleranceRow {
             tolerance_m: tol,
-            errors,
+            errors: distance_errors(&records, &reference, &folds, distances),
             us_per_ray: seconds * 1e6 / n,
             steps_per_ray,
+            boundaries: compare_boundaries(&images.targets, &reference_images.targets),
+            images_ms: images.seconds * 1e3,
         });
         progress();
     }
-    Ok((rows, reference_steps))
+    Ok(IndexResult {
+        rows,
+        reference_steps_per_ray: reference_steps,
+        reference_images: reference_images.targets.iter().map(Vec::len).sum(),
+    })
 }
 
 /// Load and measure one case. `progress` as for [`measure_index`].
@@ -443,20 +492,19 @@ pub fn measure_case(
             source: Box::new(source),
         }
     })?;
-    let (rows, reference_steps_per_ray) =
-        measure_index(&atm.refractive, case.observer_height_m, config, progress).map_err(
-            |source| AccuracyError::Tracer {
-                name: case.name.clone(),
-                source,
-            },
-        )?;
+    let measured = measure_index(&atm.refractive, case.observer_height_m, config, progress)
+        .map_err(|source| AccuracyError::Tracer {
+            name: case.name.clone(),
+            source,
+        })?;
     Ok(CaseResult {
         name: case.name.clone(),
         kind: case.kind,
         description: atm.description.clone(),
         observer_height_m: case.observer_height_m,
-        reference_steps_per_ray,
-        rows,
+        reference_steps_per_ray: measured.reference_steps_per_ray,
+        reference_images: measured.reference_images,
+        rows: measured.rows,
     })
 }
 
@@ -467,110 +515,159 @@ fn fmt_err(v: Option<f64>) -> String {
     }
 }
 
-fn fmt_tol(t: f64) -> String {
+/// A tolerance for a table: plain from 0.1 to 100, else scientific, to three significant digits
+/// with trailing zeros dropped (1e-6 rather than 1.0000000000000002e-6).
+pub(super) fn fmt_tol(t: f64) -> String {
     if (0.1..=100.0).contains(&t) {
-        format!("{t}")
+        let s = format!("{t:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
-        format!("{t:e}")
+        let s = format!("{t:.2e}");
+        match s.split_once('e') {
+            Some((m, e)) => format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.')),
+            None => s,
+        }
     }
 }
 
-/// `BENCHMARKS.md`: a header (machine, settings, command) and a table per atmosphere.
-/// `plot_rel` is the plot's path relative to the file.
-pub fn benchmarks_markdown(
-    results: &[CaseResult],
-    config: &AccuracyConfig,
-    command: &str,
-    plot_rel: &str,
-) -> String {
-    use std::fmt::Write as _;
-    let nproc = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let km = |d: f64| format!("{}", d / 1000.0);
+fn km(d: f64) -> String {
+    format!("{}", d / 1000.0)
+}
+
+/// The settings of the ray study, as bullets.
+fn rays_settings(config: &AccuracyConfig) -> String {
     let last = config.distances_m.len() - 1;
-    let mut s = String::new();
-    let _ = writeln!(s, "# Accuracy against time\n");
-    let _ = writeln!(
-        s,
-        "Generated by `{command}` — every number below is measured by that command; do not edit \
-         by hand, re-run it.\n"
-    );
-    let _ = writeln!(
-        s,
-        "* Machine: {nproc} logical CPU(s) available (`nproc`); timings are single-threaded, the \
-         median of {} repetitions of the whole fan, release build.",
-        config.repetitions
-    );
-    let _ = writeln!(
-        s,
-        "* Fan: {} rays, elevations {}°…{}°, observer 20 m (paper atmospheres and real \
-         soundings, default smoothing) or 10 m (stress soundings, `smooth_m = 0`).",
-        config.rays, config.elevation_deg.0, config.elevation_deg.1
-    );
-    let _ = writeln!(
-        s,
-        "* Error: |Δh| at ground distances {} km against a reference run of the same tracer at \
-         tolerance {:e} m (max {} steps per ray): a self-reference, showing how the error falls \
-         with the tolerance (the tests check the tracer against an independent reference). Rays \
-         not reaching a distance in both runs are skipped there. The **max** leaves out rays near \
-         a fold, |∂h/∂α| > {} × D on the reference fan (central differences), counted in the \
-         *near-fold* column (at {} km); **p95** is over all compared rays.",
-        config
+    let heights: Vec<String> = config
+        .target_heights_m
+        .iter()
+        .map(|h| format!("{h} m"))
+        .collect();
+    format!(
+        "* Timings are single-threaded, the median of {reps} repetitions of the whole fan.\n\
+         * Fan: {rays} rays, elevations {e0}°…{e1}°, observer 20 m (paper atmospheres and real \
+         soundings, default smoothing) or 10 m (stress soundings, `smooth_m = 0`).\n\
+         * Height error: |Δh| at ground distances {dists} km against a reference run of the same \
+         tracer at tolerance {rt:e} m (max {rs} steps per ray): a self-reference, showing how the \
+         error falls with the tolerance (the tests check the tracer against an independent \
+         reference). Rays not reaching a distance in both runs are skipped there. The **max** \
+         leaves out rays near a fold, |∂h/∂α| > {ff} × D on the reference fan (central \
+         differences), counted in the *near-fold* column (at {dl} km); **p95** is over all \
+         compared rays.\n\
+         * Image boundaries (second table of each atmosphere): the images of a target 0…{hs} tall \
+         at each of those distances, found on the same fan by the library's image finder \
+         (`analysis::find_images`, as `ghostship trace` reports them: folds and band edges \
+         refined on rays re-traced at the *re-trace tolerance* shown), against the images the \
+         reference run's finder gives (re-trace tolerance {rr:e} m). Images are matched by their \
+         order per target; **max |Δ|** is the largest shift of a lower or upper edge's apparent \
+         elevation, in arcseconds, over targets where both runs find the same number of images; \
+         targets where the counts differ are not compared but counted. The finder bisects edges \
+         to a fixed resolution in elevation, so 0 means both searches ended in the same bracket. \
+         *Image search* is the \
+         wall-clock time of that search (all threads).\n\
+         * Tolerance: the tracer's `tolerance_m`, an error budget on the height at the targets \
+         spread over max(30 km, farthest target) of path (see `src/tracer/ray.rs`).\n",
+        reps = config.repetitions,
+        rays = config.rays,
+        e0 = config.elevation_deg.0,
+        e1 = config.elevation_deg.1,
+        dists = config
             .distances_m
             .iter()
             .map(|d| km(*d))
             .collect::<Vec<_>>()
             .join(", "),
-        config.reference_tolerance_m,
-        config.reference_max_steps,
-        config.fold_factor,
-        km(config.distances_m[last]),
+        rt = config.reference_tolerance_m,
+        rs = config.reference_max_steps,
+        ff = config.fold_factor,
+        dl = km(config.distances_m[last]),
+        hs = heights.join(" / "),
+        rr = FoldTest::default().retrace_tolerance_m(config.reference_tolerance_m),
+    )
+}
+
+/// The height-error table of one atmosphere.
+fn height_table(r: &CaseResult, config: &AccuracyConfig) -> String {
+    use std::fmt::Write as _;
+    let last = config.distances_m.len() - 1;
+    let mut head = String::from("| tolerance (m) |");
+    let mut rule = String::from("|---:|");
+    for d in &config.distances_m {
+        let _ = write!(head, " max err {} km (m) |", km(*d));
+        rule.push_str("---:|");
+    }
+    let _ = write!(
+        head,
+        " p95 {} km (m) | near-fold / compared | µs/ray | steps/ray | rays/s | steps/s |",
+        km(config.distances_m[last])
     );
-    let _ = writeln!(
-        s,
-        "* Tolerance: the tracer's `tolerance_m`, an error budget on the height at the targets \
-         spread over max(30 km, farthest target) of path (see `src/tracer/ray.rs`).\n"
+    rule.push_str("---:|---:|---:|---:|---:|---:|");
+    let mut s = format!("{head}\n{rule}\n");
+    for row in &r.rows {
+        let mut line = format!("| {} |", fmt_tol(row.tolerance_m));
+        for e in &row.errors {
+            let _ = write!(line, " {} |", fmt_err(e.max_m));
+        }
+        let e = &row.errors[last];
+        let _ = writeln!(
+            line,
+            " {} | {} / {} | {:.1} | {:.1} | {:.0} | {:.3e} |",
+            fmt_err(e.p95_m),
+            e.near_fold,
+            e.compared,
+            row.us_per_ray,
+            row.steps_per_ray,
+            row.rays_per_s(),
+            row.steps_per_s()
+        );
+        s.push_str(&line);
+    }
+    s
+}
+
+/// The image-boundary table of one atmosphere.
+fn boundary_table(r: &CaseResult) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from(
+        "| tolerance (m) | re-trace tolerance (m) | images / reference | targets with another \
+         count | max \\|Δ\\| boundary (″) | image search (ms) |\n|---:|---:|---:|---:|---:|---:|\n",
     );
-    let _ = writeln!(s, "![time against error]({plot_rel})\n");
-    for r in results {
-        let _ = writeln!(s, "## {} ({})\n", r.name, r.kind);
+    for row in &r.rows {
+        let b = &row.boundaries;
         let _ = writeln!(
             s,
-            "{}; observer {} m; reference {:.0} steps/ray.\n",
-            r.description, r.observer_height_m, r.reference_steps_per_ray
+            "| {} | {} | {} / {} | {} / {} | {} | {:.1} |",
+            fmt_tol(row.tolerance_m),
+            fmt_tol(FoldTest::default().retrace_tolerance_m(row.tolerance_m)),
+            b.images,
+            b.reference_images,
+            b.count_mismatches,
+            b.targets,
+            b.max_arcsec.map_or("–".into(), |v| format!("{v:.2e}")),
+            row.images_ms
         );
-        let mut head = String::from("| tolerance (m) |");
-        let mut rule = String::from("|---:|");
-        for d in &config.distances_m {
-            let _ = write!(head, " max err {} km (m) |", km(*d));
-            rule.push_str("---:|");
-        }
-        let _ = write!(
-            head,
-            " p95 {} km (m) | near-fold / compared | µs/ray | steps/ray | rays/s | steps/s |",
-            km(config.distances_m[last])
+    }
+    s
+}
+
+/// The ray study's section of `BENCHMARKS.md` (a `##` heading, the settings, the plot, and per
+/// atmosphere a `###` heading with its height-error and image-boundary tables). `plot_rel` is
+/// the plot's path relative to the file.
+pub fn rays_markdown(results: &[CaseResult], config: &AccuracyConfig, plot_rel: &str) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("## Rays: height and image-boundary error against time per ray\n\n");
+    s.push_str(&rays_settings(config));
+    let _ = writeln!(s, "\n![time per ray against height error]({plot_rel})\n");
+    for r in results {
+        let _ = writeln!(s, "### {} ({})\n", r.name, r.kind);
+        let _ = writeln!(
+            s,
+            "{}; observer {} m; reference {:.0} steps/ray, {} images.\n",
+            r.description, r.observer_height_m, r.reference_steps_per_ray, r.reference_images
         );
-        rule.push_str("---:|---:|---:|---:|---:|---:|");
-        let _ = writeln!(s, "{head}\n{rule}");
-        for row in &r.rows {
-            let mut line = format!("| {} |", fmt_tol(row.tolerance_m));
-            for e in &row.errors {
-                let _ = write!(line, " {} |", fmt_err(e.max_m));
-            }
-            let e = &row.errors[last];
-            let _ = write!(
-                line,
-                " {} | {} / {} | {:.1} | {:.1} | {:.0} | {:.3e} |",
-                fmt_err(e.p95_m),
-                e.near_fold,
-                e.compared,
-                row.us_per_ray,
-                row.steps_per_ray,
-                row.rays_per_s(),
-                row.steps_per_s()
-            );
-            let _ = writeln!(s, "{line}");
-        }
-        let _ = writeln!(s);
+        s.push_str(&height_table(r, config));
+        s.push('\n');
+        s.push_str(&boundary_table(r));
+        s.push('\n');
     }
     s
 }
@@ -726,11 +823,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn percentile_and_median() {
-        let mut v: Vec<f64> = (1..=100).map(f64::from).collect();
-        assert_eq!(percentile_95(&mut v), Some(95.0));
-        assert_eq!(percentile_95(&mut []), None);
-        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+    fn tolerances_print_short() {
+        assert_eq!(fmt_tol(10.0), "10");
+        assert_eq!(fmt_tol(0.1), "0.1");
+        assert_eq!(fmt_tol(1e-2), "1e-2");
+        assert_eq!(fmt_tol(1e-4 * 0.01), "1e-6");
+        assert_eq!(fmt_tol(2.5e-5), "2.5e-5");
     }
 
     #[test]

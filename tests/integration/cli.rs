@@ -811,8 +811,122 @@ fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
     assert!((p - 1008.40).abs() < 1e-6, "{p}");
 }
 
+/// The Markdown tables in `text`: each a list of rows (header and rule left out), each row its
+/// cells, trimmed.
+fn markdown_tables(text: &str) -> Vec<Vec<Vec<String>>> {
+    let mut tables = Vec::new();
+    let mut current: Vec<&str> = Vec::new();
+    for line in text.lines().chain([""]) {
+        if line.starts_with('|') {
+            current.push(line);
+        } else if !current.is_empty() {
+            let rows = current
+                .iter()
+                .skip(2)
+                .map(|l| {
+                    // Cells split on `|` not escaped as `\|`.
+                    let l = l.replace("\\|", "¦");
+                    let cells: Vec<String> = l.split('|').map(|c| c.trim().to_string()).collect();
+                    cells[1..cells.len() - 1].to_vec()
+                })
+                .collect();
+            tables.push(rows);
+            current.clear();
+        }
+    }
+    tables
+}
+
+/// The text of the `## {title}` section of `md`, up to the next `## ` heading.
+fn md_section<'a>(md: &'a str, title: &str) -> &'a str {
+    let start = md
+        .find(&format!("\n## {title}"))
+        .unwrap_or_else(|| panic!("no section {title}:\n{md}"));
+    let rest = &md[start + 1..];
+    match rest[3..].find("\n## ") {
+        Some(end) => &rest[..end + 3],
+        None => rest,
+    }
+}
+
+fn first_cells(rows: &[Vec<String>]) -> Vec<&str> {
+    rows.iter().map(|r| r[0].as_str()).collect()
+}
+
+/// The quick run's rays section: one subsection per atmosphere (4 paper, 2 soundings, 6 stress),
+/// each with a height-error table and an image-boundary table, a row per tolerance.
+fn check_rays_section(md: &str) {
+    let rays = md_section(md, "Rays:");
+    let cases: Vec<&str> = rays.split("\n### ").skip(1).collect();
+    assert_eq!(cases.len(), 12, "{rays}");
+    for case in cases {
+        let tables = markdown_tables(case);
+        assert_eq!(tables.len(), 2, "{case}");
+        // tolerance, 4 distances, p95, near-fold/compared, µs, steps, rays/s, steps/s.
+        assert!(tables[0].iter().all(|r| r.len() == 11), "{case}");
+        // tolerance, re-trace tolerance, images/reference, mismatches, max |Δ|, search ms.
+        assert!(tables[1].iter().all(|r| r.len() == 6), "{case}");
+        for t in &tables {
+            assert_eq!(first_cells(t), ["1", "1e-2", "1e-4"], "{case}");
+        }
+        for row in &tables[1] {
+            assert!(row[2].contains(" / ") && row[3].ends_with(" / 4"), "{case}");
+        }
+    }
+}
+
+/// The quick run's frame-time section: every paper scene at 80×40 and 192×108; the exact path
+/// at 192×108 on a proxy; the straight-ray scene without curved paths; the fan tracer's steps
+/// reproduced for every curved frame.
+fn check_frame_times(md: &str) {
+    let frames = md_section(md, "Frames: time per frame");
+    let tables = markdown_tables(frames);
+    assert_eq!(tables.len(), 2, "{frames}");
+    let times = &tables[0];
+    assert_eq!(times.len(), 18, "{frames}");
+    for row in times {
+        assert_eq!(row.len(), 6, "{row:?}");
+        let straight_scene = row[0] == "fig01_horizon_straight";
+        assert_eq!(row[3] == "–", straight_scene, "{row:?}");
+        if row[1] == "192×108" && !straight_scene {
+            assert!(row[4].ends_with("(proxy 64×36)"), "{row:?}");
+        }
+    }
+    let fan = &tables[1];
+    assert_eq!(fan.len(), 16, "{frames}");
+    for row in fan {
+        assert_eq!(row.len(), 7, "{row:?}");
+        let steps: f64 = row[5].parse().unwrap_or_else(|_| panic!("{row:?}"));
+        assert!(steps > 1.0, "{row:?}");
+    }
+}
+
+/// The quick run's image-error section: a table per curved paper scene, a row per tolerance with
+/// the fan and exact paths' times, rays and pixel differences.
+fn check_image_errors(md: &str) {
+    let sweep = md_section(md, "Frames: image error against tolerance");
+    assert!(sweep.contains("docs/frame_time_vs_error.png"), "{sweep}");
+    let scenes: Vec<&str> = sweep.split("\n### ").skip(1).collect();
+    assert_eq!(scenes.len(), 8, "{sweep}");
+    for scene in scenes {
+        assert!(
+            scene.starts_with("fig") && scene.contains("40×20"),
+            "{scene}"
+        );
+        let tables = markdown_tables(scene);
+        assert_eq!(tables.len(), 1, "{scene}");
+        assert_eq!(first_cells(&tables[0]), ["1", "1e-2", "1e-4"], "{scene}");
+        for row in &tables[0] {
+            assert_eq!(row.len(), 9, "{row:?}");
+            // "changed" cells: a count and its fraction of the 800 pixels.
+            let count: usize = row[3].split(' ').next().unwrap().parse().unwrap();
+            assert!(count <= 800, "{row:?}");
+        }
+    }
+}
+
 #[test]
-fn bench_accuracy_quick_writes_the_table_and_the_plot() {
+fn bench_accuracy_quick_writes_the_tables_and_the_plots() {
     let out = tempfile::tempdir().unwrap();
     let data = crate::support::data::data_dir();
     let r = ok(&[
@@ -825,28 +939,14 @@ fn bench_accuracy_quick_writes_the_table_and_the_plot() {
         data.to_str().unwrap(),
     ]);
     assert!(r.stderr.contains("BENCHMARKS.md"), "{}", r.stderr);
-    let png = out.path().join("docs/time_vs_error.png");
-    assert_eq!(png_size(&png), (1400, 900));
+    for plot in ["docs/time_vs_error.png", "docs/frame_time_vs_error.png"] {
+        assert_eq!(png_size(&out.path().join(plot)), (1400, 900), "{plot}");
+    }
     let md = std::fs::read_to_string(out.path().join("BENCHMARKS.md")).unwrap();
     assert!(md.contains("ghostship bench accuracy --quick"), "{md}");
-    // One table per atmosphere (4 paper, 2 soundings, 6 stress), each with a row per tolerance.
-    let tables: Vec<&str> = md.split("\n## ").skip(1).collect();
-    assert_eq!(tables.len(), 12, "{md}");
-    for table in tables {
-        let rows: Vec<&str> = table
-            .lines()
-            .filter(|l| l.starts_with("| ") && !l.starts_with("| tolerance"))
-            .collect();
-        let tolerances: Vec<&str> = rows
-            .iter()
-            .map(|l| l.split('|').nth(1).unwrap().trim())
-            .collect();
-        assert_eq!(tolerances, ["1", "1e-2", "1e-4"], "{table}");
-        for row in rows {
-            // tolerance, 4 distances, p95, near-fold/compared, µs, steps, rays/s, steps/s.
-            assert_eq!(row.split('|').count(), 13, "{row}");
-        }
-    }
+    check_frame_times(&md);
+    check_image_errors(&md);
+    check_rays_section(&md);
     // --quiet prints nothing on success.
     let q = ok(&[
         "-q",
