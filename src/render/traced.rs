@@ -165,6 +165,35 @@ impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
     }
 }
 
+impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
+    /// Trace one ray exactly as [`RayTracer::trace`] does, into `record` (its step counts, end
+    /// and termination are the renderer's).
+    pub fn trace_record_into(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        record: &mut RayRecord,
+    ) -> Result<(), TracerError> {
+        let mut watch = self.fates.watch(
+            self.tracer.field(),
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        );
+        self.tracer.trace_into(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            &mut watch,
+            record,
+            None,
+        )
+    }
+}
+
 impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
     fn trace(
         &self,
@@ -173,20 +202,12 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FanRay {
-        let mut watch = self.fates.watch(
-            self.tracer.field(),
+        let run = |record: &mut RayRecord| match self.trace_record_into(
             camera_height_m,
             elevation_rad,
             distances_m,
             need_sky_direction,
-        );
-        let mut run = |record: &mut RayRecord| match self.tracer.trace_into(
-            camera_height_m,
-            elevation_rad,
-            distances_m,
-            &mut watch,
             record,
-            None,
         ) {
             Ok(()) => fan_ray(record, elevation_rad, distances_m.len()),
             Err(_) => lost(elevation_rad, distances_m.len()),

@@ -465,6 +465,12 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         rec.end_observer_elevation_rad = elevation0;
         return;
     }
+    // An observer on a break (e.g. at the top of an inversion layer given as its level): the
+    // first stage comes from the side the ray heads to, as after a landing, or a descending ray
+    // would take its first stage from the wrong side of the jump and never pass the error test.
+    if on_break(sys.breaks(), obs.height_m) {
+        k1 = derivative_past_break(&mut f, &y, &k1, obs.elevation_rad);
+    }
     let scale = sys.invariant_scale(&y);
     let invariant0 = obs.invariant;
     let mut cur = point(&obs, 0.0);
@@ -764,6 +770,17 @@ fn derivative_past_break<const N: usize>(
         ahead[i] += ahead_m * slope[i];
     }
     f(&ahead)
+}
+
+/// Whether `height_m` is on one of the (ascending) `breaks` within [`LANDING_TOLERANCE_M`].
+fn on_break(breaks: &[f64], height_m: f64) -> bool {
+    let i = breaks.partition_point(|&b| b < height_m);
+    let near = |j: usize| {
+        breaks
+            .get(j)
+            .is_some_and(|&b| (b - height_m).abs() <= LANDING_TOLERANCE_M)
+    };
+    near(i) || (i > 0 && near(i - 1))
 }
 
 /// Shortest step (m of path) retaken to end on a break; a crossing closer to the start than this

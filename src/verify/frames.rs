@@ -29,13 +29,13 @@ use std::time::Instant;
 use crate::atmosphere::{AtmosphereError, LoadedAtmosphere, load_scene_atmosphere};
 use crate::output::png::{DEFAULT_EXPOSURE, film_to_srgb8};
 use crate::refractivity::RefractiveAtmosphere;
-use crate::render::traced::{NO_SUN_TRAP_DISTANCE_M, cards_top_m};
+use crate::render::traced::cards_top_m;
 use crate::render::{
     CurvedRays, FanEnd, FanRay, Film, PrepareError, RayTracer, RenderError, RenderOptions,
     TRACER_TOLERANCE_RANGE_M, prepare_tracer, render_scene, render_tracer_config,
 };
 use crate::scene::{Scene, SceneError};
-use crate::tracer::{NoHook, RayRecord, StopAboveClimbing, Tracer, TracerConfig};
+use crate::tracer::{RayRecord, TracerConfig};
 
 use super::stats::median;
 
@@ -628,36 +628,15 @@ fn same_ray(record: &RayRecord, ray: &FanRay) -> bool {
     heights && end
 }
 
-/// Mean steps per ray of the recorded `calls`, re-traced one by one with the planar tracer as
-/// [`CurvedRays`] traces them (see `render::traced`: the sky-direction rays with its tracer, the
-/// others with the trap distance capped at [`NO_SUN_TRAP_DISTANCE_M`] and stopped above
-/// [`CurvedRays::stop_height_m`] when climbing). `None` if any re-traced ray differs from the
-/// renderer's (the tracer does something this does not reproduce) or there are no calls.
+/// Mean steps per ray of the recorded `calls`, re-traced one by one with
+/// [`CurvedRays::trace_record_into`] (the renderer's own path, fate rule included). `None` if any
+/// re-traced ray differs from the renderer's or there are no calls.
 fn fan_steps_per_ray(rays: &CurvedRays<'_, RefractiveAtmosphere>, calls: &[Call]) -> Option<f64> {
-    let full = rays.tracer();
-    let capped_config = TracerConfig {
-        max_distance_m: Some(
-            full.config()
-                .max_distance_m
-                .unwrap_or(f64::INFINITY)
-                .min(NO_SUN_TRAP_DISTANCE_M),
-        ),
-        ..full.config().clone()
-    };
-    let capped = Tracer::new(full.field(), capped_config).ok()?;
     let mut record = RayRecord::default();
     let mut steps = 0u64;
     for c in calls {
         let (h, a, d) = (c.camera_height_m, c.elevation_rad, &c.distances_m[..]);
-        let result = if c.need_sky_direction {
-            full.trace_into(h, a, d, &mut NoHook, &mut record, None)
-        } else {
-            let mut stop = StopAboveClimbing {
-                height_m: rays.stop_height_m(),
-            };
-            capped.trace_into(h, a, d, &mut stop, &mut record, None)
-        };
-        match result {
+        match rays.trace_record_into(h, a, d, c.need_sky_direction, &mut record) {
             Ok(()) if same_ray(&record, &c.ray) => steps += u64::from(record.steps()),
             Err(_) if c.ray.end == FanEnd::Lost => {}
             _ => return None,

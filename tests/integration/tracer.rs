@@ -894,3 +894,64 @@ fn records_whether_a_ray_turned() {
     assert_eq!(rec.termination, Some(Termination::Ground), "{rec:?}");
     assert!(rec.turned);
 }
+
+#[test]
+fn an_observer_on_a_break_starts_from_the_side_it_heads_to() {
+    // The Novaya Zemlya layer ends at 100 m, where dn/dh jumps; an observer exactly there used
+    // to take the first stage of a descending ray from the wrong side of the jump, so at 1e-5 m
+    // and below every step of near-level downward rays was rejected until the step budget ran
+    // out (stuck at distance 0). Both paths, every ray, must now finish in a few hundred steps.
+    use ghostship::profile::{AirColumn, SyntheticAtmosphere};
+    use ghostship::refractivity::RefractiveAtmosphere;
+    use std::sync::Arc;
+    let column: Arc<dyn AirColumn> = Arc::new(
+        SyntheticAtmosphere::from_file(&crate::support::data::data_file("novaya_zemlya.toml"))
+            .unwrap(),
+    );
+    let atm = RefractiveAtmosphere::new(column, 550.0).unwrap();
+    assert!(
+        atm.breaks_m().iter().any(|&b| b == 100.0),
+        "{:?}",
+        atm.breaks_m()
+    );
+    let field = Spherical {
+        index: &atm,
+        earth_radius_m: R,
+    };
+    for tolerance_m in [1e-4, 1e-5, 1e-6] {
+        let cfg = TracerConfig {
+            tolerance_m,
+            stop_after_last_target: false,
+            max_steps: 20_000,
+            ..TracerConfig::default()
+        };
+        let tracer = Tracer::new(&atm, cfg.clone()).unwrap();
+        for i in 0..=40 {
+            let alpha = (-0.02 + 0.0005 * i as f64).to_radians();
+            let rec = tracer.trace(100.0, alpha, &[1_000.0]).unwrap();
+            let (sin_a, cos_a) = alpha.sin_cos();
+            let exact = trace_field(
+                &field,
+                Ground::Sphere { radius_m: R },
+                &cfg,
+                DVec3::new(0.0, 0.0, R + 100.0),
+                DVec3::new(cos_a, 0.0, sin_a),
+                &[1_000.0],
+                &mut NoHook,
+                None,
+            )
+            .unwrap();
+            for (path, r) in [("planar", &rec), ("3-D", &exact)] {
+                assert!(
+                    matches!(
+                        r.termination,
+                        Some(Termination::Escaped | Termination::Ground)
+                    ) && r.steps() < 5_000,
+                    "{path}, tolerance {tolerance_m}, α {alpha}: {:?} after {} steps",
+                    r.termination,
+                    r.steps()
+                );
+            }
+        }
+    }
+}
