@@ -4,7 +4,10 @@
 //! reference run, for the `bench` command and the tests.
 //!
 //! * [`stress`] — layered stress soundings as CSV text;
-//! * [`accuracy`] — time against error: the `bench accuracy` study, `BENCHMARKS.md` and its plot.
+//! * [`accuracy`] — time against error: the `bench accuracy` study, `BENCHMARKS.md` and its plot;
+//! * [`stress_report`] — the stress suite's launch set, Bouguer drift bound, error against
+//!   tolerance: the `bench stress` study, `STRESS.md` and its plot.
 
 pub mod accuracy;
 pub mod stress;
+pub mod stress_report;
