@@ -45,7 +45,7 @@ use ghostship::verify::stress_report::{
     bouguer_drift_bound, error_length_m, launch_elevations_rad,
 };
 
-use crate::support::fans::{Refinement, converged_reference, csv_profile, fold_slopes};
+use crate::support::fans::{Refinement, converged_reference, csv_profile, fold_slopes, within};
 use crate::support::reference::{
     BreakSource, FineSteps, RefReach, ReferenceSteps, atmosphere_index,
     reference_heights_with_steps,
@@ -269,7 +269,7 @@ fn record_problems(rec: &RayRecord, config: &TracerConfig, farthest_m: f64) -> V
         );
     }
     let bound = bouguer_drift_bound(config.tolerance_m, error_length_m(config, farthest_m));
-    if !(rec.invariant_drift <= bound) {
+    if !within(rec.invariant_drift, bound) {
         let drift = rec.invariant_drift;
         push(
             Kind::Drift,
@@ -381,7 +381,7 @@ fn check_observer(
                     w.near_fold += 1;
                     continue;
                 }
-                if !(estimate <= 0.1 * tol) {
+                if !within(estimate, 0.1 * tol) {
                     w.unconverged += 1;
                     continue;
                 }
@@ -392,7 +392,7 @@ fn check_observer(
                     w.error_m = err;
                     w.at = (h0, deg, d);
                 }
-                if !(err <= tol) {
+                if !within(err, tol) {
                     let text = format!("{}: |Δh| {err:.3e} m at {d} m", context(tol));
                     problems.push((Kind::Tolerance, text));
                 }
@@ -664,7 +664,7 @@ fn duct_5000_km(elevations_deg: &[f64], tolerances_m: &[f64]) -> Vec<String> {
                     "{context}: reference estimate {estimate:.2e} m"
                 );
                 let err = (h - want).abs();
-                if !(err <= tol) {
+                if !within(err, tol) {
                     problems.push(format!("{context}: |Δh| {err:.3e} m at {d} m"));
                 }
             }
@@ -741,11 +741,11 @@ fn three_d_path(
                         let (Some(want), Some(got)) = (reach.height_m(), rec.heights_m[k]) else {
                             continue;
                         };
-                        if l.slopes[k] > 3.0 * d || !(estimate <= 0.1 * tol) {
+                        if l.slopes[k] > 3.0 * d || !within(estimate, 0.1 * tol) {
                             continue;
                         }
                         let err = (got - want).abs();
-                        if !(err <= tol) {
+                        if !within(err, tol) {
                             problems.push(format!("{context}: |Δh| {err:.3e} m at {d} m"));
                         }
                     }

@@ -175,3 +175,8 @@ fn differences(a: &[RefReach], b: &[RefReach]) -> Vec<f64> {
         })
         .collect()
 }
+
+/// `value ≤ bound`, false for NaN (so `!within(..)` flags a NaN as a violation).
+pub fn within(value: f64, bound: f64) -> bool {
+    value <= bound
+}
