@@ -16,8 +16,8 @@
 //! * if |α| ≤ 30° (the independent reference's range) and it is not near a fold
 //!   (|∂h/∂α| > 3·D), its height at 5/10/20/26 km is within the tolerance of the **independent**
 //!   reference tracer ([`crate::support::reference`]), wherever that reference has converged to
-//!   a tenth of the tolerance (refined per ray, [`converged_reference`]; rays it cannot
-//!   converge are counted and printed, and must be few);
+//!   a tenth of the tolerance (refined per ray, [`converged_reference`]; ray·distances where
+//!   it does not are counted and printed, and may be at most 5 % of those compared);
 //! * per atmosphere, the worst such error does not grow as the tolerance shrinks, beyond
 //!   [`MONOTONE_ALLOWANCE_M`], over the rays whose reference is converged to
 //!   [`REFERENCE_TARGET_M`].
@@ -27,13 +27,12 @@
 
 use std::sync::{Arc, OnceLock};
 
+use glam::DVec3;
 use rayon::prelude::*;
 
+use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::profile::Profile;
 use ghostship::refractivity::RefractiveAtmosphere;
-use glam::DVec3;
-
-use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 use ghostship::tracer::{
@@ -525,6 +524,20 @@ fn print_table(atmospheres: &[Loaded], table: &[Vec<Worst>], tolerances_m: &[f64
     }
 }
 
+/// The suite compared something at every tolerance, and the reference converged for at least
+/// 95 % of what it could compare.
+fn check_coverage(run: &SuiteRun) {
+    for w in run.table.iter().flatten() {
+        assert!(w.compared > 0, "a tolerance compared nothing");
+        assert!(
+            w.unconverged * 20 <= w.compared,
+            "the reference did not converge for {} of {} ray·distances",
+            w.unconverged,
+            w.compared
+        );
+    }
+}
+
 /// Fast mode, computed once for the four tests that check it: all fourteen atmospheres, all five
 /// observers, the fast launch set, all seven tolerances.
 fn fast_suite() -> &'static SuiteRun {
@@ -538,9 +551,7 @@ fn fast_suite() -> &'static SuiteRun {
             &STRESS_TOLERANCES_M,
             LaunchSet::Fast,
         );
-        for w in run.table.iter().flatten() {
-            assert!(w.compared > 0, "a tolerance compared nothing");
-        }
+        check_coverage(&run);
         run
     })
 }
@@ -578,13 +589,22 @@ fn stress_suite_long() {
         &STRESS_TOLERANCES_M,
         LaunchSet::Long,
     );
+    check_coverage(&run);
+    let problems: Vec<String> = run
+        .problems
+        .iter()
+        .map(|(kind, p)| format!("{kind:?}: {p}"))
+        .collect();
     for kind in [Kind::Record, Kind::Drift, Kind::Tolerance, Kind::Monotone] {
         let n = run.problems.iter().filter(|(k, _)| *k == kind).count();
         eprintln!("long mode: {n} {kind:?} problems");
     }
-    for kind in [Kind::Record, Kind::Drift, Kind::Tolerance, Kind::Monotone] {
-        run.assert_none(kind);
-    }
+    assert!(
+        problems.is_empty(),
+        "{} problems:\n{}",
+        problems.len(),
+        problems.join("\n")
+    );
 }
 
 /// Which stress atmosphere.
