@@ -794,17 +794,21 @@ const LINE_COLOURS: [RGBColor; 14] = [
 /// Smallest error drawn (m): a run identical to the reference has error 0.
 const PLOT_FLOOR_M: f64 = 1e-10;
 
-/// The log-log plot of the largest error against the tolerance, one line per atmosphere (solid
-/// for the accuracy study's six, dashed for the other eight), with the line error = tolerance.
-/// PNG bytes, `width × height` pixels.
-pub fn error_vs_tolerance_png(
-    results: &[StressResult],
-    study: &[bool],
-    width: u32,
-    height: u32,
-) -> Result<Vec<u8>, StressError> {
-    crate::output::plot::register_plot_font().map_err(StressError::Plot)?;
-    let font = crate::output::plot::PLOT_FONT;
+/// The chart the lines are drawn on: log tolerance against log error.
+type LogChart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<
+        plotters::coord::combinators::LogCoord<f64>,
+        plotters::coord::combinators::LogCoord<f64>,
+    >,
+>;
+
+/// Each result's (tolerance, largest error) points (errors of 0 drawn at [`PLOT_FLOOR_M`]) and
+/// the axis ranges (x0, x1, y0, y1) around them and the line error = tolerance.
+type PlotPoints = (Vec<Vec<(f64, f64)>>, (f64, f64, f64, f64));
+
+fn plot_points(results: &[StressResult]) -> PlotPoints {
     let points: Vec<Vec<(f64, f64)>> = results
         .iter()
         .map(|r| {
@@ -821,7 +825,70 @@ pub fn error_vs_tolerance_png(
     if !x0.is_finite() {
         (x0, x1, y0, y1) = (1e-5, 10.0, 1e-9, 10.0);
     }
-    let (x0, x1, y0, y1) = (x0 / 2.0, x1 * 2.0, y0 / 3.0, y1 * 3.0);
+    (points, (x0 / 2.0, x1 * 2.0, y0 / 3.0, y1 * 3.0))
+}
+
+/// The line error = tolerance across `x0..x1` and one line per result (solid where `study`).
+fn draw_lines(
+    chart: &mut LogChart<'_, '_>,
+    results: &[StressResult],
+    points: &[Vec<(f64, f64)>],
+    study: &[bool],
+    (x0, x1): (f64, f64),
+) -> Result<(), StressError> {
+    let guide = RGBColor(90, 90, 90);
+    chart
+        .draw_series(DashedLineSeries::new(
+            [(x0, x0), (x1, x1)],
+            10,
+            6,
+            guide.stroke_width(2),
+        ))
+        .map_err(plot_err)?
+        .label("error = tolerance")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], guide.stroke_width(2)));
+    for (i, (r, pts)) in results.iter().zip(points).enumerate() {
+        let colour = LINE_COLOURS[i % LINE_COLOURS.len()];
+        let style = colour.stroke_width(2);
+        let series = if study.get(i).copied().unwrap_or(true) {
+            chart.draw_series(LineSeries::new(pts.clone(), style))
+        } else {
+            chart.draw_series(DashedLineSeries::new(pts.clone(), 8, 5, style))
+        };
+        series
+            .map_err(plot_err)?
+            .label(r.name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(3))
+            });
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// The two lines under the plot: what the error is measured against and what the lines mean.
+const PLOT_NOTE: [&str; 2] = [
+    "Error against the tracer's own run at 1e-7 m (a self-reference; tests/integration/stress.rs \
+     checks the same suite against an independent reference tracer).",
+    "Left out: rays near a fold and where the self-reference is unsettled. Solid: the accuracy \
+     study's six atmospheres; dashed: the other eight.",
+];
+
+/// The log-log plot of the largest error against the tolerance, one line per atmosphere (solid
+/// where `study` says it is one of the accuracy study's six, dashed otherwise), with the line
+/// error = tolerance and a note on what the error is measured against. PNG bytes,
+/// `width × height` pixels.
+pub fn error_vs_tolerance_png(
+    results: &[StressResult],
+    study: &[bool],
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, StressError> {
+    crate::output::plot::register_plot_font().map_err(StressError::Plot)?;
+    let font = crate::output::plot::PLOT_FONT;
+    let (points, (x0, x1, y0, y1)) = plot_points(results);
     let mut buffer = vec![255u8; width as usize * height as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
@@ -847,38 +914,7 @@ pub fn error_vs_tolerance_png(
             .axis_desc_style((font, 18))
             .draw()
             .map_err(plot_err)?;
-        let guide = RGBColor(90, 90, 90);
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(x0, x0), (x1, x1)],
-                10,
-                6,
-                guide.stroke_width(2),
-            ))
-            .map_err(plot_err)?
-            .label("error = tolerance")
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], guide.stroke_width(2))
-            });
-        for (i, (r, pts)) in results.iter().zip(&points).enumerate() {
-            let colour = LINE_COLOURS[i % LINE_COLOURS.len()];
-            let style = colour.stroke_width(2);
-            let solid = study.get(i).copied().unwrap_or(true);
-            let series = if solid {
-                chart.draw_series(LineSeries::new(pts.clone(), style))
-            } else {
-                chart.draw_series(DashedLineSeries::new(pts.clone(), 8, 5, style))
-            };
-            series
-                .map_err(plot_err)?
-                .label(r.name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(3))
-                });
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, colour.filled())))
-                .map_err(plot_err)?;
-        }
+        draw_lines(&mut chart, results, &points, study, (x0, x1))?;
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
@@ -887,19 +923,10 @@ pub fn error_vs_tolerance_png(
             .position(SeriesLabelPosition::UpperLeft)
             .draw()
             .map_err(plot_err)?;
-        let note = [
-            "Error against the tracer's own run at 1e-7 m (a self-reference; tests/integration/stress.rs checks \
-             the same suite against an independent reference tracer).",
-            "Left out: rays near a fold and where the self-reference is unsettled. Solid: the accuracy \
-             study's six atmospheres; dashed: the other eight.",
-        ];
-        for (i, line) in note.iter().enumerate() {
+        for (i, line) in PLOT_NOTE.iter().enumerate() {
+            let at = (20, 6 + 22 * i as i32);
             note_area
-                .draw(&Text::new(
-                    *line,
-                    (20, 6 + 22 * i as i32),
-                    (font, 15).into_font(),
-                ))
+                .draw(&Text::new(*line, at, (font, 15).into_font()))
                 .map_err(plot_err)?;
         }
         root.present().map_err(plot_err)?;
@@ -963,6 +990,53 @@ mod tests {
         let mut c = StressConfig::fast();
         c.tolerances_m.push(0.0);
         assert!(c.check().is_err());
+    }
+
+    /// A made-up result: errors of 0.1 × the tolerance, one over it at 1 m.
+    fn result(name: &str) -> StressResult {
+        let rows = STRESS_TOLERANCES_M
+            .iter()
+            .map(|&t| StressRow {
+                tolerance_m: t,
+                rays: 10,
+                terminations: BTreeMap::from([("ground", 4), ("targets_done", 6)]),
+                max_error_m: Some(if t == 1.0 { 3.0 } else { 0.1 * t }),
+                worst: Some(RayAt {
+                    observer_m: 2.0,
+                    elevation_deg: 0.1,
+                    distance_m: 26_000.0,
+                }),
+                compared: 30,
+                max_drift: 1e-12,
+                ..StressRow::default()
+            })
+            .collect();
+        StressResult {
+            name: name.into(),
+            description: "a test".into(),
+            launches: 10,
+            rows,
+        }
+    }
+
+    #[test]
+    fn markdown_and_plot_show_every_atmosphere_and_tolerance() {
+        let results = [result("one"), result("two")];
+        let config = StressConfig::fast();
+        let md = stress_markdown(&results, &config, "ghostship bench stress", "docs/x.png");
+        assert!(md.contains("![error against tolerance](docs/x.png)"));
+        assert!(md.contains("| one | 1.0e0 | **3.0e0** |"), "{md}");
+        assert!(
+            md.contains("| *worst error / tolerance* | *0.10* | *3.00* |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| one | a test | 70 | ground 28, targets_done 42 |"),
+            "{md}"
+        );
+        let png = error_vs_tolerance_png(&results, &[true, false], 700, 450).unwrap();
+        let img = image::load_from_memory(&png).unwrap();
+        assert_eq!((img.width(), img.height()), (700, 450));
     }
 
     #[test]

@@ -626,7 +626,6 @@ fn duct_5000_km(elevations_deg: &[f64], tolerances_m: &[f64]) -> Vec<String> {
     let loaded = by_name(&atmospheres, "long_duct");
     let index = atmosphere_index(&loaded.atm, BreakSource::Profile(&loaded.profile));
     let distances: Vec<f64> = (1..=10).map(|k| k as f64 * 500_000.0).collect();
-    let farthest = distances[distances.len() - 1];
     let h0 = LONG_DUCT_OBSERVER_M;
     let mut problems = Vec::new();
     for &deg in elevations_deg {
@@ -637,60 +636,110 @@ fn duct_5000_km(elevations_deg: &[f64], tolerances_m: &[f64]) -> Vec<String> {
             max_halvings: 2,
         };
         let reference = converged_reference(&index, R, TOP_M, h0, a, &distances, refinement);
+        // |∂h/∂α| from the reference itself (the tracer at 1e-6 m would take ~10⁷ steps).
         let run =
             |a| reference_heights_with_steps(&index, R, TOP_M, h0, a, &distances, refinement.steps);
         let (up, down) = (run(a + 1e-6), run(a - 1e-6));
+        let slopes: Vec<f64> = up
+            .iter()
+            .zip(&down)
+            .map(|(u, v)| match (u.height_m(), v.height_m()) {
+                (Some(u), Some(v)) => ((u - v) / 2e-6).abs(),
+                _ => f64::INFINITY,
+            })
+            .collect();
         for &tol in tolerances_m {
-            let cfg = TracerConfig {
-                max_steps: 10_000_000,
-                ..config(tol)
-            };
-            let rec = Tracer::new(&loaded.atm, cfg.clone())
-                .unwrap()
-                .trace(h0, a, &distances)
-                .unwrap();
             let context = format!("5000 km duct α {deg}° tol {tol:e} m");
-            eprintln!(
-                "{context}: {:?}, {} steps, drift {:.2e}, h(5000 km) {:?} (reference {:?})",
-                rec.termination,
-                rec.steps(),
-                rec.invariant_drift,
-                rec.heights_m[9],
-                reference[9]
+            let rec = duct_ray(loaded, a, &distances, tol, &context, &mut problems);
+            let (found, compared) = height_problems(
+                &context,
+                &rec.heights_m,
+                &reference,
+                &slopes,
+                &distances,
+                tol,
             );
-            for (_, p) in record_problems(&rec, &cfg, farthest) {
-                problems.push(format!("{context}: {p}"));
-            }
-            if rec.termination != Some(Termination::TargetsDone) {
-                problems.push(format!("{context}: ended {:?}", rec.termination));
-            }
-            for (k, &d) in distances.iter().enumerate() {
-                let Some(h) = rec.heights_m[k] else {
-                    problems.push(format!("{context}: did not reach {d} m"));
-                    continue;
-                };
-                if !(30.0..=200.0).contains(&h) {
-                    problems.push(format!("{context}: left the duct, {h} m at {d} m"));
-                }
-                let (reach, estimate) = reference[k];
-                let want = reach.height_m().expect("the reference stays in the duct");
-                let slope = match (up[k].height_m(), down[k].height_m()) {
-                    (Some(u), Some(v)) => ((u - v) / 2e-6).abs(),
-                    _ => f64::INFINITY,
-                };
-                assert!(slope < 3.0 * d, "{context}: near a fold at {d} m");
-                assert!(
-                    estimate <= 0.1 * tol,
-                    "{context}: reference estimate {estimate:.2e} m"
-                );
-                let err = (h - want).abs();
-                if !within(err, tol) {
-                    problems.push(format!("{context}: |Δh| {err:.3e} m at {d} m"));
-                }
-            }
+            problems.extend(found);
+            assert_eq!(
+                compared,
+                distances.len(),
+                "{context}: the reference must judge every distance"
+            );
         }
     }
     problems
+}
+
+/// The long duct's ray at `elevation_rad` traced at `tolerance_m` to `distances_m`; problems
+/// with its record, its end and its staying in the duct are pushed to `problems`.
+fn duct_ray(
+    loaded: &Loaded,
+    elevation_rad: f64,
+    distances_m: &[f64],
+    tolerance_m: f64,
+    context: &str,
+    problems: &mut Vec<String>,
+) -> RayRecord {
+    let cfg = TracerConfig {
+        max_steps: 10_000_000,
+        ..config(tolerance_m)
+    };
+    let rec = Tracer::new(&loaded.atm, cfg.clone())
+        .unwrap()
+        .trace(LONG_DUCT_OBSERVER_M, elevation_rad, distances_m)
+        .unwrap();
+    eprintln!(
+        "{context}: {:?}, {} steps, drift {:.2e}, h(5000 km) {:?}",
+        rec.termination,
+        rec.steps(),
+        rec.invariant_drift,
+        rec.heights_m.last(),
+    );
+    let farthest = distances_m[distances_m.len() - 1];
+    for (_, p) in record_problems(&rec, &cfg, farthest) {
+        problems.push(format!("{context}: {p}"));
+    }
+    if rec.termination != Some(Termination::TargetsDone) {
+        problems.push(format!("{context}: ended {:?}", rec.termination));
+    }
+    for (h, d) in rec.heights_m.iter().zip(distances_m) {
+        match h {
+            Some(h) if (30.0..=200.0).contains(h) => {}
+            Some(h) => problems.push(format!("{context}: left the duct, {h} m at {d} m")),
+            None => problems.push(format!("{context}: did not reach {d} m")),
+        }
+    }
+    rec
+}
+
+/// |Δh| of `heights_m` against `reference` at `distances_m`, where the ray is not near a fold
+/// (`slopes` ≤ 3·D) and the reference has converged to a tenth of `tolerance_m`: the distances
+/// where it exceeds the tolerance, and how many were compared.
+fn height_problems(
+    context: &str,
+    heights_m: &[Option<f64>],
+    reference: &[(RefReach, f64)],
+    slopes: &[f64],
+    distances_m: &[f64],
+    tolerance_m: f64,
+) -> (Vec<String>, usize) {
+    let mut problems = Vec::new();
+    let mut compared = 0;
+    for (k, &d) in distances_m.iter().enumerate() {
+        let (reach, estimate) = reference[k];
+        let (Some(want), Some(got)) = (reach.height_m(), heights_m[k]) else {
+            continue;
+        };
+        if slopes[k] > 3.0 * d || !within(estimate, 0.1 * tolerance_m) {
+            continue;
+        }
+        compared += 1;
+        let err = (got - want).abs();
+        if !within(err, tolerance_m) {
+            problems.push(format!("{context}: |Δh| {err:.3e} m at {d} m"));
+        }
+    }
+    (problems, compared)
 }
 
 #[test]
@@ -718,62 +767,60 @@ fn three_d_path(
     let dir = tempfile::tempdir().unwrap();
     let atmospheres = load_suite(dir.path());
     let farthest = STRESS_DISTANCES_M[STRESS_DISTANCES_M.len() - 1];
-    let up = DVec3::new(0.3, -0.5, 0.8).normalize();
-    let east = up.cross(DVec3::Z).normalize();
+    let elevations: Vec<f64> = elevations_deg.iter().map(|d| d.to_radians()).collect();
     let mut problems = Vec::new();
     for name in names {
         let loaded = by_name(&atmospheres, name);
-        let field = Spherical {
-            index: &loaded.atm,
-            earth_radius_m: R,
-        };
         for &h0 in observers_m {
-            let elevations: Vec<f64> = elevations_deg.iter().map(|d| d.to_radians()).collect();
             let launches = launches_at(loaded, h0, &elevations);
             for &tol in tolerances_m {
                 let cfg = config(tol);
                 for l in &launches {
                     let a = l.elevation_rad;
-                    let dir = east * a.cos() + up * a.sin();
-                    let rec = trace_field(
-                        &field,
-                        Ground::Sphere { radius_m: R },
-                        &cfg,
-                        up * (R + h0),
-                        dir,
-                        &STRESS_DISTANCES_M,
-                        &mut NoHook,
-                        None,
-                    )
-                    .unwrap();
-                    let context = format!(
-                        "3-D {name} h0 {h0} m α {:.6}° tol {tol:e} m",
-                        a.to_degrees()
-                    );
+                    let rec = trace_3d(&loaded.atm, h0, a, &cfg);
+                    let deg = a.to_degrees();
+                    let context = format!("3-D {name} h0 {h0} m α {deg:.6}° tol {tol:e} m");
                     for (_, p) in record_problems(&rec, &cfg, farthest) {
                         problems.push(format!("{context}: {p}"));
                     }
-                    let Some(reference) = &l.reference else {
-                        continue;
-                    };
-                    for (k, &d) in STRESS_DISTANCES_M.iter().enumerate() {
-                        let (reach, estimate) = reference[k];
-                        let (Some(want), Some(got)) = (reach.height_m(), rec.heights_m[k]) else {
-                            continue;
-                        };
-                        if l.slopes[k] > 3.0 * d || !within(estimate, 0.1 * tol) {
-                            continue;
-                        }
-                        let err = (got - want).abs();
-                        if !within(err, tol) {
-                            problems.push(format!("{context}: |Δh| {err:.3e} m at {d} m"));
-                        }
+                    if let Some(reference) = &l.reference {
+                        let (h, d) = (&rec.heights_m, &STRESS_DISTANCES_M);
+                        problems
+                            .extend(height_problems(&context, h, reference, &l.slopes, d, tol).0);
                     }
                 }
             }
         }
     }
     problems
+}
+
+/// One ray through `atm` seen as a 3-D field ([`Spherical`]), from `observer_m` above an
+/// arbitrary point of the sphere, in an arbitrary azimuth, at `elevation_rad`.
+fn trace_3d(
+    atm: &RefractiveAtmosphere,
+    observer_m: f64,
+    elevation_rad: f64,
+    cfg: &TracerConfig,
+) -> RayRecord {
+    let field = Spherical {
+        index: atm,
+        earth_radius_m: R,
+    };
+    let up = DVec3::new(0.3, -0.5, 0.8).normalize();
+    let east = up.cross(DVec3::Z).normalize();
+    let dir = east * elevation_rad.cos() + up * elevation_rad.sin();
+    trace_field(
+        &field,
+        Ground::Sphere { radius_m: R },
+        cfg,
+        up * (R + observer_m),
+        dir,
+        &STRESS_DISTANCES_M,
+        &mut NoHook,
+        None,
+    )
+    .unwrap()
 }
 
 #[test]
