@@ -123,7 +123,7 @@ const EXTREME: &[Corners] = &[
     },
 ];
 
-/// Observer height (m) from which a level ray stays in the [`EXTREME`] `long_duct` for
+/// Observer height (m) from which a level ray stays in the stress suite's `long_duct` for
 /// thousands of kilometres (the middle of its inversion).
 pub const LONG_DUCT_OBSERVER_M: f64 = 170.0;
 
