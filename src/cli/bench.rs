@@ -1,8 +1,18 @@
+<<<<<<< HEAD
 //! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] with the standard cases and a
 //! [`FrameConfig`] with the paper scenes → measure every case ([`ghostship::verify::accuracy`])
 //! and every scene's frames ([`ghostship::verify::frames`]) with a progress bar → write
 //! `BENCHMARKS.md`, `docs/time_vs_error.png` and `docs/frame_time_vs_error.png` under the output
 //! folder.
+=======
+//! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] and the standard cases → measure
+//! every case ([`ghostship::verify::accuracy`]) with a progress bar → write `BENCHMARKS.md` and
+//! `docs/time_vs_error.png` under the output folder.
+//!
+//! `ghostship bench stress`: the stress suite's atmospheres → a [`StressConfig`] → measure each
+//! ([`ghostship::verify::stress_report`]) with a progress bar → write `STRESS.md` and
+//! `docs/stress_error_vs_tolerance.png` under the output folder.
+>>>>>>> stress
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -13,11 +23,18 @@ use ghostship::verify::accuracy::{
     AccuracyConfig, BenchCase, CaseResult, measure_case, rays_markdown, standard_cases,
     time_vs_error_png,
 };
+<<<<<<< HEAD
 use ghostship::verify::benchmarks::benchmarks_markdown;
 use ghostship::verify::frames::{
     FrameConfig, FrameTiming, PaperScene, SceneSweep, load_paper_scenes, sweep_scene, time_scene,
 };
 use ghostship::verify::frames_report::{frame_time_vs_error_png, frames_markdown};
+=======
+use ghostship::verify::stress::stress_suite;
+use ghostship::verify::stress_report::{
+    StressConfig, StressResult, error_vs_tolerance_png, measure_stress, stress_markdown,
+};
+>>>>>>> stress
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `ghostship bench`.
@@ -39,6 +56,24 @@ pub enum BenchCommand {
     /// on the fan, exact 3-D and straight-ray paths. Writes BENCHMARKS.md,
     /// docs/time_vs_error.png and docs/frame_time_vs_error.png.
     Accuracy(AccuracyArgs),
+    /// The stress suite's figure: trace the fourteen stress atmospheres (superadiabatic layers,
+    /// 0.1 m layers with 30 K jumps, near-critical ducts, …) from five observers at elevations
+    /// −5°…+90° and tangent to every layer corner, at tolerances 10 m … 1e-5 m; the largest
+    /// error at 5–26 km against a 1e-7 m self-reference, Bouguer drift and terminations; writes
+    /// STRESS.md and docs/stress_error_vs_tolerance.png.
+    Stress(StressArgs),
+}
+
+/// Arguments of `ghostship bench stress`.
+#[derive(Debug, clap::Args)]
+pub struct StressArgs {
+    /// Folder to write STRESS.md and docs/stress_error_vs_tolerance.png into.
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    pub out: PathBuf,
+    /// The long launch set (about 150 elevations per observer and rays tangent to every
+    /// twentieth break below 2 km) instead of the fast one.
+    #[arg(long)]
+    pub long: bool,
 }
 
 /// Arguments of `ghostship bench accuracy`.
@@ -65,6 +100,7 @@ pub struct AccuracyArgs {
 pub fn run(args: BenchArgs, quiet: bool) -> anyhow::Result<()> {
     match args.which {
         BenchCommand::Accuracy(a) => accuracy(a, quiet),
+        BenchCommand::Stress(a) => stress(a, quiet),
     }
 }
 
@@ -137,6 +173,7 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+<<<<<<< HEAD
 /// The plots, relative to the output folder (and to BENCHMARKS.md in it).
 const RAY_PLOT: &str = "docs/time_vs_error.png";
 const FRAME_PLOT: &str = "docs/frame_time_vs_error.png";
@@ -146,6 +183,14 @@ fn progress_bar(quiet: bool, len: u64) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len);
+=======
+/// A progress bar of `len` runs (hidden when quiet or not on a terminal).
+fn progress_bar(len: usize, quiet: bool) -> ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len as u64);
+>>>>>>> stress
     if let Ok(style) =
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
     {
@@ -154,11 +199,74 @@ fn progress_bar(quiet: bool, len: u64) -> ProgressBar {
     bar
 }
 
+<<<<<<< HEAD
 fn measure_rays(
     cases: &[BenchCase],
+=======
+fn stress(args: StressArgs, quiet: bool) -> anyhow::Result<()> {
+    let config = if args.long {
+        StressConfig::long()
+    } else {
+        StressConfig::fast()
+    };
+    let dir = std::env::temp_dir().join(format!("ghostship-stress-suite-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let measured = measure_stress_suite(&config, &dir, quiet);
+    let _ = std::fs::remove_dir_all(&dir);
+    let (results, study) = measured?;
+    let command = if args.long {
+        "ghostship bench stress --long"
+    } else {
+        "ghostship bench stress"
+    };
+    let md_path = args.out.join("STRESS.md");
+    let png_path = args.out.join("docs").join("stress_error_vs_tolerance.png");
+    let md = stress_markdown(
+        &results,
+        &config,
+        command,
+        "docs/stress_error_vs_tolerance.png",
+    );
+    let png = error_vs_tolerance_png(&results, &study, 1400, 900)?;
+    write_atomic(&png_path, &png)?;
+    write_atomic(&md_path, md.as_bytes())?;
+    if !quiet {
+        eprintln!("wrote {}", md_path.display());
+        eprintln!("wrote {}", png_path.display());
+    }
+    Ok(())
+}
+
+/// Measure every stress atmosphere; also says which belong to the accuracy study.
+fn measure_stress_suite(
+    config: &StressConfig,
+    dir: &std::path::Path,
+    quiet: bool,
+) -> anyhow::Result<(Vec<StressResult>, Vec<bool>)> {
+    let suite = stress_suite();
+    let runs = suite.len() * config.observers_m.len() * (config.tolerances_m.len() + 1);
+    let bar = progress_bar(runs, quiet);
+    let mut results = Vec::new();
+    for atmosphere in &suite {
+        bar.set_message(atmosphere.name);
+        results.push(measure_stress(atmosphere, dir, config, &mut || bar.inc(1))?);
+    }
+    bar.finish_and_clear();
+    let study = suite.iter().map(|s| s.in_accuracy_study).collect();
+    Ok((results, study))
+}
+
+fn measure_all(
+    args: &AccuracyArgs,
+>>>>>>> stress
     config: &AccuracyConfig,
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<CaseResult>> {
+<<<<<<< HEAD
+=======
+    let cases = standard_cases(&args.data, stress_dir)?;
+    let bar = progress_bar(cases.len() * (config.tolerances_m.len() + 1), quiet);
+>>>>>>> stress
     let mut results = Vec::new();
     for case in cases {
         bar.set_message(format!("rays: {}", case.name));

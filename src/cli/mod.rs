@@ -1,7 +1,7 @@
 //! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
 //! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis),
-//! [`render`] (scenes to images) and [`pipeline`] (batch runs of all three) and [`bench`] (time against error). Errors go back to
-//! `main` as one `anyhow` chain.
+//! [`render`] (scenes to images), [`pipeline`] (batch runs of all three) and [`bench`] (time
+//! against error, the stress suite). Errors go back to `main` as one `anyhow` chain.
 
 pub mod bench;
 pub mod pipeline;
@@ -49,7 +49,8 @@ pub enum Command {
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
     /// Benchmarks: `bench accuracy` measures the tracer's error against its time per ray and
-    /// writes BENCHMARKS.md with a log-log plot.
+    /// writes BENCHMARKS.md with a log-log plot; `bench stress` measures the stress suite's
+    /// error against tolerance and writes STRESS.md with a log-log plot.
     Bench(bench::BenchArgs),
 }
 

@@ -11,6 +11,8 @@
 //! * [`frames_report`] — their tables and plot;
 //! * [`benchmarks`] — the whole `BENCHMARKS.md`;
 //! * [`stats`] — median and 95th percentile.
+//! * [`stress_report`] — the stress suite's launch set, Bouguer drift bound, error against
+//!   tolerance: the `bench stress` study, `STRESS.md` and its plot.
 
 pub mod accuracy;
 pub mod benchmarks;
@@ -19,3 +21,4 @@ pub mod frames_report;
 pub mod image_bounds;
 pub mod stats;
 pub mod stress;
+pub mod stress_report;

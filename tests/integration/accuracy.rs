@@ -11,16 +11,15 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use ghostship::profile::{FitOptions, Profile, SyntheticAtmosphere};
+use ghostship::profile::{Profile, SyntheticAtmosphere};
 use ghostship::refractivity::RefractiveAtmosphere;
-use ghostship::sounding::{ReadOptions, read_sounding};
 use ghostship::tracer::{Tracer, TracerConfig};
 use ghostship::verify::stress::stress_soundings;
 
 use crate::support::data::data_file;
+use crate::support::fans::{csv_profile, fitted_profile, fold_slopes, reference_with_error};
 use crate::support::reference::{
     BreakSource, RefReach, ReferenceIndex, ReferenceSteps, atmosphere_index,
-    reference_heights_with_steps,
 };
 
 const R: f64 = 6_371_000.0;
@@ -56,15 +55,6 @@ impl Case {
     }
 }
 
-fn profile(path: &Path, smooth_m: f64) -> Profile {
-    let s = read_sounding(path, &ReadOptions::default()).expect("sounding reads");
-    let options = FitOptions {
-        smooth_m,
-        ..FitOptions::default()
-    };
-    Profile::from_sounding(&s, &options).expect("sounding fits")
-}
-
 fn cases(dir: &Path) -> Vec<Case> {
     let mut out = Vec::new();
     for name in [
@@ -87,17 +77,15 @@ fn cases(dir: &Path) -> Vec<Case> {
     ] {
         out.push(Case {
             label: name.into(),
-            column: Column::Profile(Box::new(profile(&data_file(name), 20.0))),
+            column: Column::Profile(Box::new(fitted_profile(&data_file(name), 20.0))),
             observer_m: 20.0,
             steps: ReferenceSteps::default(),
         });
     }
     for (name, text) in stress_soundings() {
-        let path = dir.join(format!("{name}.csv"));
-        std::fs::write(&path, text).unwrap();
         out.push(Case {
             label: name.into(),
-            column: Column::Profile(Box::new(profile(&path, 0.0))),
+            column: Column::Profile(Box::new(csv_profile(dir, name, &text))),
             observer_m: if name == "novaya_zemlya_critical" {
                 100.0
             } else {
@@ -106,42 +94,24 @@ fn cases(dir: &Path) -> Vec<Case> {
             steps: ReferenceSteps {
                 max_ground_step_m: 50.0,
                 max_height_step_m: 0.02,
+                fine: None,
             },
         });
     }
     out
 }
 
-/// The reference heights with steps `steps` and an error estimate: the difference to a run
-/// with half the steps (the finer result is returned).
+/// The reference heights with the case's steps and an error estimate (step halving).
 fn reference(index: &ReferenceIndex, case: &Case, a: f64) -> Vec<(RefReach, f64)> {
-    let run = |steps| {
-        reference_heights_with_steps(index, R, 40_000.0, case.observer_m, a, &DISTANCES_M, steps)
-    };
-    let coarse = run(case.steps);
-    let fine = run(case.steps.halved());
-    coarse
-        .into_iter()
-        .zip(fine)
-        .map(|(c, f)| match (c.height_m(), f.height_m()) {
-            (Some(x), Some(y)) => (f, (x - y).abs()),
-            (None, None) => (f, 0.0),
-            _ => (f, f64::INFINITY),
-        })
-        .collect()
-}
-
-/// |∂h/∂α| at each distance by central differences of a tight trace (only to classify folds).
-fn slopes(tracer: &Tracer<'_, RefractiveAtmosphere>, h0: f64, a: f64) -> Vec<f64> {
-    let da = 1e-6;
-    let up = tracer.trace(h0, a + da, &DISTANCES_M).unwrap();
-    let down = tracer.trace(h0, a - da, &DISTANCES_M).unwrap();
-    (0..DISTANCES_M.len())
-        .map(|i| match (up.heights_m[i], down.heights_m[i]) {
-            (Some(u), Some(d)) => ((u - d) / (2.0 * da)).abs(),
-            _ => f64::INFINITY,
-        })
-        .collect()
+    reference_with_error(
+        index,
+        R,
+        40_000.0,
+        case.observer_m,
+        a,
+        &DISTANCES_M,
+        case.steps,
+    )
 }
 
 /// Per fan ray: the reference at each distance (with its error estimate) and |∂h/∂α|.
@@ -173,7 +143,7 @@ fn measure(case: &Case, tolerances: &[f64]) -> Vec<Worst> {
         .map(|&a| {
             (
                 reference(&index, case, a),
-                slopes(&tight, case.observer_m, a),
+                fold_slopes(&tight, case.observer_m, a, &DISTANCES_M),
             )
         })
         .collect();

@@ -12,4 +12,5 @@ mod reference_tracer;
 mod refractivity;
 mod render;
 mod scenes;
+mod stress;
 mod tracer;

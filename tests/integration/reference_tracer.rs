@@ -469,6 +469,7 @@ fn convergence_is_sixth_order() {
     let coarse = ReferenceSteps {
         max_ground_step_m: 1600.0,
         max_height_step_m: 1.6,
+        fine: None,
     };
     for deg in [0.1, 0.2, 0.3, 0.5] {
         let a = f64::to_radians(deg);

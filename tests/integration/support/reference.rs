@@ -21,8 +21,10 @@
 //! order conditions up to order six hold exactly, checked with exact fractions). The step is a
 //! smooth function of the state, Δθ = 1 / (R/Δx + |v|/Δh): at most Δx of ground distance and
 //! at most about Δh of height change per step ([`ReferenceSteps`], default 200 m and 0.2 m), so
-//! thin layers are sampled finely however steep the ray. Halving both limits halves every step,
-//! and the difference of the two runs is the error estimate of [`reference_heights_with_error`].
+//! thin layers are sampled finely however steep the ray (optionally with a smaller Δh for steps
+//! that start below a given height, [`FineSteps`], for layers thinner than Δh). Halving the
+//! limits halves every step, and the difference of the two runs is the error estimate of
+//! [`reference_heights_with_error`].
 //!
 //! # Breaks
 //! A step that straddles a break of the index (a height where dn/dh or d²n/dh² jumps, listed in
@@ -129,6 +131,19 @@ pub struct ReferenceSteps {
     pub max_ground_step_m: f64,
     /// Δh: the largest height change of one step (m), approached by steep rays.
     pub max_height_step_m: f64,
+    /// A smaller Δh for steps that start low down, where layers may be thinner than
+    /// `max_height_step_m`: a step that crosses such a layer whole is cut at its two breaks and
+    /// never subdivides it, so halving the steps would not show the error made there.
+    pub fine: Option<FineSteps>,
+}
+
+/// A smaller height-step limit for the steps that start below a height.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FineSteps {
+    /// Steps starting below this height above the surface (m) …
+    pub below_m: f64,
+    /// … change the height by at most this (m) (the smaller of it and the general limit).
+    pub max_height_step_m: f64,
 }
 
 impl Default for ReferenceSteps {
@@ -137,16 +152,21 @@ impl Default for ReferenceSteps {
         ReferenceSteps {
             max_ground_step_m: 200.0,
             max_height_step_m: 0.2,
+            fine: None,
         }
     }
 }
 
 impl ReferenceSteps {
-    /// Both limits halved (every step exactly half as long).
+    /// Every limit halved (every step exactly half as long).
     pub fn halved(self) -> Self {
         ReferenceSteps {
             max_ground_step_m: 0.5 * self.max_ground_step_m,
             max_height_step_m: 0.5 * self.max_height_step_m,
+            fine: self.fine.map(|f| FineSteps {
+                max_height_step_m: 0.5 * f.max_height_step_m,
+                ..f
+            }),
         }
     }
 }
@@ -277,6 +297,9 @@ struct Ray<'i, 'a> {
     bounds: Vec<f64>,
     inv_ground_step: f64,
     inv_height_step: f64,
+    /// Below this height, `inv_fine_height_step` replaces `inv_height_step` (if larger).
+    fine_below_m: f64,
+    inv_fine_height_step: f64,
 }
 
 impl<'i, 'a> Ray<'i, 'a> {
@@ -286,6 +309,11 @@ impl<'i, 'a> Ray<'i, 'a> {
             "radius and top must be positive"
         );
         assert!(steps.max_ground_step_m > 0.0 && steps.max_height_step_m > 0.0);
+        let fine = steps.fine.unwrap_or(FineSteps {
+            below_m: f64::NEG_INFINITY,
+            max_height_step_m: steps.max_height_step_m,
+        });
+        assert!(fine.max_height_step_m > 0.0);
         let inside = |b: &&f64| **b > 4.0 * NUDGE_M && **b < top_m - 4.0 * NUDGE_M;
         let mut bounds = vec![0.0];
         bounds.extend(index.breaks_m.iter().filter(inside));
@@ -298,6 +326,8 @@ impl<'i, 'a> Ray<'i, 'a> {
             bounds,
             inv_ground_step: radius / steps.max_ground_step_m,
             inv_height_step: 1.0 / steps.max_height_step_m,
+            fine_below_m: fine.below_m,
+            inv_fine_height_step: 1.0 / fine.max_height_step_m,
         }
     }
 
@@ -401,9 +431,14 @@ impl<'i, 'a> Ray<'i, 'a> {
         }
     }
 
-    /// The step length the step rule gives at `v`.
-    fn step_rule(&self, v: f64) -> f64 {
-        1.0 / (self.inv_ground_step + v.abs() * self.inv_height_step)
+    /// The step length the step rule gives at height `u` and slope `v`.
+    fn step_rule(&self, u: f64, v: f64) -> f64 {
+        let inv_height = if u < self.fine_below_m {
+            self.inv_height_step.max(self.inv_fine_height_step)
+        } else {
+            self.inv_height_step
+        };
+        1.0 / (self.inv_ground_step + v.abs() * inv_height)
     }
 
     /// Integrate from `state` in `layer` to angle `target`, crossing breaks on the way.
@@ -411,7 +446,7 @@ impl<'i, 'a> Ray<'i, 'a> {
         let mut stalled = 0;
         while state.theta < target {
             let rest = target - state.theta;
-            let s = self.step_rule(state.v).min(rest);
+            let s = self.step_rule(state.u, state.v).min(rest);
             let trial = self.rk_step(&state, s, layer);
             let Some(bracket) = self.exit_bracket(&state, &trial, s, layer) else {
                 state = trial;
