@@ -1,18 +1,12 @@
-<<<<<<< HEAD
 //! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] with the standard cases and a
 //! [`FrameConfig`] with the paper scenes → measure every case ([`ghostship::verify::accuracy`])
 //! and every scene's frames ([`ghostship::verify::frames`]) with a progress bar → write
 //! `BENCHMARKS.md`, `docs/time_vs_error.png` and `docs/frame_time_vs_error.png` under the output
 //! folder.
-=======
-//! `ghostship bench accuracy`: arguments → an [`AccuracyConfig`] and the standard cases → measure
-//! every case ([`ghostship::verify::accuracy`]) with a progress bar → write `BENCHMARKS.md` and
-//! `docs/time_vs_error.png` under the output folder.
 //!
 //! `ghostship bench stress`: the stress suite's atmospheres → a [`StressConfig`] → measure each
 //! ([`ghostship::verify::stress_report`]) with a progress bar → write `STRESS.md` and
 //! `docs/stress_error_vs_tolerance.png` under the output folder.
->>>>>>> stress
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -23,18 +17,15 @@ use ghostship::verify::accuracy::{
     AccuracyConfig, BenchCase, CaseResult, measure_case, rays_markdown, standard_cases,
     time_vs_error_png,
 };
-<<<<<<< HEAD
 use ghostship::verify::benchmarks::benchmarks_markdown;
 use ghostship::verify::frames::{
     FrameConfig, FrameTiming, PaperScene, SceneSweep, load_paper_scenes, sweep_scene, time_scene,
 };
 use ghostship::verify::frames_report::{frame_time_vs_error_png, frames_markdown};
-=======
 use ghostship::verify::stress::stress_suite;
 use ghostship::verify::stress_report::{
     StressConfig, StressResult, error_vs_tolerance_png, measure_stress, stress_markdown,
 };
->>>>>>> stress
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `ghostship bench`.
@@ -173,7 +164,6 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-<<<<<<< HEAD
 /// The plots, relative to the output folder (and to BENCHMARKS.md in it).
 const RAY_PLOT: &str = "docs/time_vs_error.png";
 const FRAME_PLOT: &str = "docs/frame_time_vs_error.png";
@@ -183,14 +173,6 @@ fn progress_bar(quiet: bool, len: u64) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len);
-=======
-/// A progress bar of `len` runs (hidden when quiet or not on a terminal).
-fn progress_bar(len: usize, quiet: bool) -> ProgressBar {
-    if quiet || !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(len as u64);
->>>>>>> stress
     if let Ok(style) =
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
     {
@@ -199,10 +181,6 @@ fn progress_bar(len: usize, quiet: bool) -> ProgressBar {
     bar
 }
 
-<<<<<<< HEAD
-fn measure_rays(
-    cases: &[BenchCase],
-=======
 fn stress(args: StressArgs, quiet: bool) -> anyhow::Result<()> {
     let config = if args.long {
         StressConfig::long()
@@ -245,7 +223,7 @@ fn measure_stress_suite(
 ) -> anyhow::Result<(Vec<StressResult>, Vec<bool>)> {
     let suite = stress_suite();
     let runs = suite.len() * config.observers_m.len() * (config.tolerances_m.len() + 1);
-    let bar = progress_bar(runs, quiet);
+    let bar = progress_bar(quiet, runs as u64);
     let mut results = Vec::new();
     for atmosphere in &suite {
         bar.set_message(atmosphere.name);
@@ -256,17 +234,11 @@ fn measure_stress_suite(
     Ok((results, study))
 }
 
-fn measure_all(
-    args: &AccuracyArgs,
->>>>>>> stress
+fn measure_rays(
+    cases: &[BenchCase],
     config: &AccuracyConfig,
     bar: &ProgressBar,
 ) -> anyhow::Result<Vec<CaseResult>> {
-<<<<<<< HEAD
-=======
-    let cases = standard_cases(&args.data, stress_dir)?;
-    let bar = progress_bar(cases.len() * (config.tolerances_m.len() + 1), quiet);
->>>>>>> stress
     let mut results = Vec::new();
     for case in cases {
         bar.set_message(format!("rays: {}", case.name));
