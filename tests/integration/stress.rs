@@ -854,7 +854,11 @@ fn trace_3d(
 #[test]
 fn stress_3d_path_meets_the_same_bounds() {
     let problems = three_d_path(
-        &["near_critical_0115", "superadiabatic_desert", "surface_duct"],
+        &[
+            "near_critical_0115",
+            "superadiabatic_desert",
+            "surface_duct",
+        ],
         &[2.0, 100.0],
         &[-1.0, -0.1, 0.0, 0.05, 0.2, 1.0, 10.0, 90.0],
         &[1e-1, 1e-3, 1e-5],
