@@ -909,11 +909,7 @@ fn an_observer_on_a_break_starts_from_the_side_it_heads_to() {
             .unwrap(),
     );
     let atm = RefractiveAtmosphere::new(column, 550.0).unwrap();
-    assert!(
-        atm.breaks_m().iter().any(|&b| b == 100.0),
-        "{:?}",
-        atm.breaks_m()
-    );
+    assert!(atm.breaks_m().contains(&100.0), "{:?}", atm.breaks_m());
     let field = Spherical {
         index: &atm,
         earth_radius_m: R,
