@@ -676,8 +676,9 @@ fn plot_err<E: std::fmt::Display>(e: E) -> AccuracyError {
     AccuracyError::Plot(e.to_string())
 }
 
-/// Line colours, dark enough to read on white, distinct for the twelve standard cases.
-const LINE_COLOURS: [RGBColor; 12] = [
+/// Line colours, dark enough to read on white: distinct for the twelve standard cases here and
+/// the fourteen stress atmospheres of [`super::stress_report`].
+pub(crate) const LINE_COLOURS: [RGBColor; 14] = [
     RGBColor(220, 20, 60),
     RGBColor(34, 139, 34),
     RGBColor(218, 145, 0),
@@ -690,10 +691,12 @@ const LINE_COLOURS: [RGBColor; 12] = [
     RGBColor(140, 86, 75),
     RGBColor(0, 0, 0),
     RGBColor(100, 100, 255),
+    RGBColor(0, 90, 50),
+    RGBColor(150, 150, 150),
 ];
 
 /// Smallest error drawn (m): a run identical to the reference has error 0.
-const PLOT_FLOOR_M: f64 = 1e-10;
+pub(crate) const PLOT_FLOOR_M: f64 = 1e-10;
 
 /// The log-log plot: x = µs per ray, y = max error at the farthest distance, one line per
 /// atmosphere with its points labelled by tolerance, and a dashed line at 1e-5 m (the peer goal

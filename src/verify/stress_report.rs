@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use plotters::prelude::*;
 use rayon::prelude::*;
 
+use super::accuracy::{LINE_COLOURS, PLOT_FLOOR_M};
 use super::stress::StressAtmosphere;
 #[cfg(doc)]
 use super::stress::stress_suite;
@@ -772,27 +773,6 @@ fn termination_table(results: &[StressResult]) -> String {
 fn plot_err<E: std::fmt::Display>(e: E) -> StressError {
     StressError::Plot(e.to_string())
 }
-
-/// Fourteen line colours, dark enough to read on white.
-const LINE_COLOURS: [RGBColor; 14] = [
-    RGBColor(220, 20, 60),
-    RGBColor(34, 139, 34),
-    RGBColor(218, 145, 0),
-    RGBColor(31, 119, 180),
-    RGBColor(255, 100, 0),
-    RGBColor(128, 0, 128),
-    RGBColor(0, 160, 160),
-    RGBColor(230, 0, 200),
-    RGBColor(120, 120, 0),
-    RGBColor(140, 86, 75),
-    RGBColor(0, 0, 0),
-    RGBColor(100, 100, 255),
-    RGBColor(0, 90, 50),
-    RGBColor(150, 150, 150),
-];
-
-/// Smallest error drawn (m): a run identical to the reference has error 0.
-const PLOT_FLOOR_M: f64 = 1e-10;
 
 /// The chart the lines are drawn on: log tolerance against log error.
 type LogChart<'a, 'b> = ChartContext<
