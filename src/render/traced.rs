@@ -14,10 +14,11 @@
 //! **Early stops** follow the tracer's one fate rule, [`FateWatch`] (Bouguer's invariant over a
 //! [`BouguerEnvelope`] of the field, built once per tracer): past the last card a ray that
 //! provably oscillates in a duct ends [`Termination::Trapped`] ([`FanEnd::Lost`], shaded as the
-//! horizon sky). Without a sun the final sky direction does not matter, so a ray that provably
-//! escapes also ends as soon as nothing is left for it to meet — past the last card, or climbing
-//! above every card top without another turning point ([`FanEnd::Sky`]). Every other ray is
-//! traced to the sea or the top, however far: there is no trap distance.
+//! horizon sky). A ray that provably escapes, once nothing is left for it to meet — past the last
+//! card, or climbing above every card top without another turning point — climbs out to the top
+//! in closed form ([`FanEnd::Sky`] with its final direction), or, without a sun (the direction
+//! does not matter), just ends there. Every other ray is traced to the sea or the top, however
+//! far: there is no trap distance.
 
 use std::cell::RefCell;
 
@@ -109,7 +110,8 @@ impl Fates {
         }
     }
 
-    /// The watch for one ray; escaping rays stop early when the sky direction is not needed.
+    /// The watch for one ray: escaping rays climb out in closed form above the cards, or stop
+    /// there when the sky direction is not needed.
     fn watch<S: StratifiedIndex + ?Sized>(
         &self,
         index: &S,
@@ -126,10 +128,11 @@ impl Fates {
             elevation_rad,
             distances_m.last().copied().unwrap_or(0.0),
         );
+        let watch = watch.clear_above(self.cards_top_m);
         if need_sky_direction {
             watch
         } else {
-            watch.stop_escaping_above(self.cards_top_m)
+            watch.without_direction()
         }
     }
 }
@@ -560,7 +563,8 @@ mod tests {
                 (1.0, 0.0)
             }
         }
-        let curved = CurvedRays::new(&Vacuum, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
+        // Cards up to 100 m: the rays' heights at 1 and 10 km are all below.
+        let curved = CurvedRays::new(&Vacuum, render_tracer_config(EARTH_RADIUS_M), 100.0).unwrap();
         let straight = StraightRays::new(EARTH_RADIUS_M).unwrap();
         let d = [1_000.0, 10_000.0];
         for &alpha in &[-0.01, -0.0015, 0.0, 0.002] {

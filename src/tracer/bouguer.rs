@@ -14,9 +14,10 @@
 //!
 //! [`FateWatch`] applies the fates along a ray, as a [`RayHook`]: the one rule by which every
 //! caller (the trace report, the renderer) ends rays early. Past its last target a ray that
-//! provably oscillates ends [`Termination::Trapped`](super::Termination::Trapped); when the
-//! caller does not need a ray's final direction, a ray that provably escapes ends as soon as
-//! nothing is left for it to meet. A ray whose fate stays undecided runs on to its natural end
+//! provably oscillates ends [`Termination::Trapped`](super::Termination::Trapped). A ray that
+//! provably escapes, once nothing is left for it to meet, climbs out to the top in closed form
+//! ([`HookAction::ClimbOut`]: same end, no long integration), or, when the caller does not need
+//! its final direction, just ends. A ray whose fate stays undecided runs on to its natural end
 //! (ground, top) or the tracer's safety limits (`max_length_m`, `max_steps`).
 
 use super::StratifiedIndex;
@@ -166,7 +167,10 @@ pub struct FateWatch<'e> {
     envelope: &'e BouguerEnvelope,
     invariant_m: f64,
     targets_end_m: f64,
-    escape_above_m: Option<f64>,
+    /// Above this height a climbing ray has nothing left to meet (above every object).
+    clear_above_m: Option<f64>,
+    /// Whether the caller needs an escaping ray's final direction.
+    need_direction: bool,
     /// The fate once the envelope has decided it: it does not change along the ray (the
     /// invariant is the launch value, so integration error cannot move it).
     decided: Option<Fate>,
@@ -175,7 +179,8 @@ pub struct FateWatch<'e> {
 impl<'e> FateWatch<'e> {
     /// Watch the ray launched at `elevation_rad` from `observer_height_m` through `index` (the
     /// field `envelope` was built from, over `earth_radius_m`), whose last target is at ground
-    /// distance `targets_end_m` (0 without targets). Escaping rays are traced to the top.
+    /// distance `targets_end_m` (0 without targets). Past it, a ray that provably escapes climbs
+    /// out to the top in closed form ([`HookAction::ClimbOut`]).
     pub fn new<S: StratifiedIndex + ?Sized>(
         envelope: &'e BouguerEnvelope,
         index: &S,
@@ -189,17 +194,26 @@ impl<'e> FateWatch<'e> {
             envelope,
             invariant_m: n0 * (earth_radius_m + observer_height_m) * elevation_rad.cos(),
             targets_end_m,
-            escape_above_m: None,
+            clear_above_m: None,
+            need_direction: true,
             decided: None,
         }
     }
 
-    /// Also end (with [`HookAction::Stop`]) a ray that provably escapes once it is past its last
-    /// target, or climbing above `height_m` (above every object, so it never meets one again):
-    /// for callers that do not need the final direction.
-    pub fn stop_escaping_above(self, height_m: f64) -> Self {
+    /// A climbing ray above `height_m` has nothing left to meet (it is above every object): a
+    /// ray that provably escapes is finished from there as past its last target.
+    pub fn clear_above(self, height_m: f64) -> Self {
         FateWatch {
-            escape_above_m: Some(height_m),
+            clear_above_m: Some(height_m),
+            ..self
+        }
+    }
+
+    /// The caller does not need an escaping ray's final direction: such a ray ends
+    /// ([`HookAction::Stop`]) as soon as nothing is left for it to meet, instead of climbing out.
+    pub fn without_direction(self) -> Self {
+        FateWatch {
+            need_direction: false,
             ..self
         }
     }
@@ -214,7 +228,7 @@ impl<'e> FateWatch<'e> {
         let done = point.distance_m >= self.targets_end_m;
         let climbing = point.elevation_rad > 0.0;
         let clear = self
-            .escape_above_m
+            .clear_above_m
             .is_some_and(|h| climbing && point.height_m > h);
         if !(done || clear) {
             return HookAction::Continue;
@@ -234,7 +248,8 @@ impl<'e> FateWatch<'e> {
         match fate {
             Fate::Trapped if done => HookAction::Trapped,
             // Past the targets, or climbing for good above every object: nothing left to meet.
-            Fate::Escapes if self.escape_above_m.is_some() => HookAction::Stop,
+            Fate::Escapes if !self.need_direction => HookAction::Stop,
+            Fate::Escapes if climbing => HookAction::ClimbOut,
             _ => HookAction::Continue,
         }
     }
@@ -376,10 +391,30 @@ mod tests {
         .unwrap();
         let rec = plain.trace(1100.0, 0.0, &[50_000.0]).unwrap();
         assert_eq!(rec.termination, Some(Termination::MaxDistance));
-        // Asked to stop escaping rays above 1500 m, the watch ends the steep ray there.
+        // Clear above 1500 m, the watch finishes the steep ray from there in closed form: the
+        // same end as the integrated ray, in far fewer steps.
         let envelope = tracer.fates().unwrap();
+        let free = Tracer::new(&ElevatedDuct, cfg.clone()).unwrap();
+        let integrated = free.trace(1100.0, 0.02, &[50_000.0]).unwrap();
+        assert_eq!(integrated.termination, Some(Termination::Escaped));
+        let mut watch =
+            FateWatch::new(envelope, &ElevatedDuct, r, 1100.0, 0.02, 50_000.0).clear_above(1500.0);
+        let mut rec = crate::tracer::RayRecord::default();
+        free.trace_into(1100.0, 0.02, &[50_000.0], &mut watch, &mut rec, None)
+            .unwrap();
+        assert_eq!(rec.termination, Some(Termination::Escaped));
+        assert!(
+            rec.steps() * 3 < integrated.steps(),
+            "{rec:?} {integrated:?}"
+        );
+        let direction_rad = rec.end_observer_elevation_rad - integrated.end_observer_elevation_rad;
+        assert!(direction_rad.abs() < 1e-9, "{direction_rad:e}");
+        assert!((rec.end.distance_m - integrated.end.distance_m).abs() < 0.05);
+        assert!((rec.end.height_m - integrated.end.height_m).abs() < 1e-6);
+        // Not needing the direction, it ends the ray there.
         let mut watch = FateWatch::new(envelope, &ElevatedDuct, r, 1100.0, 0.02, 50_000.0)
-            .stop_escaping_above(1500.0);
+            .clear_above(1500.0)
+            .without_direction();
         let mut rec = crate::tracer::RayRecord::default();
         plain
             .trace_into(1100.0, 0.02, &[50_000.0], &mut watch, &mut rec, None)

@@ -13,6 +13,7 @@
 
 mod bouguer;
 mod breaks;
+mod climb_out;
 mod dopri;
 mod ray;
 mod straight;

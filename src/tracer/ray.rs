@@ -27,6 +27,7 @@ use std::fmt;
 use serde::Serialize;
 
 use super::breaks::{Bracket, Exit};
+use super::climb_out::climb_out;
 use super::dopri::{Controller, Dense, Step};
 use super::system::{Observables, RaySystem};
 
@@ -321,6 +322,13 @@ pub enum HookAction {
     Stop,
     /// Stop here with [`Termination::Trapped`].
     Trapped,
+    /// The ray provably climbs out through the top without turning again, and nothing below
+    /// the top is left for it to meet: finish it in closed form (the refraction integral of a
+    /// spherically symmetric field, `climb_out`) and end [`Termination::Escaped`] at the top.
+    /// Ignored (the ray is integrated on) when the path is being recorded, on flat ground, or
+    /// when the closed form cannot be evaluated. Heights at requested distances beyond this
+    /// point are not reported.
+    ClimbOut,
 }
 
 /// Caller-side control of a ray (the renderer's object surfaces and early stops).
@@ -735,12 +743,63 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             HookAction::Continue => {}
             HookAction::Stop => return finish(rec, Termination::LeftRegion, &obs, s, elevation0),
             HookAction::Trapped => return finish(rec, Termination::Trapped, &obs, s, elevation0),
+            HookAction::ClimbOut if path.is_none() => {
+                let tolerance_rad = CLIMB_OUT_SHARE * tolerance_per_m;
+                if let Some((top_obs, length_m)) = climb_to_top(sys, &obs, cfg, tolerance_rad)
+                    && s + length_m < cfg.max_length_m
+                    && cfg.max_distance_m.is_none_or(|d| top_obs.distance_m < d)
+                {
+                    rec.note_elevation(top_obs.elevation_rad);
+                    return finish(
+                        rec,
+                        Termination::Escaped,
+                        &top_obs,
+                        s + length_m,
+                        elevation0,
+                    );
+                }
+            }
+            HookAction::ClimbOut => {}
         }
         h = match aim.take() {
             Some(a) => a.next_step_m,
             None => controller.accept(h, err),
         };
     }
+}
+
+/// The share of the error budget per metre (T/L, in radians of direction) that a closed-form
+/// climb out may spend on the ray's final direction.
+const CLIMB_OUT_SHARE: f64 = 0.1;
+
+/// The state at the top of a ray climbing out from `obs` in closed form, and the path length
+/// there; `None` where the system has no radial profile or the closed form fails.
+fn climb_to_top<const N: usize, Sys: RaySystem<N>>(
+    sys: &Sys,
+    obs: &Observables,
+    cfg: &TracerConfig,
+    tolerance_rad: f64,
+) -> Option<(Observables, f64)> {
+    let radius_m = sys.radius_m()?;
+    let out = climb_out(
+        |h| sys.index_at(h).unwrap_or((f64::NAN, f64::NAN)),
+        sys.breaks(),
+        radius_m,
+        obs.height_m,
+        obs.elevation_rad,
+        cfg.top_m,
+        tolerance_rad,
+    )?;
+    let angle_rad = obs.angle_rad + out.angle_rad;
+    let top = Observables {
+        height_m: cfg.top_m,
+        distance_m: radius_m * angle_rad,
+        elevation_rad: out.elevation_top_rad,
+        angle_rad,
+        invariant: obs.invariant,
+        index: out.index_top,
+    };
+    Some((top, out.arc_length_m))
 }
 
 /// Steps shorter than this (m) get the error budget of a step this long. Without the floor, a

@@ -49,6 +49,15 @@ pub(crate) trait RaySystem<const N: usize> {
     fn invariant_scale(&self, y: &[f64; N]) -> f64;
     /// Heights (m above the ground, ascending) where the field is not smooth.
     fn breaks(&self) -> &[f64];
+    /// The index and dn/dh at `height_m` above the ground, for a closed-form climb out of a spherically
+    /// symmetric field (`climb_out`); `None` where the system has no radial profile (flat
+    /// ground). For a 3-D field it is sampled above the observer, so it only means something
+    /// when the field is spherically symmetric, as [`HookAction::ClimbOut`] presumes.
+    ///
+    /// [`HookAction::ClimbOut`]: super::HookAction::ClimbOut
+    fn index_at(&self, height_m: f64) -> Option<(f64, f64)>;
+    /// Earth radius (m) for the closed-form climb; `None` on flat ground.
+    fn radius_m(&self) -> Option<f64>;
 }
 
 /// Spherically symmetric field, 2-D state (x, y, Tx, Ty) about Earth's centre.
@@ -104,6 +113,12 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
     }
     fn breaks(&self) -> &[f64] {
         self.field.breaks_m()
+    }
+    fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
+        Some(self.field.index_and_derivative(height_m))
+    }
+    fn radius_m(&self) -> Option<f64> {
+        Some(self.radius_m)
     }
 }
 
@@ -207,5 +222,21 @@ impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
     }
     fn breaks(&self) -> &[f64] {
         self.field.breaks_m()
+    }
+    fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
+        match self.ground {
+            Ground::Sphere { radius_m } => {
+                let at = self.start_direction * (radius_m + height_m);
+                let (n, gradient) = self.field.index_and_gradient(at);
+                Some((n, gradient.dot(self.start_direction)))
+            }
+            Ground::Flat => None,
+        }
+    }
+    fn radius_m(&self) -> Option<f64> {
+        match self.ground {
+            Ground::Sphere { radius_m } => Some(radius_m),
+            Ground::Flat => None,
+        }
     }
 }

@@ -270,6 +270,106 @@ impl PowerLayers {
     }
 }
 
+impl PowerLayers {
+    /// Where the exact ray leaves through `top`: (angle travelled, local elevation there);
+    /// `None` if it meets the ground first or is still inside after 2 000 crossings.
+    fn leave(&self, top: f64, h0: f64, alpha: f64) -> Option<(f64, f64)> {
+        let j = self.layer(h0);
+        let below = j > 0 && h0 == self.bases_m[j] && alpha < 0.0;
+        let mut p = Piece {
+            theta: 0.0,
+            h: h0,
+            psi: alpha,
+            layer: if below { j - 1 } else { j },
+        };
+        for _ in 0..2_000 {
+            let (dt, b, psi_b) = self.next_crossing(&p, top)?;
+            match b {
+                0 => return None,
+                3 => return Some((p.theta + dt, psi_b)),
+                _ => {}
+            }
+            p = Piece {
+                theta: p.theta + dt,
+                h: [0.0, self.bases_m[1], self.bases_m[2], top][b],
+                psi: psi_b,
+                layer: if psi_b > 0.0 { b } else { b - 1 }.min(2),
+            };
+        }
+        None
+    }
+}
+
+impl ghostship::tracer::StratifiedIndex for PowerLayers {
+    fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        self.n_and_dndh(height_m)
+    }
+    fn breaks_m(&self) -> &[f64] {
+        &self.bases_m[1..]
+    }
+}
+
+/// The tracer's closed-form climb out of escaping rays (Bouguer's invariant and the refraction
+/// integral, `HookAction::ClimbOut`) against the exact rays of the piecewise power law: where
+/// they leave the top and in which direction, for rays from steep to grazing, launched above
+/// the duct or climbing out of it; and the same rays integrated all the way.
+#[test]
+fn escaping_rays_leave_where_the_exact_power_law_rays_do() {
+    use ghostship::tracer::{Termination, Tracer, TracerConfig};
+    let layers = PowerLayers::new(1.000_3, [0.0, 40.0, 120.0], [-1e-7, -4e-7, -0.5e-7]);
+    let top = 20e3;
+    let config = TracerConfig {
+        earth_radius_m: R,
+        top_m: top,
+        ..TracerConfig::default()
+    };
+    // The direction budget of the tolerance: T over the error length (see the tracer docs).
+    let budget_rad = config.tolerance_m / config.error_length_m;
+    let closed = Tracer::new(&layers, config.clone()).unwrap().with_fates();
+    let integrated = Tracer::new(&layers, config.clone()).unwrap();
+    let rays = [
+        (5.0, 5.0),
+        (30.0, 2.0),
+        (100.0, 0.5),
+        (100.0, 0.2),
+        (121.0, 0.0),
+        (300.0, -0.1),
+        (2_000.0, 0.001),
+        (2_000.0, -0.3),
+    ];
+    let mut worst = [0.0f64; 4];
+    for (h0, deg) in rays {
+        let alpha = f64::to_radians(deg);
+        let (theta, psi) = layers.leave(top, h0, alpha).expect("the ray escapes");
+        let n_top = layers.n_and_dndh(top).0;
+        let direction = (n_top * psi.cos()).min(1.0).acos() - theta;
+        for (which, tracer) in [(0, &closed), (2, &integrated)] {
+            let rec = tracer.trace(h0, alpha, &[]).unwrap();
+            assert_eq!(rec.termination, Some(Termination::Escaped), "{h0} {deg}");
+            let d_direction = (rec.end_observer_elevation_rad - direction).abs();
+            let d_distance = (rec.end.distance_m - R * theta).abs();
+            eprintln!(
+                "{h0} m {deg}° ({}): {} steps, direction off {d_direction:.1e} rad, exit {d_distance:.1e} m",
+                ["closed form", "", "integrated"][which],
+                rec.steps()
+            );
+            worst[which] = worst[which].max(d_direction);
+            worst[which + 1] = worst[which + 1].max(d_distance);
+        }
+    }
+    eprintln!("worst: {worst:?}");
+    assert!(
+        worst[0] <= 0.1 * budget_rad,
+        "closed form {:.1e} rad",
+        worst[0]
+    );
+    assert!(
+        worst[1] <= 0.1 * budget_rad * R,
+        "closed form {:.1e} m",
+        worst[1]
+    );
+}
+
 #[test]
 fn piecewise_power_law_matches_the_exact_rays() {
     // Ground to 40 m: dn/dh = −1e-7 (super-refracting, rays still curve less than the Earth);

@@ -1,0 +1,338 @@
+//! Stage 4 (trace), the last leg of an escaping ray in closed form. In: a spherically stratified
+//! index n(h) with its breaks, and a climbing ray (height, local elevation) that Bouguer's
+//! invariant proves will leave through the top without turning again. Out: [`ClimbOut`] — the
+//! angle it still travels about Earth's centre, its path length, and its index and local
+//! elevation at the top.
+//!
+//! With c = n·r·cos ψ constant and g(r) = n·r, a climbing ray's radius grows monotonically until
+//! it leaves, so its angle and path length are integrals over r (the classical refraction
+//! integral):
+//!
+//! dθ/dr = c / (r·√(g² − c²)),   ds/dr = g / √(g² − c²).
+//!
+//! Near the start g − c ≈ a + b·(h − h₁), with a = g₁ − c = g₁·(1 − cos ψ₁) and b = g′(h₁); the
+//! substitution h − h₁ = (H − h₁ + δ)·u² − δ, δ = a/b, makes that √ a multiple of u, which removes
+//! the inverse square root a ray near its turning point (ψ₁ → 0) puts at the lower end, however
+//! small ψ₁ (a feature of width ~√δ that no quadrature node would see otherwise). Where g does not
+//! grow at the start (b ≤ 0, or δ far beyond the climb), the root is bounded away from zero and
+//! h is linear in the variable. The integrand has a kink wherever the
+//! profile has a break, so each piece between breaks is integrated on its own, by the
+//! Gauss–Kronrod 7–15 pair with bisection until the pair agree. A grazing ray's climb from 40 m
+//! to 40 km spans 700 km of path, which the Runge–Kutta integrator crosses in hundreds of steps
+//! of at most `max_step_m`; here it costs a few hundred evaluations of n(h).
+//!
+//! Written by hand: the rule is fifteen constants and a fixed-size stack, shares its nodes
+//! between the two integrands, and allocates nothing per ray; the adaptive quadrature crates
+//! (quad-rs, quad_gk) integrate one boxed or `Arc` integrand at a time over a heap of segments.
+
+/// Gauss–Kronrod 15-point abscissae on [−1, 1] (the non-negative half, descending; the Gauss
+/// 7-point nodes are the odd indices), from QUADPACK's `qk15`.
+const XGK: [f64; 8] = [
+    0.991_455_371_120_812_6,
+    0.949_107_912_342_758_5,
+    0.864_864_423_359_769_1,
+    0.741_531_185_599_394_4,
+    0.586_087_235_467_691_1,
+    0.405_845_151_377_397_2,
+    0.207_784_955_007_898_5,
+    0.0,
+];
+
+/// Kronrod weights for [`XGK`].
+const WGK: [f64; 8] = [
+    0.022_935_322_010_529_22,
+    0.063_092_092_629_978_55,
+    0.104_790_010_322_250_2,
+    0.140_653_259_715_525_9,
+    0.169_004_726_639_267_9,
+    0.190_350_578_064_785_4,
+    0.204_432_940_075_298_9,
+    0.209_482_141_084_727_8,
+];
+
+/// Gauss weights for the nodes `XGK[1]`, `XGK[3]`, `XGK[5]`, `XGK[7]`.
+const WG: [f64; 4] = [
+    0.129_484_966_168_869_7,
+    0.279_705_391_489_276_7,
+    0.381_830_050_505_118_9,
+    0.417_959_183_673_469_4,
+];
+
+/// Most pieces a climb-out may be cut into (bisection stack depth); beyond it the caller keeps
+/// integrating the ray instead.
+const MAX_PIECES: usize = 256;
+
+/// The end of a ray's climb to the top, from where it started climbing out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ClimbOut {
+    /// Angle travelled about Earth's centre (rad).
+    pub angle_rad: f64,
+    /// Path length (m).
+    pub arc_length_m: f64,
+    /// Refractive index at the top.
+    pub index_top: f64,
+    /// Local elevation at the top, inside the atmosphere (rad).
+    pub elevation_top_rad: f64,
+}
+
+/// A climbing ray at `height_m` with local elevation `elevation_rad` (> 0) over a sphere of
+/// `radius_m`, in the index `index` (n and dn/dh at a height) with `breaks_m` (ascending): its climb to
+/// `top_m`, with the angle accurate to `tolerance_rad`. `None` when the ray is not climbing, would
+/// turn below the top (g falls to c), or the quadrature does not settle within [`MAX_PIECES`].
+pub(crate) fn climb_out(
+    index: impl Fn(f64) -> (f64, f64),
+    breaks_m: &[f64],
+    radius_m: f64,
+    height_m: f64,
+    elevation_rad: f64,
+    top_m: f64,
+    tolerance_rad: f64,
+) -> Option<ClimbOut> {
+    let span_m = top_m - height_m;
+    if !(elevation_rad > 0.0 && span_m > 0.0 && tolerance_rad > 0.0) {
+        return None;
+    }
+    let leg = Leg::new(&index, radius_m, height_m, elevation_rad, span_m);
+    let mut angle_rad = 0.0;
+    let mut arc_length_m = 0.0;
+    let inside = breaks_m.iter().filter(|&&b| b > height_m && b < top_m);
+    let mut lower_u = leg.variable(height_m);
+    for upper_u in inside.map(|&b| leg.variable(b)).chain([1.0]) {
+        let (angle, arc) = leg.integrate(lower_u, upper_u, tolerance_rad)?;
+        angle_rad += angle;
+        arc_length_m += arc;
+        lower_u = upper_u;
+    }
+    let (gap_m, g_m) = leg.gap(top_m)?;
+    let index_top = index(top_m).0;
+    let elevation_top_rad = (gap_m * (g_m + leg.invariant_m))
+        .sqrt()
+        .atan2(leg.invariant_m);
+    let finite = angle_rad.is_finite() && arc_length_m.is_finite() && index_top.is_finite();
+    finite.then_some(ClimbOut {
+        angle_rad,
+        arc_length_m,
+        index_top,
+        elevation_top_rad,
+    })
+}
+
+/// One climb: the integrands in the variable u of the module docs.
+struct Leg<'f, F: Fn(f64) -> (f64, f64)> {
+    index: &'f F,
+    radius_m: f64,
+    height_m: f64,
+    /// h − h₁ = scale·u² − shift (quadratic), or scale·u (linear, `shift_m` infinite).
+    scale_m: f64,
+    shift_m: f64,
+    index_start: f64,
+    invariant_m: f64,
+    /// g − c at the start, n₁·r₁·(1 − cos ψ₁), written without cancellation.
+    gap_start_m: f64,
+}
+
+/// Beyond this many climbs' heights, δ no longer matters: the variable is linear in h.
+const LINEAR_SHIFT_SPANS: f64 = 1e3;
+
+impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
+    fn new(index: &'f F, radius_m: f64, height_m: f64, elevation_rad: f64, span_m: f64) -> Self {
+        let (index_start, slope) = index(height_m);
+        let r1 = radius_m + height_m;
+        let g1 = index_start * r1;
+        let half = (0.5 * elevation_rad).sin();
+        let gap_start_m = 2.0 * g1 * half * half;
+        // b = g′(h₁) = n + r·dn/dh.
+        let growth = index_start + r1 * slope;
+        let shift_m = gap_start_m / growth;
+        let quadratic = growth > 0.0 && shift_m <= LINEAR_SHIFT_SPANS * span_m;
+        Leg {
+            index,
+            radius_m,
+            height_m,
+            scale_m: if quadratic { span_m + shift_m } else { span_m },
+            shift_m: if quadratic { shift_m } else { f64::INFINITY },
+            index_start,
+            invariant_m: g1 * elevation_rad.cos(),
+            gap_start_m,
+        }
+    }
+
+    fn linear(&self) -> bool {
+        self.shift_m.is_infinite()
+    }
+
+    /// The variable u at `height_m`.
+    fn variable(&self, height_m: f64) -> f64 {
+        let rise = height_m - self.height_m;
+        if self.linear() {
+            rise / self.scale_m
+        } else {
+            ((rise + self.shift_m) / self.scale_m).sqrt()
+        }
+    }
+
+    /// h and dh/du at u.
+    fn height(&self, u: f64) -> (f64, f64) {
+        if self.linear() {
+            (self.height_m + self.scale_m * u, self.scale_m)
+        } else {
+            let rise = (self.scale_m * u * u - self.shift_m).max(0.0);
+            (self.height_m + rise, 2.0 * self.scale_m * u)
+        }
+    }
+
+    /// g − c and g at `height_m`; `None` where g ≤ c (the ray would turn there).
+    fn gap(&self, height_m: f64) -> Option<(f64, f64)> {
+        let r = self.radius_m + height_m;
+        let dn = (self.index)(height_m).0 - self.index_start;
+        let gap = dn * r + self.index_start * (height_m - self.height_m) + self.gap_start_m;
+        (gap > 0.0).then_some((gap, self.invariant_m + gap))
+    }
+
+    /// dθ/du and ds/du at u.
+    fn integrand(&self, u: f64) -> Option<(f64, f64)> {
+        let (h, dh_du) = self.height(u);
+        let (gap, g) = self.gap(h)?;
+        let root = (gap * (g + self.invariant_m)).sqrt();
+        let r = self.radius_m + h;
+        Some((self.invariant_m * dh_du / (r * root), g * dh_du / root))
+    }
+
+    /// The Kronrod estimates of both integrals over [a, b] and the Kronrod − Gauss difference of
+    /// the angle.
+    fn rule(&self, a: f64, b: f64) -> Option<(f64, f64, f64)> {
+        let centre = 0.5 * (a + b);
+        let half = 0.5 * (b - a);
+        let (mut angle_k, mut arc_k, mut angle_g) = (0.0, 0.0, 0.0);
+        for (i, (&x, &w)) in XGK.iter().zip(&WGK).enumerate() {
+            let nodes = if x == 0.0 { 1 } else { 2 };
+            for sign in [1.0, -1.0].into_iter().take(nodes) {
+                let (angle, arc) = self.integrand(centre + sign * half * x)?;
+                angle_k += w * angle;
+                arc_k += w * arc;
+                if i % 2 == 1 {
+                    angle_g += WG[i / 2] * angle;
+                }
+            }
+        }
+        Some((
+            angle_k * half,
+            arc_k * half,
+            (angle_k - angle_g).abs() * half,
+        ))
+    }
+
+    /// Both integrals over [a, b] (in u), the angle to `tolerance_rad` spread by length.
+    fn integrate(&self, a: f64, b: f64, tolerance_rad: f64) -> Option<(f64, f64)> {
+        if b <= a {
+            return Some((0.0, 0.0));
+        }
+        let per_u = tolerance_rad / (b - a);
+        let mut stack = [(0.0, 0.0); MAX_PIECES];
+        stack[0] = (a, b);
+        let mut depth = 1;
+        let mut pieces = 0;
+        let (mut angle, mut arc) = (0.0, 0.0);
+        while depth > 0 {
+            depth -= 1;
+            let (lo, hi) = stack[depth];
+            let (piece_angle, piece_arc, error) = self.rule(lo, hi)?;
+            pieces += 1;
+            if error <= per_u * (hi - lo) || pieces >= MAX_PIECES {
+                if error > per_u * (hi - lo) {
+                    return None;
+                }
+                angle += piece_angle;
+                arc += piece_arc;
+                continue;
+            }
+            if depth + 2 > MAX_PIECES {
+                return None;
+            }
+            let mid = 0.5 * (lo + hi);
+            stack[depth] = (mid, hi);
+            stack[depth + 1] = (lo, mid);
+            depth += 2;
+        }
+        Some((angle, arc))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_kronrod_rule_is_exact_to_degree_22_and_the_gauss_rule_to_13() {
+        for degree in 0..=23u32 {
+            let exact = if degree % 2 == 1 {
+                0.0
+            } else {
+                2.0 / f64::from(degree + 1)
+            };
+            let (mut kronrod, mut gauss) = (0.0, 0.0);
+            for (i, (&x, &w)) in XGK.iter().zip(&WGK).enumerate() {
+                let nodes: &[f64] = if x == 0.0 { &[0.0] } else { &[x, -x] };
+                for &t in nodes {
+                    kronrod += w * t.powi(degree as i32);
+                    if i % 2 == 1 {
+                        gauss += WG[i / 2] * t.powi(degree as i32);
+                    }
+                }
+            }
+            if degree <= 22 {
+                assert!((kronrod - exact).abs() < 1e-15, "K15 degree {degree}");
+            }
+            if degree <= 13 {
+                assert!((gauss - exact).abs() < 1e-15, "G7 degree {degree}");
+            }
+            if degree == 14 {
+                assert!((gauss - exact).abs() > 1e-6, "G7 is not exact at degree 14");
+            }
+        }
+    }
+
+    /// n ≡ 1: the ray is a straight line, whose angle and length follow from the triangle
+    /// (centre, start, exit).
+    #[test]
+    fn in_vacuum_the_climb_is_a_straight_line() {
+        let radius = 6_371_000.0;
+        for (h1, psi) in [(0.0, 1e-9), (100.0, 1e-4), (2_000.0, 0.01), (10.0, 0.7)] {
+            let top = 40_000.0;
+            let out = climb_out(|_| (1.0, 0.0), &[], radius, h1, psi, top, 1e-13).unwrap();
+            let (r1, rt) = (radius + h1, radius + top);
+            let c = r1 * psi.cos();
+            let psi_top = (c / rt).acos();
+            // Angle at the centre: the straight line's direction turns by exactly that angle.
+            let angle = psi_top - psi;
+            let length = (rt * rt - c * c).sqrt() - r1 * psi.sin();
+            assert!(
+                (out.angle_rad - angle).abs() < 1e-12,
+                "{h1} {psi}: angle {:e} vs {angle:e}",
+                out.angle_rad - angle
+            );
+            assert!(
+                (out.arc_length_m - length).abs() < 1e-6 * length,
+                "{h1} {psi}"
+            );
+            assert!((out.elevation_top_rad - psi_top).abs() < 1e-12);
+            assert_eq!(out.index_top, 1.0);
+        }
+    }
+
+    #[test]
+    fn a_ray_that_would_turn_below_the_top_is_refused() {
+        // n falls fast enough above 1 km that a level ray at 1 km turns back down there.
+        let radius = 6_371_000.0;
+        let index = |h: f64| {
+            let above = h > 1_000.0;
+            (
+                1.0003 - 2e-7 * (h - 1_000.0).max(0.0),
+                if above { -2e-7 } else { 0.0 },
+            )
+        };
+        assert!(climb_out(index, &[1_000.0], radius, 1_000.0, 1e-5, 40_000.0, 1e-10).is_none());
+        assert!(climb_out(|_| (1.0, 0.0), &[], radius, 100.0, 0.0, 40_000.0, 1e-10).is_none());
+        assert!(climb_out(|_| (1.0, 0.0), &[], radius, 100.0, -0.1, 40_000.0, 1e-10).is_none());
+    }
+}
