@@ -534,12 +534,14 @@ pub fn render_scene(
         });
     let shader = Shader {
         cards,
-        sky,
         sky_table,
         sea_table: AngleTable::new(0.0, sea_hi, |g| {
             sea.radiance_with_sky_depths(g, &sky, depths)
         }),
         sun: scene.sun,
+        sun_transmittance: scene
+            .sun
+            .map(|_| AngleTable::new(elevations.0, elevations.1, |e| sky.transmittance(e))),
         heading_rad: cam.heading_rad,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),
