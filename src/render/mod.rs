@@ -9,11 +9,14 @@
 //! few comparisons per card in view, and the sky/sea/sun model (shading in `shade`). Per row,
 //! cards are tested only in the columns their azimuth range and the row's heights allow.
 //!
-//! **Flat rows.** With one sample per pixel, a row whose elevations span less than
-//! [`FLAT_ROW_FRACTION`] × the fan tolerance (the elevation changes by ≈ α·u²/2 across it: every
-//! row of a narrow mirage frame at 400×200, about half of them at 1920×1080) is shaded at the elevation of its centre column: one fan
-//! lookup, one sea or sky colour for the row, and per pixel only the card tests in card columns.
-//! Rows whose ray may meet the sun are shaded pixel by pixel (the disc depends on the azimuth).
+//! **Flat rows.** With one sample per pixel, a row is cut into a few bands of columns (by their
+//! distance from the centre column, on which alone the elevation depends) whose elevations span
+//! less than [`FLAT_ROW_FRACTION`] × the fan tolerance (the elevation changes by ≈ α·u²/2 across
+//! a row: one band for every row of a narrow mirage frame at 400×200, one to a few at
+//! 1920×1080). Each band is shaded at the elevation of its first column: one fan lookup, one sea
+//! or sky colour, and per pixel only the card tests in card columns. Rows whose ray may meet
+//! the sun, or that would need more than a few bands, are shaded pixel by pixel (the disc
+//! depends on each pixel's own elevation and azimuth).
 //!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
@@ -220,6 +223,10 @@ struct RowScratch {
     heights: Vec<Option<f64>>,
     /// Column ranges [a, b) whose rays may meet a card.
     card_columns: Vec<(usize, usize)>,
+    /// The same in a flat row, with the band they belong to.
+    band_columns: Vec<(usize, (usize, usize))>,
+    /// Interpolated heights at the card distances of each flat band, band after band.
+    band_heights: Vec<Option<f64>>,
 }
 
 impl RowScratch {
@@ -228,6 +235,8 @@ impl RowScratch {
             dirs: Vec::with_capacity(samples),
             heights: vec![None; distances],
             card_columns: Vec::new(),
+            band_columns: Vec::new(),
+            band_heights: Vec::new(),
         }
     }
 
@@ -258,8 +267,8 @@ impl RowScratch {
 /// one image row may differ for the row to be shaded at a single elevation (1 sample per pixel,
 /// fan mode). Along a row of a level camera the elevation changes by about α·u²/2 (u the
 /// half-width in radians): across a 1° mirage frame at α = 0.3° that is 0.005 px at 400 px wide
-/// (every row of the paper frames at 400×200 is flat) but 0.02 px at 1920 (about half the rows
-/// of a 1080p frame are). Flat rows share one ray — one fan lookup, the sea or sky colour once —
+/// (every row of the paper frames at 400×200 is one band) but 0.02 px at 1920 (rows of a 1080p
+/// frame take one to a few bands). A band shares one ray — one fan lookup, the sea or sky colour once —
 /// and only columns that can meet a card (or rows that meet the sun) are shaded pixel by pixel.
 /// Features are then misplaced by at most (1 + this) × the fan tolerance.
 pub const FLAT_ROW_FRACTION: f64 = 0.1;
@@ -274,8 +283,61 @@ struct FlatRow<'a> {
     y: u32,
 }
 
-/// Shade row `y` (1 sample per pixel) at one elevation, if its elevations span less than
-/// `limit_rad` and it does not meet the sun; returns whether it did.
+/// Most bands a row is cut into by [`flat_bands`]; a row that needs more is shaded pixel by pixel.
+const MAX_FLAT_BANDS: usize = 8;
+
+/// One band of a flat row: the columns at the same distance from the centre column as the
+/// right-half columns [`start`, `end`), shaded at the elevation of column `start`.
+struct FlatBand {
+    start: usize,
+    end: usize,
+    alpha: f64,
+    background: [f64; 3],
+    /// Whether every sample of the band sees only sky (no fan lookup was needed).
+    clear_sky: bool,
+}
+
+/// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
+/// depends on nothing else, and changes monotonically with it), whose elevations stay within
+/// `limit_rad` of the band's first column. `None` if that takes more than [`MAX_FLAT_BANDS`]
+/// or an elevation is not finite. Bands are returned by their right-half column ranges.
+fn flat_bands(
+    frame: &CameraFrame,
+    y: u32,
+    width: u32,
+    limit_rad: f64,
+) -> Option<Vec<(usize, f64)>> {
+    let film_y = y as f64 + 0.5;
+    let elevation = |x: usize| frame.view_direction(x as f64 + 0.5, film_y).elevation_rad;
+    let width = width as usize;
+    let mut bands = Vec::new();
+    let mut start = width / 2;
+    while start < width {
+        if bands.len() == MAX_FLAT_BANDS {
+            return None;
+        }
+        let alpha = elevation(start);
+        if !alpha.is_finite() {
+            return None;
+        }
+        // The last column within the limit (monotone: bisect).
+        let (mut lo, mut hi) = (start, width);
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if (elevation(mid) - alpha).abs() <= limit_rad {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        bands.push((start, alpha));
+        start = lo + 1;
+    }
+    Some(bands)
+}
+
+/// Shade row `y` (1 sample per pixel) band by band ([`flat_bands`]: each band at one elevation),
+/// if it can be cut into few enough bands and no band meets the sun; returns whether it did.
 fn shade_flat_row(
     ctx: &FlatRow<'_>,
     row: &mut [[f32; 4]],
@@ -284,61 +346,117 @@ fn shade_flat_row(
 ) -> bool {
     let width = row.len() as u32;
     let film_y = ctx.y as f64 + 0.5;
-    // The elevation changes monotonically with the distance from the centre column.
-    let centre = ctx.frame.view_direction((width / 2) as f64 + 0.5, film_y);
-    let edge = ctx.frame.view_direction(0.5, film_y);
-    let span = (centre.elevation_rad - edge.elevation_rad).abs();
-    if span.is_nan() || span > ctx.limit_rad {
+    let Some(starts) = flat_bands(ctx.frame, ctx.y, width, ctx.limit_rad) else {
         return false;
+    };
+    let n_dist = scratch.heights.len();
+    let RowScratch {
+        band_heights,
+        band_columns: columns,
+        ..
+    } = scratch;
+    band_heights.clear();
+    band_heights.resize(starts.len() * n_dist, None);
+    columns.clear();
+    let mut bands = Vec::with_capacity(starts.len());
+    for (k, &(start, alpha)) in starts.iter().enumerate() {
+        let end = starts.get(k + 1).map_or(width as usize, |b| b.0);
+        let heights = &mut band_heights[k * n_dist..(k + 1) * n_dist];
+        if alpha >= ctx.clear_sky_from {
+            bands.push(FlatBand {
+                start,
+                end,
+                alpha,
+                background: ctx.shader.sky_table.at(alpha),
+                clear_sky: true,
+            });
+            continue;
+        }
+        let fan_end = ctx.fan.interpolate(alpha, heights);
+        if ctx.shader.may_meet_sun(fan_end) {
+            return false;
+        }
+        for card in &ctx.shader.cards {
+            if let Some(h) = heights[card.distance_index]
+                && !(h < card.base_m || h > card.top_m)
+            {
+                let range = card_column_range(card, ctx.frame, ctx.y, width);
+                columns.push((k, range.unwrap_or((0, width as usize))));
+            }
+        }
+        let dir = ctx
+            .frame
+            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
+        bands.push(FlatBand {
+            start,
+            end,
+            alpha,
+            background: ctx.shader.background(&dir, fan_end),
+            clear_sky: false,
+        });
     }
-    let alpha = centre.elevation_rad;
-    // A colour that is not finite becomes the fallback; `samples` pixels use it (counted).
-    let finite = |c: [f64; 3], samples: u64| {
+    shade_bands(ctx, row, &bands, band_heights, columns, non_finite);
+    true
+}
+
+/// Fill `row` from its flat bands: the band's background, or the cards over it in the columns
+/// (`columns`: band index, column range) where the band's ray meets a card.
+fn shade_bands(
+    ctx: &FlatRow<'_>,
+    row: &mut [[f32; 4]],
+    bands: &[FlatBand],
+    band_heights: &[Option<f64>],
+    columns: &[(usize, (usize, usize))],
+    non_finite: &AtomicU64,
+) {
+    let width = row.len();
+    let n_dist = band_heights.len() / bands.len().max(1);
+    let film_y = ctx.y as f64 + 0.5;
+    // A colour that is not finite becomes the fallback (counted per sample).
+    let finite = |c: [f64; 3]| {
         if c.iter().all(|v| v.is_finite()) {
             c
         } else {
-            if samples > 0 {
-                non_finite.fetch_add(samples, Ordering::Relaxed);
-            }
+            non_finite.fetch_add(1, Ordering::Relaxed);
             ctx.shader.fallback
         }
     };
     let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
-    if alpha >= ctx.clear_sky_from {
-        row.fill(pixel(finite(ctx.shader.sky_table.at(alpha), width as u64)));
-        return true;
-    }
-    let heights = &mut scratch.heights;
-    let end = ctx.fan.interpolate(alpha, heights);
-    if ctx.shader.may_meet_sun(end) {
-        return false;
-    }
-    let columns = &mut scratch.card_columns;
-    columns.clear();
-    for card in &ctx.shader.cards {
-        if let Some(h) = heights[card.distance_index]
-            && !(h < card.base_m || h > card.top_m)
-        {
-            columns.push(
-                card_column_range(card, ctx.frame, ctx.y, width).unwrap_or((0, width as usize)),
-            );
-        }
-    }
-    let background = ctx.shader.background(&centre, end);
-    let in_card_columns = |x: usize| columns.iter().any(|&(a, b)| (a..b).contains(&x));
-    let filled = (0..row.len()).filter(|&x| !in_card_columns(x)).count();
-    let fill = pixel(finite(background, filled as u64));
+    let fills: Vec<[f32; 4]> = bands
+        .iter()
+        .map(|b| {
+            let c = b.background;
+            pixel(if c.iter().all(|v| v.is_finite()) {
+                c
+            } else {
+                ctx.shader.fallback
+            })
+        })
+        .collect();
     for (x, px) in row.iter_mut().enumerate() {
-        *px = if in_card_columns(x) {
+        let mirrored = x.max(width - 1 - x);
+        let k = bands
+            .iter()
+            .position(|b| (b.start..b.end).contains(&mirrored))
+            .unwrap_or(0);
+        let band = &bands[k];
+        let in_card = !band.clear_sky
+            && columns
+                .iter()
+                .any(|&(j, (a, b))| j == k && (a..b).contains(&x));
+        *px = if in_card {
             let dir = ctx
                 .frame
-                .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha);
-            pixel(finite(ctx.shader.composite(&dir, heights, background), 1))
+                .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
+            let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
+            pixel(finite(ctx.shader.composite(&dir, heights, band.background)))
         } else {
-            fill
+            if !band.background.iter().all(|v| v.is_finite()) {
+                non_finite.fetch_add(1, Ordering::Relaxed);
+            }
+            fills[k]
         };
     }
-    true
 }
 
 /// Pixel columns [a, b) of row `y` whose samples may see `card`, given that their elevations lie
@@ -597,6 +715,7 @@ pub fn render_scene(
                     dirs,
                     heights,
                     card_columns,
+                    ..
                 } = scratch;
                 // Which pixels' rays may meet a card: all of them when tracing per sample;
                 // with a fan, those in the column range of a card that the row's rays can reach.

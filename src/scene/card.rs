@@ -74,12 +74,19 @@ impl Texture {
 
     /// Read and decode an image file.
     pub fn from_file(path: &Path) -> Result<Self, TextureError> {
+        Self::from_file_with_digest(path).map(|(texture, _)| texture)
+    }
+
+    /// Read and decode an image file, with the sha256 of the bytes that were decoded.
+    pub fn from_file_with_digest(path: &Path) -> Result<(Self, [u8; 32]), TextureError> {
+        use sha2::{Digest, Sha256};
         let wrap = |source| TextureError {
             path: path.to_path_buf(),
             source,
         };
         let bytes = std::fs::read(path).map_err(|e| wrap(image::ImageError::IoError(e)))?;
-        Self::from_image_bytes(&bytes).map_err(wrap)
+        let texture = Self::from_image_bytes(&bytes).map_err(wrap)?;
+        Ok((texture, Sha256::digest(&bytes).into()))
     }
 
     /// Bilinear sample at texture coordinates (`u`, `v`) in [0, 1] (v = 0 at the top edge);

@@ -506,6 +506,7 @@ impl Scene {
         };
 
         let mut cards = Vec::with_capacity(raw.cards.len());
+        let mut card_digests = Vec::with_capacity(raw.cards.len());
         for (i, rc) in raw.cards.iter().enumerate() {
             let key = |k: &str| format!("cards[{i}].{k}");
             let image_path = resolve(&rc.image);
@@ -535,11 +536,14 @@ impl Scene {
                 100_000.0,
                 "−1000…100000 m",
             )?;
-            let texture =
-                Texture::from_file(&image_path).map_err(|source| SceneError::Texture {
-                    path: name.to_path_buf(),
-                    source,
+            let (texture, digest) =
+                Texture::from_file_with_digest(&image_path).map_err(|source| {
+                    SceneError::Texture {
+                        path: name.to_path_buf(),
+                        source,
+                    }
                 })?;
+            card_digests.push(digest);
             cards.push(Card {
                 image_path,
                 distance_m,
@@ -606,11 +610,12 @@ impl Scene {
             sun,
             hash_hex: String::new(),
         };
-        scene.hash_hex = scene.compute_hash(text);
+        scene.hash_hex = scene.compute_hash(text, &card_digests);
         Ok(scene)
     }
 
-    fn compute_hash(&self, text: &str) -> String {
+    /// `card_digests`: the sha256 of each card's image file, in card order.
+    fn compute_hash(&self, text: &str, card_digests: &[[u8; 32]]) -> String {
         let mut h = Sha256::new();
         h.update(b"ghostship-scene-v1\0");
         h.update(text.as_bytes());
@@ -641,15 +646,11 @@ impl Scene {
                 Err(_) => h.update(b"unreadable"),
             }
         }
-        for card in &self.cards {
-            h.update(b"\0");
-            h.update(card.texture.width.to_le_bytes());
-            h.update(card.texture.height.to_le_bytes());
-            for t in &card.texture.texels {
-                for v in t {
-                    h.update(v.to_le_bytes());
-                }
-            }
+        // The card images by the content of their files (what was decoded; hashing the
+        // decoded linear texels instead costs more than rendering a small frame).
+        for digest in card_digests {
+            h.update(b"\0card\0");
+            h.update(digest);
         }
         h.finalize().iter().map(|b| format!("{b:02x}")).collect()
     }
@@ -787,6 +788,26 @@ mod tests {
         let b = hash_in(one.path(), "surface_temperature_c = 5.0\n");
         let c = hash_in(two.path(), "surface_temperature_c = 0.0\n");
         assert_ne!(a, b, "editing the atmosphere must change the scene hash");
+        assert_eq!(a, c, "the same files in another folder give the same hash");
+    }
+
+    #[test]
+    fn hash_follows_the_card_image_content_not_its_folder() {
+        let text = format!(
+            "{MINIMAL}[[cards]]\nimage = \"card.png\"\ndistance_m = 1000\nwidth_m = 10\nheight_m = 5\n"
+        );
+        let hash_in = |dir: &Path, rgba: [u8; 4]| {
+            let img = image::RgbaImage::from_pixel(4, 2, image::Rgba(rgba));
+            img.save(dir.join("card.png")).unwrap();
+            Scene::from_toml_str(&text, dir, Path::new("s.toml"))
+                .unwrap()
+                .hash_hex
+        };
+        let (one, two) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let a = hash_in(one.path(), [10, 20, 30, 255]);
+        let b = hash_in(one.path(), [10, 20, 31, 255]);
+        let c = hash_in(two.path(), [10, 20, 30, 255]);
+        assert_ne!(a, b, "editing a card image must change the scene hash");
         assert_eq!(a, c, "the same files in another folder give the same hash");
     }
 
