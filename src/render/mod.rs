@@ -813,6 +813,51 @@ mod tests {
     }
 
     #[test]
+    fn flat_bands_cover_the_row_within_the_limit() {
+        // A 1.1° frame pitched up 0.3° (the Fata Morgana scene's width), where the elevation
+        // changes across a row by more than the limit; odd and even widths (the mirror
+        // column of x is width − 1 − x).
+        let mut most_bands = 0;
+        for width in [1920u32, 1921, 7] {
+            let cam = crate::scene::camera::Camera {
+                height_m: 10.0,
+                heading_rad: 0.3,
+                pitch_rad: 0.005,
+                hfov_rad: 0.019,
+                width,
+                height: 200,
+                samples_per_pixel: 1,
+            };
+            let frame = cam.frame();
+            let limit_rad = FLAT_ROW_FRACTION * 0.25 * cam.min_pixel_angle_rad();
+            let mut banded_rows = 0;
+            for y in [0u32, 40, 100, 199] {
+                let Some(bands) = flat_bands(&frame, y, width, limit_rad) else {
+                    continue;
+                };
+                banded_rows += 1;
+                most_bands = most_bands.max(bands.len());
+                assert_eq!(bands[0].0, width as usize / 2);
+                assert!(bands.windows(2).all(|w| w[0].0 < w[1].0));
+                let film_y = y as f64 + 0.5;
+                let elevation =
+                    |x: usize| frame.view_direction(x as f64 + 0.5, film_y).elevation_rad;
+                for x in 0..width as usize {
+                    let mirrored = x.max(width as usize - 1 - x);
+                    let k = bands.iter().rposition(|b| b.0 <= mirrored).unwrap();
+                    let off = (elevation(x) - bands[k].1).abs();
+                    assert!(
+                        off <= limit_rad * (1.0 + 1e-9),
+                        "w{width} y{y} x{x}: {off:e}"
+                    );
+                }
+            }
+            assert!(banded_rows >= 2, "w{width}: {banded_rows}");
+        }
+        assert!(most_bands >= 2, "{most_bands}");
+    }
+
+    #[test]
     fn jitter_hash_is_uniform_enough() {
         let n = 10_000;
         let mean: f64 = (0..n).map(|i| unit_hash(i as u64)).sum::<f64>() / n as f64;
