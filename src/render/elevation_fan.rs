@@ -90,8 +90,14 @@ pub struct ElevationFan {
     pub max_depth_reached: u32,
 }
 
+/// Whether two ends are shaded alike (trapped and lost rays both get the fallback).
 fn same_kind(a: &FanEnd, b: &FanEnd) -> bool {
-    std::mem::discriminant(a) == std::mem::discriminant(b)
+    let kind = |e: &FanEnd| match e {
+        FanEnd::Ground { .. } => 0,
+        FanEnd::Sky { .. } => 1,
+        FanEnd::Trapped | FanEnd::Lost => 2,
+    };
+    kind(a) == kind(b)
 }
 
 /// Does the interval (a, b) with traced midpoint m need more bisection?

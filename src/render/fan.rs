@@ -54,7 +54,12 @@ pub enum FanEnd {
         /// Elevation of the final direction relative to the observer's horizontal (rad).
         elevation_rad: f64,
     },
-    /// Trapped or failed; the renderer shades a documented fallback (never NaN).
+    /// Oscillates in a duct for ever (Bouguer's invariant proves it,
+    /// [`Termination::Trapped`](crate::tracer::Termination::Trapped)): it never reaches the sea
+    /// or the sky. Shaded like [`FanEnd::Lost`], as the horizon-sky fallback.
+    Trapped,
+    /// Failed: cut short by the tracer's step or length budget, or the field or the state became
+    /// non-finite. The renderer shades a documented fallback (never NaN).
     Lost,
 }
 

@@ -195,7 +195,7 @@ impl Shader<'_> {
                     l
                 }
             }
-            FanEnd::Lost => self.fallback,
+            FanEnd::Trapped | FanEnd::Lost => self.fallback,
         }
     }
 

@@ -13,7 +13,7 @@
 //!
 //! **Early stops** follow the tracer's one fate rule, [`FateWatch`] (Bouguer's invariant over a
 //! [`BouguerEnvelope`] of the field, built once per tracer): past the last card a ray that
-//! provably oscillates in a duct ends [`Termination::Trapped`] ([`FanEnd::Lost`], shaded as the
+//! provably oscillates in a duct ends [`Termination::Trapped`] ([`FanEnd::Trapped`], shaded as the
 //! horizon sky). A ray that provably escapes, once nothing is left for it to meet — past the last
 //! card, or climbing above every card top without another turning point — climbs out to the top
 //! in closed form ([`FanEnd::Sky`] with its final direction), or, without a sun (the direction
@@ -70,6 +70,7 @@ fn fan_ray(record: &RayRecord, elevation_rad: f64, n_distances: usize) -> FanRay
                 elevation_rad: record.end_observer_elevation_rad,
             }
         }
+        Some(Termination::Trapped) => FanEnd::Trapped,
         _ => FanEnd::Lost,
     };
     FanRay {
@@ -597,6 +598,37 @@ mod tests {
                 other => panic!("{alpha}: {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn a_ducted_ray_is_trapped_and_a_ray_out_of_steps_is_lost() {
+        // An elevated duct from 20 to 60 m (dn/dh −4e-7, 2.5× the Earth's curvature): n·r peaks
+        // at 20 m, and a level ray from 25 m oscillates about it (turning near 8.6 m and at
+        // 25 m) for ever.
+        let duct = Layered {
+            g: -4e-7,
+            lo: 20.0,
+            hi: 60.0,
+        };
+        let config = render_tracer_config(EARTH_RADIUS_M);
+        for need_sky in [false, true] {
+            let rays = CurvedRays::new(&duct, config.clone(), 30.0).unwrap();
+            let r = rays.trace(25.0, 0.0, &[5_000.0], need_sky);
+            assert_eq!(r.end, FanEnd::Trapped, "{r:?}");
+            assert!(r.heights_m[0].is_some_and(|h| h > 8.0 && h < 25.1), "{r:?}");
+            let exact = ExactRays::new(&duct, config.clone(), 30.0).unwrap();
+            assert_eq!(
+                exact.trace(25.0, 0.0, &[5_000.0], need_sky).end,
+                FanEnd::Trapped
+            );
+        }
+        // The same ray with a budget of 20 steps is cut short: lost, not trapped.
+        let short = TracerConfig {
+            max_steps: 20,
+            ..config
+        };
+        let rays = CurvedRays::new(&duct, short, 30.0).unwrap();
+        assert_eq!(rays.trace(25.0, 0.0, &[50_000.0], true).end, FanEnd::Lost);
     }
 
     #[test]

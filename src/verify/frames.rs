@@ -13,9 +13,9 @@
 //!
 //! The reference renders are `ghostship render`'s at the tightest tolerance it accepts (the low
 //! end of [`TRACER_TOLERANCE_RANGE_M`]; the ray study's 1e-7 m is outside that range), with the
-//! renderer's own step budget. Rays that end [`FanEnd::Lost`] (trapped, or cut short by the step
-//! budget) are shaded as the horizon-sky fallback; every render of the sweep counts them, so a
-//! reference that has them shows it.
+//! renderer's own step budget. Rays that end [`FanEnd::Trapped`] (in a duct for ever) or
+//! [`FanEnd::Lost`] (cut short by the step budget) are shaded as the horizon-sky fallback; every
+//! render of the sweep counts both, apart, so a reference that has lost rays shows it.
 //!
 //! Image error is measured on the 8-bit sRGB pixels of the PNG output ([`film_to_srgb8`] at the
 //! configured exposure): the fraction of pixels of which any channel differs, and the largest
@@ -412,14 +412,19 @@ pub struct PathPoint {
     pub diff: PixelDiff,
     /// Rays traced for one render (the fan's rays, or one per pixel on the exact path).
     pub rays: u64,
-    /// Of those, rays that ended [`FanEnd::Lost`] (trapped or cut short; shaded as the fallback).
+    /// Of those, rays that ended [`FanEnd::Trapped`] (in a duct for ever; shaded as the
+    /// fallback).
+    pub trapped_rays: u64,
+    /// Of those, rays that ended [`FanEnd::Lost`] (cut short by the step budget or non-finite;
+    /// shaded as the fallback).
     pub lost_rays: u64,
 }
 
-/// A [`RayTracer`] that passes every call on and counts the calls and the lost rays.
+/// A [`RayTracer`] that passes every call on and counts the calls, the trapped and the lost rays.
 struct Counting<'t> {
     inner: &'t dyn RayTracer,
     calls: AtomicU64,
+    trapped: AtomicU64,
     lost: AtomicU64,
 }
 
@@ -428,6 +433,7 @@ impl<'t> Counting<'t> {
         Counting {
             inner,
             calls: AtomicU64::new(0),
+            trapped: AtomicU64::new(0),
             lost: AtomicU64::new(0),
         }
     }
@@ -448,9 +454,11 @@ impl RayTracer for Counting<'_> {
             need_sky_direction,
         );
         self.calls.fetch_add(1, Ordering::Relaxed);
-        if ray.end == FanEnd::Lost {
-            self.lost.fetch_add(1, Ordering::Relaxed);
-        }
+        match ray.end {
+            FanEnd::Trapped => self.trapped.fetch_add(1, Ordering::Relaxed),
+            FanEnd::Lost => self.lost.fetch_add(1, Ordering::Relaxed),
+            _ => 0,
+        };
         ray
     }
 }
@@ -476,6 +484,7 @@ fn sweep_point(
         runs,
         diff,
         rays: counting.calls.into_inner() / per_run,
+        trapped_rays: counting.trapped.into_inner() / per_run,
         lost_rays: counting.lost.into_inner() / per_run,
     };
     Ok((point, film))

@@ -114,7 +114,10 @@ fn fan_tracer_markdown(timings: &[FrameTiming]) -> String {
 }
 
 fn rays(p: &PathPoint) -> String {
-    format!("{} ({} lost)", p.rays, p.lost_rays)
+    format!(
+        "{} ({} trapped, {} lost)",
+        p.rays, p.trapped_rays, p.lost_rays
+    )
 }
 
 /// One scene's sweep table.
@@ -139,19 +142,20 @@ fn sweep_table(sw: &SceneSweep) -> String {
     );
     s.push_str(
         "| tolerance (m) | fan (ms) | fan rays | fan changed | fan max Δ | exact 3-D (ms) | \
-         exact lost rays | exact changed | exact max Δ |\n\
+         exact trapped / lost rays | exact changed | exact max Δ |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for row in &sw.rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} / {} | {} | {} |",
             fmt_tol(row.tolerance_m),
             ms(row.fan.frame_ms),
             rays(&row.fan),
             changed(&row.fan.diff),
             row.fan.diff.max_channel,
             ms(row.exact.frame_ms),
+            row.exact.trapped_rays,
             row.exact.lost_rays,
             changed(&row.exact.diff),
             row.exact.diff.max_channel,
@@ -176,10 +180,11 @@ pub fn frames_markdown(
          on the fan path and on the exact 3-D path, against a render of the same path at \
          {rt:e} m, the tightest tolerance `ghostship render` accepts (the ray study's 1e-7 m is \
          outside its range), with the renderer's own step budget.\n\
-         * *Lost* rays ended neither on the sea nor in the sky (trapped, or cut short by the step \
-         budget) and are shaded as the horizon-sky fallback: a reference with lost rays is wrong \
-         where they are, and the rows below compare with it all the same. The exact path traces \
-         one ray per pixel.\n\
+         * *Trapped* rays oscillate in a duct for ever (proved by Bouguer's invariant) and \
+         *lost* rays were cut short (step budget, non-finite field); neither reaches the sea or \
+         the sky, and both are shaded as the horizon-sky fallback. Trapped rays are physics; a \
+         reference with lost rays is wrong where they are, and the rows below compare with it \
+         all the same. The exact path traces one ray per pixel.\n\
          * Image error on the 8-bit sRGB pixels of the PNG output (exposure {exp}): **changed** \
          — pixels of which any channel differs (count, and fraction of the frame); **max Δ** — \
          the largest difference of one channel (of 255).\n\
