@@ -17,7 +17,8 @@ use crate::sounding::{ReadOptions, Sounding, read_sounding};
 use crate::tracer::StratifiedIndex;
 
 /// What the user named: a sounding file, a synthetic atmosphere TOML, or the standard atmosphere.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum AtmosphereSource {
     /// A radiosonde sounding (normalised CSV, Wyoming, IGRA2; the format is read from the content).
     Sounding(PathBuf),
@@ -77,7 +78,7 @@ impl std::fmt::Display for AtmosphereSource {
 }
 
 /// How to build the atmosphere.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AtmosphereOptions {
     /// Smoothing scale of the sounding fit (m); see [`FitOptions::smooth_m`]. Ignored for
     /// synthetic and standard atmospheres.
@@ -169,8 +170,17 @@ pub enum AtmosphereError {
 pub fn load_scene_atmosphere(
     settings: &AtmosphereSettings,
 ) -> Result<Option<LoadedAtmosphere>, AtmosphereError> {
+    scene_atmosphere(settings)
+        .map(|(source, options)| load_atmosphere(&source, &options))
+        .transpose()
+}
+
+/// What a scene's `[atmosphere]` section names and how to load it; `None` for straight rays.
+pub fn scene_atmosphere(
+    settings: &AtmosphereSettings,
+) -> Option<(AtmosphereSource, AtmosphereOptions)> {
     if settings.straight {
-        return Ok(None);
+        return None;
     }
     let source = match &settings.source {
         AtmosphereSpec::Sounding(p) => AtmosphereSource::Sounding(p.clone()),
@@ -184,7 +194,7 @@ pub fn load_scene_atmosphere(
         wavelength_nm: settings.wavelength_nm,
         igra2_time: settings.igra2_time.clone(),
     };
-    load_atmosphere(&source, &options).map(Some)
+    Some((source, options))
 }
 
 /// Read, fit and refract the atmosphere `source` names.

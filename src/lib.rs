@@ -16,6 +16,8 @@
 
 pub mod analysis;
 pub mod atmosphere;
+pub mod input;
+pub mod jobs;
 pub mod output;
 pub mod pipeline;
 pub mod profile;

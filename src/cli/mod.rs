@@ -87,6 +87,36 @@ fn write_quietly(out: &mut impl Write, text: &[u8]) -> std::io::Result<()> {
     }
 }
 
+/// Write each product to its path (atomically, through the jobs layer's writer) and, unless
+/// `quiet`, say so on stderr.
+pub fn write_files(
+    files: &[(std::path::PathBuf, ghostship::jobs::Product)],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    ghostship::jobs::writer::write_products_to(
+        files.iter().map(|(p, product)| (p.as_path(), product)),
+    )?;
+    if !quiet {
+        for (path, _) in files {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// Write `products` into `dir` under their names (see [`write_files`]).
+pub fn write_into(
+    dir: &std::path::Path,
+    products: &[ghostship::jobs::Product],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let files: Vec<_> = products
+        .iter()
+        .map(|p| (dir.join(&p.name), p.clone()))
+        .collect();
+    write_files(&files, quiet)
+}
+
 /// The error and its causes on one line, `outer: inner: …` (like anyhow's `{:#}`), leaving out a
 /// cause whose text the message so far already ends with: several stage errors print their
 /// source inside their own message *and* expose it as the source, which would repeat it.

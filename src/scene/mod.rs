@@ -319,10 +319,12 @@ pub fn samples_per_pixel_root(spp: u32) -> Option<u32> {
 impl Scene {
     /// Load a scene file; paths inside are relative to its folder.
     pub fn from_file(path: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::input::read_limited_text(path, crate::input::MAX_TOML_BYTES).map_err(
+            |source| SceneError::Read {
+                path: path.to_path_buf(),
+                source,
+            },
+        )?;
         let base = path.parent().unwrap_or(Path::new("."));
         let mut scene = Self::from_toml_str(&text, base, path)?;
         scene.source_path = Some(path.to_path_buf());
@@ -636,7 +638,7 @@ impl Scene {
         if let AtmosphereSpec::Sounding(p) | AtmosphereSpec::Synthetic(p) = &self.atmosphere.source
         {
             h.update(b"\0atmosphere\0");
-            match std::fs::read(p) {
+            match crate::input::read_limited(p, crate::input::MAX_SOUNDING_BYTES) {
                 Ok(bytes) => h.update(bytes),
                 Err(_) => h.update(b"unreadable"),
             }
