@@ -20,9 +20,10 @@ use std::process::Command;
 use std::time::Instant;
 
 use ghostship::atmosphere::load_scene_atmosphere;
+use ghostship::jobs::render::provenance;
 use ghostship::output::film::write_films;
 use ghostship::output::{exr, png, write_atomic};
-use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
+use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
 const SCENES: [&str; 9] = [

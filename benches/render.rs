@@ -8,8 +8,9 @@ use std::path::PathBuf;
 
 use criterion::{Criterion, criterion_group};
 use ghostship::atmosphere::{LoadedAtmosphere, load_scene_atmosphere};
+use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
-use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
+use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
 const SCENES: [&str; 9] = [

@@ -126,12 +126,28 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     if !quiet {
         super::print_stdout(&summary_table(&report, &out, args, start.elapsed()))?;
     }
-    let failed = report.failed();
-    if failed > 0 {
+    let failed: Vec<String> = report
+        .jobs
+        .iter()
+        .filter_map(|j| match &j.outcome {
+            JobOutcome::Failed(reason) => Some(format!("  {}: {reason}", j.name)),
+            _ => None,
+        })
+        .collect();
+    if !failed.is_empty() {
+        const SHOWN: usize = 20;
+        let more = failed.len().saturating_sub(SHOWN);
         anyhow::bail!(
-            "{failed} of {} job(s) failed (see the table above and {})",
+            "{} of {} job(s) failed (every reason is in {}):\n{}{}",
+            failed.len(),
             report.jobs.len(),
-            report.manifest.as_deref().unwrap_or(&out).display()
+            report.manifest.as_deref().unwrap_or(&out).display(),
+            failed[..failed.len().min(SHOWN)].join("\n"),
+            if more > 0 {
+                format!("\n  … and {more} more")
+            } else {
+                String::new()
+            }
         );
     }
     Ok(())

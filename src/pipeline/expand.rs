@@ -179,6 +179,16 @@ fn with_times(
     let (from, to) = match times {
         TimeSelection::First => (None, None),
         TimeSelection::One(t) => {
+            if let Some(path) = source.path()
+                && let Some(all) = crate::sounding::igra2_times(path).map_err(|e| e.to_string())?
+                && !all.contains(t)
+            {
+                return Err(format!(
+                    "{}: no IGRA2 sounding at {t:?} (the file holds: {})",
+                    path.display(),
+                    all.join(", ")
+                ));
+            }
             return Ok(vec![AtmosphereChoice {
                 source,
                 igra2_time: Some(t.clone()),

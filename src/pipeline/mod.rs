@@ -59,7 +59,7 @@ pub enum PipelineError {
         source: std::io::Error,
     },
     /// The file has problems; every one is listed as `file:line:column: message`.
-    #[error("invalid pipeline {}: {}", path.display(), list(path, problems))]
+    #[error("invalid pipeline: {}", list(path, problems))]
     Invalid {
         /// The pipeline file.
         path: PathBuf,
@@ -337,7 +337,7 @@ fn diagnostics(text: &str, problems: Vec<Problem>) -> Vec<Diagnostic> {
             }
         })
         .collect();
-    out.sort_by(|a, b| (a.line, a.column).cmp(&(b.line, b.column)));
+    out.sort_by_key(|d| (d.line, d.column));
     out.dedup();
     out
 }

@@ -10,12 +10,13 @@
 use std::sync::Arc;
 
 use ghostship::analysis::{Image, Reach, TransferCurve, find_images};
+use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
 use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::traced::render_tracer_config;
 use ghostship::render::{
-    CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, provenance, render_scene,
+    CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, render_scene,
 };
 use ghostship::scene::card::srgb_to_linear;
 use ghostship::scene::{AtmosphereSpec, Scene, Texture, assets};
