@@ -168,10 +168,11 @@ fn summary_table(
         .max()
         .unwrap_or(3)
         .max(3);
-    let mut text = format!(
+    let header = format!(
         "{:<width$}  {:<7}  {:<9}  {:>8}  outputs\n",
         "job", "kind", "status", "time"
     );
+    let mut text = String::new();
     let (mut ran, mut skipped, mut failed) = (0, 0, 0);
     for job in &report.jobs {
         let status = match &job.outcome {
@@ -214,6 +215,9 @@ fn summary_table(
                 text.push_str(&format!("    {}\n", path.display()));
             }
         }
+    }
+    if !text.is_empty() {
+        text.insert_str(0, &header);
     }
     let verb = if args.dry_run { "would run" } else { "ran" };
     text.push_str(&format!(

@@ -66,7 +66,10 @@ pub type Problem = (Range<usize>, String);
 
 /// One value or a list of them.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "a number or a list of numbers (for paths: a string or a list of strings)"
+)]
 pub enum OneOrMany<T> {
     /// A single value.
     One(T),

@@ -74,3 +74,73 @@ pub fn usage_error(args: &[&str]) -> Run {
 pub fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
+
+/// Every file under `dir` (recursively) by its path relative to `dir`, with its bytes; empty
+/// if `dir` does not exist.
+pub fn output_tree(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut files = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(folder) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path
+                    .strip_prefix(dir)
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned();
+                files.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    files
+}
+
+/// `ghostship pipeline run PIPELINE --out OUT EXTRA…`.
+pub fn pipeline_run(pipeline: &Path, out: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "pipeline",
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+/// Path of the `ghostship` binary built for these tests (for spawning and killing it).
+pub fn binary() -> &'static str {
+    env!("CARGO_BIN_EXE_ghostship")
+}
+
+/// Assert that two output folders hold the same files with the same bytes (naming the files
+/// that differ rather than printing their content).
+pub fn assert_same_tree(a: &Path, b: &Path) {
+    let (ta, tb) = (output_tree(a), output_tree(b));
+    let names =
+        |t: &std::collections::BTreeMap<String, Vec<u8>>| t.keys().cloned().collect::<Vec<_>>();
+    assert_eq!(
+        names(&ta),
+        names(&tb),
+        "{} and {} hold different files",
+        a.display(),
+        b.display()
+    );
+    let differing: Vec<&String> = ta
+        .iter()
+        .filter(|(k, v)| tb[*k] != **v)
+        .map(|(k, _)| k)
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "these files differ between {} and {}: {differing:?}",
+        a.display(),
+        b.display()
+    );
+}
