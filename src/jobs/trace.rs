@@ -140,20 +140,11 @@ impl TraceJobRequest {
         let invalid = |m: String| Err(JobError::Invalid(m));
         if !(observer_height_m.is_finite() && observer_height_m >= 0.0) {
             return invalid(format!(
-                "observer height {observer_height_m} m must be ≥ 0 m above the surface"
+                "observer height {observer_height_m} m (observer_height_m) must be ≥ 0 m above the surface"
             ));
         }
         if distances_m.is_empty() {
             return invalid("give at least one target distance".into());
-        }
-        if distances_m.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
-            return invalid("target distances must be finite and > 0 m".into());
-        }
-        if target_heights_m
-            .iter()
-            .any(|h| !(h.is_finite() && *h > 0.0))
-        {
-            return invalid("target heights must be finite and > 0 m".into());
         }
         distances_m.sort_by(f64::total_cmp);
         let (elevation_min_deg, elevation_max_deg, elevation_count, elevations_deg) =
@@ -183,7 +174,8 @@ impl TraceJobRequest {
             .map_err(|e| JobError::Invalid(e.to_string()))?;
         if observer_height_m >= request.tracer.top_m {
             return invalid(format!(
-                "observer height {observer_height_m} m is not below the top of the atmosphere ({} m)",
+                "observer height {observer_height_m} m (observer_height_m) is not below the top of \
+                 the atmosphere ({} m)",
                 request.tracer.top_m
             ));
         }

@@ -496,3 +496,29 @@ fn polar_pipeline_covers_every_shipped_sounding() {
         }
     }
 }
+
+#[test]
+fn the_example_of_docs_pipeline_md_is_a_valid_pipeline() {
+    let doc = std::fs::read_to_string(repo_file("docs/pipeline.md")).unwrap();
+    let start = doc.find("```toml\n").expect("an example") + "```toml\n".len();
+    let text = &doc[start..start + doc[start..].find("```").unwrap()];
+    // Its paths are written relative to pipelines/, like the shipped pipelines.
+    let at = repo_file("pipelines").join("example.toml");
+    let p = ghostship::pipeline::ResolvedPipeline::from_toml_str(text, &at)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let names: Vec<&str> = p.jobs.iter().map(|j| j.name.as_str()).collect();
+    let soundings = std::fs::read_dir(soundings_dir())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().extension().is_some_and(|x| x == "csv"))
+        .count();
+    // A profile per sounding, 2 atmospheres × 2 heights, 2 scenes × 2 IGRA2 soundings.
+    assert_eq!(names.len(), soundings + 4 + 4, "{names:?}");
+    for name in [
+        "Bjornoya-01028_2024022611_from_10m",
+        "superior_mirage_from_50m",
+        "fig10_fata_morgana_USM00070026-data_2010-06-01_excerpt_2010060112",
+    ] {
+        assert!(names.contains(&name), "{name}: {names:?}");
+    }
+}
