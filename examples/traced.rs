@@ -10,7 +10,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use ghostship::analysis::{TraceRequest, trace_plot_png, trace_report};
-use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::jobs::render::provenance;
 use ghostship::output::film::write_film;
 use ghostship::output::png;
@@ -49,7 +48,8 @@ fn main() -> anyhow::Result<()> {
         straight: false,
         ..scene.atmosphere.clone()
     };
-    let atmosphere = load_scene_atmosphere(&settings)?
+    let atmosphere = settings
+        .load()?
         .context("a curved-ray atmosphere is always loaded")?
         .refractive;
     let options = RenderOptions {

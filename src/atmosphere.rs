@@ -12,13 +12,11 @@ use std::sync::Arc;
 
 use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
 use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
-use crate::scene::{AtmosphereSettings, AtmosphereSpec};
 use crate::sounding::{ReadOptions, Sounding, read_sounding};
 use crate::tracer::StratifiedIndex;
 
 /// What the user named: a sounding file, a synthetic atmosphere TOML, or the standard atmosphere.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
 pub enum AtmosphereSource {
     /// A radiosonde sounding (normalised CSV, Wyoming, IGRA2; the format is read from the content).
     Sounding(PathBuf),
@@ -162,39 +160,6 @@ pub enum AtmosphereError {
         #[source]
         source: crate::refractivity::RefractivityError,
     },
-}
-
-/// The atmosphere a scene asks for, loaded like every command's (its `[atmosphere]` section:
-/// source, wavelength, smoothing, IGRA2 time); `None` when the scene traces straight rays, which
-/// need no air.
-pub fn load_scene_atmosphere(
-    settings: &AtmosphereSettings,
-) -> Result<Option<LoadedAtmosphere>, AtmosphereError> {
-    scene_atmosphere(settings)
-        .map(|(source, options)| load_atmosphere(&source, &options))
-        .transpose()
-}
-
-/// What a scene's `[atmosphere]` section names and how to load it; `None` for straight rays.
-pub fn scene_atmosphere(
-    settings: &AtmosphereSettings,
-) -> Option<(AtmosphereSource, AtmosphereOptions)> {
-    if settings.straight {
-        return None;
-    }
-    let source = match &settings.source {
-        AtmosphereSpec::Sounding(p) => AtmosphereSource::Sounding(p.clone()),
-        AtmosphereSpec::Synthetic(p) => AtmosphereSource::Synthetic(p.clone()),
-        AtmosphereSpec::Us1976 => AtmosphereSource::Us1976,
-    };
-    let options = AtmosphereOptions {
-        smooth_m: settings
-            .smooth_m
-            .unwrap_or(AtmosphereOptions::default().smooth_m),
-        wavelength_nm: settings.wavelength_nm,
-        igra2_time: settings.igra2_time.clone(),
-    };
-    Some((source, options))
 }
 
 /// Read, fit and refract the atmosphere `source` names.

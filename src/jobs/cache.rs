@@ -69,30 +69,13 @@ impl AtmosphereCache {
     /// Announce one more job that will use `request`; the atmosphere is kept until as many
     /// [`release`](Self::release) calls have been made. Atmospheres never announced stay loaded.
     pub fn expect(&self, request: &AtmosphereRequest) {
-        let mut slots = self.lock();
-        slots
-            .entry(request.key())
-            .or_insert_with(|| Slot {
-                users: 0,
-                cell: Arc::new(OnceLock::new()),
-            })
-            .users += 1;
+        self.with_slot(request, |slot| slot.users += 1);
     }
 
     /// The atmosphere `request` names, loading it on first use (other threads asking for it
     /// meanwhile wait for that load rather than repeating it). A failed load is remembered too.
     pub fn get(&self, request: &AtmosphereRequest) -> Result<Arc<LoadedAtmosphere>, JobError> {
-        let cell = {
-            let mut slots = self.lock();
-            slots
-                .entry(request.key())
-                .or_insert_with(|| Slot {
-                    users: 0,
-                    cell: Arc::new(OnceLock::new()),
-                })
-                .cell
-                .clone()
-        };
+        let cell = self.with_slot(request, |slot| slot.cell.clone());
         cell.get_or_init(|| {
             load_atmosphere(&request.source, &request.options)
                 .map(Arc::new)
@@ -112,6 +95,16 @@ impl AtmosphereCache {
                 slots.remove(&key);
             }
         }
+    }
+
+    /// `f` on the slot of `request`, created empty if needed.
+    fn with_slot<T>(&self, request: &AtmosphereRequest, f: impl FnOnce(&mut Slot) -> T) -> T {
+        let mut slots = self.lock();
+        let slot = slots.entry(request.key()).or_insert_with(|| Slot {
+            users: 0,
+            cell: Arc::new(OnceLock::new()),
+        });
+        f(slot)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, Slot>> {

@@ -7,11 +7,11 @@ use std::sync::Arc;
 
 use super::cache::AtmosphereRequest;
 use super::{AtmosphereCache, JobError, Product};
-use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere, scene_atmosphere};
+use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere};
 use crate::output::exr::ExrMetadata;
 use crate::output::film::{ImageFormat, encode_film};
 use crate::render::{Film, RenderOptions, check_tracer_tolerance, prepare_tracer, render_scene};
-use crate::scene::{AtmosphereSpec, Scene, samples_per_pixel_root};
+use crate::scene::{Scene, samples_per_pixel_root};
 
 /// How a render job renders, beyond what its scene says. Every field has the `render`
 /// command's default.
@@ -91,7 +91,9 @@ impl RenderRequest {
             ));
         }
         apply_overrides(&mut scene, &settings)?;
-        let atmosphere = scene_atmosphere(&scene.atmosphere)
+        let atmosphere = scene
+            .atmosphere
+            .resolve()
             .map(|(source, options)| AtmosphereRequest { source, options });
         Ok(RenderRequest {
             scene: Arc::new(scene),
@@ -193,11 +195,7 @@ fn apply_overrides(scene: &mut Scene, settings: &RenderSettings) -> Result<(), J
         scene.atmosphere.straight = true;
     }
     if let Some(source) = &settings.atmosphere {
-        scene.atmosphere.source = match source {
-            AtmosphereSource::Sounding(p) => AtmosphereSpec::Sounding(p.clone()),
-            AtmosphereSource::Synthetic(p) => AtmosphereSpec::Synthetic(p.clone()),
-            AtmosphereSource::Us1976 => AtmosphereSpec::Us1976,
-        };
+        scene.atmosphere.source = source.clone();
         scene.atmosphere.igra2_time = settings.igra2_time.clone();
     }
     if let Some(h) = settings.observer_height_m {

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::support::cli::{fails, ghostship, json_file, ok, run, usage_error};
+use crate::support::cli::{fails, ghostship, json_file, ok, pipeline_ok, usage_error};
 use crate::support::data::{data_file, repo_file, sounding};
 
 fn png_size(path: &Path) -> (u32, u32) {
@@ -404,13 +404,7 @@ distances_m = [3000.0]
     )
     .unwrap();
     let out = dir.path().join("results");
-    let r = ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let r = pipeline_ok(&pipeline, &out, &[]);
     for f in ["profile.csv", "layers.json", "profile.png"] {
         assert!(out.join("inferior_mirage").join(f).is_file(), "{f}");
         assert!(out.join("dmh").join(f).is_file(), "{f}");
@@ -427,15 +421,7 @@ distances_m = [3000.0]
             .is_string(),
         "{manifest}"
     );
-    let r = ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--verbose",
-        "--force",
-    ]);
+    let r = pipeline_ok(&pipeline, &out, &["--verbose", "--force"]);
     assert!(r.stdout.contains("trace.json"), "{}", r.stdout);
 
     // A render job whose scene is missing is named, with line and column, before anything runs.
@@ -586,14 +572,7 @@ fn igra2_time_chooses_the_sounding() {
 fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
     let pipeline = repo_file("pipelines/soundings.toml");
     let dir = tempfile::tempdir().unwrap();
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--quiet",
-    ]);
+    pipeline_ok(&pipeline, dir.path(), &["--quiet"]);
     for job in [
         "utqiagvik",
         "danmarkshavn",
@@ -738,13 +717,7 @@ fn pipeline_render_job_writes_every_size_and_format() {
     )
     .unwrap();
     let out = dir.path().join("o");
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    pipeline_ok(&pipeline, &out, &[]);
     for (name, w, h) in [("64x32", 64, 32), ("40x40", 40, 40)] {
         let img = image::open(out.join(format!("fig01/{name}.png"))).unwrap();
         assert_eq!((img.width(), img.height()), (w, h));
@@ -1176,14 +1149,7 @@ fn render_tolerance_is_validated_used_and_recorded() {
     )
     .unwrap();
     let out = dir.path().join("o");
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
+    pipeline_ok(&pipeline, &out, &["-q"]);
     let lines = exr_provenance(&out.join("f/40x20.exr"));
     assert!(
         lines.contains(&"tracer_tolerance_m=0.05".to_string()),

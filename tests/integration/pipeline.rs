@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use crate::support::cli::{
-    assert_same_tree, binary, fails, json_file, ok, output_tree, pipeline_run,
+    assert_same_tree, binary, fails, json_file, ok, output_tree, pipeline_ok, pipeline_run,
 };
 use crate::support::data::{data_dir, data_file, repo_file, sounding, soundings_dir};
 
@@ -42,18 +42,6 @@ distances_m = [10000.0, 30000.0]
     path
 }
 
-fn ok_run(pipeline: &Path, out: &Path, extra: &[&str]) -> crate::support::cli::Run {
-    let r = pipeline_run(pipeline, out, extra);
-    assert_eq!(
-        r.code,
-        Some(0),
-        "pipeline run {extra:?}: {}\n{}",
-        r.stdout,
-        r.stderr
-    );
-    r
-}
-
 fn job_count(out: &Path) -> usize {
     json_file(&out.join("manifest.json"))["jobs_in_pipeline"]
         .as_array()
@@ -71,11 +59,11 @@ fn paper_pipeline_skips_when_unchanged_and_is_the_same_for_any_j_and_for_merged_
         dir.path().join("c"),
     );
     let start = Instant::now();
-    ok_run(&paper, &a, &["-j", "1"]);
+    pipeline_ok(&paper, &a, &["-j", "1"]);
     let first = start.elapsed();
     let jobs = job_count(&a);
     let start = Instant::now();
-    let again = ok_run(&paper, &a, &[]);
+    let again = pipeline_ok(&paper, &a, &[]);
     let second = start.elapsed();
     assert!(
         again
@@ -88,10 +76,10 @@ fn paper_pipeline_skips_when_unchanged_and_is_the_same_for_any_j_and_for_merged_
         second * 10 < first,
         "second run {second:?}, first {first:?}"
     );
-    ok_run(&paper, &b, &["-j", "2"]);
+    pipeline_ok(&paper, &b, &["-j", "2"]);
     assert_same_tree(&a, &b);
     for k in 1..=4 {
-        let r = ok_run(&paper, &c, &["--shard", &format!("{k}/4")]);
+        let r = pipeline_ok(&paper, &c, &["--shard", &format!("{k}/4")]);
         assert!(
             r.stdout.contains(&format!("in shard {k}/4")),
             "{}",
@@ -133,7 +121,7 @@ fn runs_killed_at_random_moments_resume_to_the_same_bytes_and_leave_no_temp_file
     let pipeline = small_pipeline(dir.path());
     let reference = dir.path().join("reference");
     let start = Instant::now();
-    ok_run(&pipeline, &reference, &[]);
+    pipeline_ok(&pipeline, &reference, &[]);
     let full_ms = start.elapsed().as_millis() as u64;
     let expected = output_tree(&reference);
     let out = dir.path().join("killed");
@@ -191,7 +179,7 @@ fn runs_killed_at_random_moments_resume_to_the_same_bytes_and_leave_no_temp_file
     // running process) is removed as well.
     std::fs::create_dir_all(out.join("us1976")).unwrap();
     std::fs::write(out.join("us1976/.layers.json.tmp-0"), b"partial").unwrap();
-    let r = ok_run(&pipeline, &out, &[]);
+    let r = pipeline_ok(&pipeline, &out, &[]);
     assert_same_tree(&reference, &out);
     eprintln!(
         "kill test: seed {seed}, {interrupted} of {KILLS} runs interrupted, {temp_files_seen} \
@@ -274,11 +262,11 @@ fn dry_run_lists_what_would_run_and_an_edited_input_reruns_its_job() {
     )
     .unwrap();
     let out = dir.path().join("out");
-    let r = ok_run(&pipeline, &out, &["--dry-run"]);
+    let r = pipeline_ok(&pipeline, &out, &["--dry-run"]);
     assert!(r.stdout.contains("2 would run"), "{}", r.stdout);
     assert!(!out.exists(), "a dry run writes nothing");
-    ok_run(&pipeline, &out, &[]);
-    let r = ok_run(&pipeline, &out, &["--dry-run"]);
+    pipeline_ok(&pipeline, &out, &[]);
+    let r = pipeline_ok(&pipeline, &out, &["--dry-run"]);
     assert!(
         r.stdout.contains("0 would run, 2 unchanged"),
         "{}",
@@ -287,7 +275,7 @@ fn dry_run_lists_what_would_run_and_an_edited_input_reruns_its_job() {
     let mut text = std::fs::read_to_string(&atmosphere).unwrap();
     text.push_str("\n# edited\n");
     std::fs::write(&atmosphere, text).unwrap();
-    let r = ok_run(&pipeline, &out, &["--dry-run"]);
+    let r = pipeline_ok(&pipeline, &out, &["--dry-run"]);
     assert!(
         r.stdout.contains("1 would run, 1 unchanged"),
         "{}",
@@ -295,7 +283,7 @@ fn dry_run_lists_what_would_run_and_an_edited_input_reruns_its_job() {
     );
     let row = r.stdout.lines().find(|l| l.starts_with("layer ")).unwrap();
     assert!(row.contains("would run"), "{row}");
-    let r = ok_run(&pipeline, &out, &["--dry-run", "--force"]);
+    let r = pipeline_ok(&pipeline, &out, &["--dry-run", "--force"]);
     assert!(r.stdout.contains("2 would run"), "{}", r.stdout);
 }
 
@@ -310,11 +298,11 @@ fn merge_rejects_missing_and_repeated_shards_and_jobs() {
     .unwrap();
     let d = dir.path().join("d");
     for k in [1, 2] {
-        ok_run(&pipeline, &d, &["--shard", &format!("{k}/3")]);
+        pipeline_ok(&pipeline, &d, &["--shard", &format!("{k}/3")]);
     }
     let r = fails(&["pipeline", "merge", d.to_str().unwrap()]);
     assert!(r.stderr.contains("3/3 missing"), "{}", r.stderr);
-    ok_run(&pipeline, &d, &["--shard", "3/3"]);
+    pipeline_ok(&pipeline, &d, &["--shard", "3/3"]);
     // The same shard in two folders.
     let e = dir.path().join("e");
     std::fs::create_dir(&e).unwrap();

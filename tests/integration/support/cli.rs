@@ -101,6 +101,19 @@ pub fn output_tree(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     files
 }
 
+/// `ghostship pipeline run PIPELINE --out OUT EXTRA…`, which must succeed.
+pub fn pipeline_ok(pipeline: &Path, out: &Path, extra: &[&str]) -> Run {
+    let r = pipeline_run(pipeline, out, extra);
+    assert_eq!(
+        r.code,
+        Some(0),
+        "pipeline run {extra:?} failed:\nstdout: {}\nstderr: {}",
+        r.stdout,
+        r.stderr
+    );
+    r
+}
+
 /// `ghostship pipeline run PIPELINE --out OUT EXTRA…`.
 pub fn pipeline_run(pipeline: &Path, out: &Path, extra: &[&str]) -> Run {
     let mut args = vec![
