@@ -207,8 +207,23 @@ fn apply_overrides(scene: &mut Scene, settings: &RenderSettings) -> Result<(), J
         scene.camera.height_m = h;
     }
     if settings.straight || settings.atmosphere.is_some() || settings.observer_height_m.is_some() {
+        // File names and contents only, so the hash does not depend on where the files are.
         let mut salt = scene.hash_hex.clone().into_bytes();
-        salt.extend(format!("{:?}{:?}", scene.atmosphere, scene.camera.height_m).bytes());
+        let file_name =
+            |p: &std::path::Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+        salt.extend(
+            format!(
+                "{:?}{:?}{}{:?}",
+                settings
+                    .atmosphere
+                    .as_ref()
+                    .map(|s| s.path().map(file_name)),
+                settings.igra2_time,
+                scene.atmosphere.straight,
+                scene.camera.height_m
+            )
+            .bytes(),
+        );
         if let Some(path) = settings.atmosphere.as_ref().and_then(|s| s.path()) {
             let bytes = crate::input::read_limited(path, crate::input::MAX_SOUNDING_BYTES)
                 .unwrap_or_default();

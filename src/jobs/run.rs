@@ -250,18 +250,79 @@ pub fn run_jobs(
     } else {
         remove_dead_temp_files(&options.out_dir)?
     };
+    let (mut to_run, shared) = triage(jobs, &mine, options);
+    if options.dry_run {
+        return Ok(RunReport {
+            jobs: shared.rows.into_values().collect(),
+            removed_temp_files,
+            manifest: None,
+        });
+    }
+    // Costliest first, so the last job to finish is a short one.
+    to_run.sort_by(|&a, &b| jobs[b].cost.total_cmp(&jobs[a].cost).then(a.cmp(&b)));
+    let manifest_path = options.out_dir.join(
+        options
+            .shard
+            .map_or_else(|| MANIFEST_NAME.to_string(), |s| s.manifest_name()),
+    );
+    let state = Mutex::new(shared);
+    execute(jobs, &to_run, options, progress, &state, &manifest_path)?;
+    let shared = state.into_inner().unwrap_or_else(|e| e.into_inner());
+    write_atomic(&manifest_path, &shared.manifest.to_json())?;
+    Ok(RunReport {
+        jobs: shared.rows.into_values().collect(),
+        removed_temp_files,
+        manifest: Some(manifest_path),
+    })
+}
+
+/// Split `mine` into the jobs to run and those unchanged since an earlier run (whose records
+/// go into the new manifest as they are); in a dry run every job gets its row here.
+fn triage(jobs: &[PlannedJob], mine: &[usize], options: &RunOptions) -> (Vec<usize>, Shared) {
     let previous = if options.force {
         BTreeMap::new()
     } else {
         previous_records(&options.out_dir)
     };
-    let unchanged = |job: &PlannedJob| {
-        previous
-            .get(&job.name)
-            .is_some_and(|r| r.key == job.key && outputs_present(&options.out_dir, r))
+    let mut shared = Shared {
+        manifest: empty_manifest(jobs, options),
+        rows: BTreeMap::new(),
+        last_save: Instant::now(),
     };
-    let mut rows: BTreeMap<usize, JobSummary> = BTreeMap::new();
-    let mut manifest = Manifest {
+    let mut to_run = Vec::new();
+    for &i in mine {
+        let job = &jobs[i];
+        let record = previous
+            .get(&job.name)
+            .filter(|r| r.key == job.key && outputs_present(&options.out_dir, r));
+        if let Some(record) = record {
+            shared
+                .manifest
+                .jobs
+                .insert(job.name.clone(), record.clone());
+        }
+        let outcome = match (record.is_some(), options.dry_run) {
+            (true, true) => JobOutcome::WouldSkip,
+            (true, false) => JobOutcome::Skipped,
+            (false, true) => JobOutcome::WouldRun,
+            (false, false) => {
+                to_run.push(i);
+                continue;
+            }
+        };
+        let outputs = record
+            .map(|r| r.outputs.keys().map(|k| options.out_dir.join(k)).collect())
+            .unwrap_or_default();
+        shared
+            .rows
+            .insert(i, summary(job, outcome, Duration::ZERO, outputs));
+    }
+    (to_run, shared)
+}
+
+/// A manifest of `options`' run of `jobs`, without job records yet.
+fn empty_manifest(jobs: &[PlannedJob], options: &RunOptions) -> Manifest {
+    Manifest {
         format: MANIFEST_FORMAT.into(),
         program: program(),
         pipeline: options.pipeline.clone(),
@@ -274,57 +335,7 @@ pub fn run_jobs(
             .into_iter()
             .collect(),
         jobs: BTreeMap::new(),
-    };
-    let mut to_run = Vec::new();
-    for &i in &mine {
-        let job = &jobs[i];
-        let skip = unchanged(job);
-        if skip && let Some(record) = previous.get(&job.name) {
-            manifest.jobs.insert(job.name.clone(), record.clone());
-        }
-        if skip || options.dry_run {
-            let outcome = match (skip, options.dry_run) {
-                (true, true) => JobOutcome::WouldSkip,
-                (true, false) => JobOutcome::Skipped,
-                _ => JobOutcome::WouldRun,
-            };
-            let outputs = previous
-                .get(&job.name)
-                .filter(|_| skip)
-                .map(|r| r.outputs.keys().map(|k| options.out_dir.join(k)).collect())
-                .unwrap_or_default();
-            rows.insert(i, summary(job, outcome, Duration::ZERO, outputs));
-        } else {
-            to_run.push(i);
-        }
     }
-    if options.dry_run {
-        return Ok(RunReport {
-            jobs: rows.into_values().collect(),
-            removed_temp_files,
-            manifest: None,
-        });
-    }
-    // Costliest first, so the last job to finish is a short one.
-    to_run.sort_by(|&a, &b| jobs[b].cost.total_cmp(&jobs[a].cost).then(a.cmp(&b)));
-    let manifest_path = options.out_dir.join(
-        options
-            .shard
-            .map_or_else(|| MANIFEST_NAME.to_string(), |s| s.manifest_name()),
-    );
-    let state = Mutex::new(Shared {
-        manifest,
-        rows,
-        last_save: Instant::now(),
-    });
-    execute(jobs, &to_run, options, progress, &state, &manifest_path)?;
-    let shared = state.into_inner().unwrap_or_else(|e| e.into_inner());
-    write_atomic(&manifest_path, &shared.manifest.to_json())?;
-    Ok(RunReport {
-        jobs: shared.rows.into_values().collect(),
-        removed_temp_files,
-        manifest: Some(manifest_path),
-    })
 }
 
 struct Shared {

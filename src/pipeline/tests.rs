@@ -1,3 +1,6 @@
+//! Tests of pipeline files: defaults, matrices, globs, IGRA2 time ranges and the problems
+//! reported at their line and column.
+
 use super::*;
 
 fn data(rel: &str) -> String {
