@@ -87,6 +87,26 @@ pub struct AtmosphereOptions {
     pub igra2_time: Option<String>,
 }
 
+impl AtmosphereOptions {
+    /// Check the wavelength (300–1700 nm) and the smoothing scale (finite, ≥ 0 m).
+    pub fn validate(&self) -> Result<(), AtmosphereError> {
+        let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+        if !(self.wavelength_nm >= lo && self.wavelength_nm <= hi) {
+            return Err(AtmosphereError::InvalidOption(format!(
+                "wavelength {} nm (wavelength_nm) is outside {lo}–{hi} nm",
+                self.wavelength_nm
+            )));
+        }
+        if !(self.smooth_m.is_finite() && self.smooth_m >= 0.0) {
+            return Err(AtmosphereError::InvalidOption(format!(
+                "smoothing scale {} m (smooth_m) must be finite and ≥ 0",
+                self.smooth_m
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Default for AtmosphereOptions {
     /// The fit's default smoothing (20 m), 550 nm, the first IGRA2 sounding.
     fn default() -> Self {
@@ -167,19 +187,7 @@ pub fn load_atmosphere(
     source: &AtmosphereSource,
     options: &AtmosphereOptions,
 ) -> Result<LoadedAtmosphere, AtmosphereError> {
-    let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
-    if !(options.wavelength_nm >= lo && options.wavelength_nm <= hi) {
-        return Err(AtmosphereError::InvalidOption(format!(
-            "wavelength {} nm is outside {lo}–{hi} nm",
-            options.wavelength_nm
-        )));
-    }
-    if !(options.smooth_m.is_finite() && options.smooth_m >= 0.0) {
-        return Err(AtmosphereError::InvalidOption(format!(
-            "smoothing scale {} m must be finite and ≥ 0",
-            options.smooth_m
-        )));
-    }
+    options.validate()?;
     let source_name = source.to_string();
     let (sounding, column, top_of_data_m, description): (
         Option<Sounding>,

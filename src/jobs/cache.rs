@@ -24,21 +24,7 @@ pub struct AtmosphereRequest {
 impl AtmosphereRequest {
     /// Check the options (wavelength range, smoothing ≥ 0) before any file is read.
     pub fn validate(&self) -> Result<(), JobError> {
-        let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
-        let o = &self.options;
-        if !(o.wavelength_nm >= lo && o.wavelength_nm <= hi) {
-            return Err(JobError::Invalid(format!(
-                "wavelength_nm must be from {lo} to {hi} nm, got {}",
-                o.wavelength_nm
-            )));
-        }
-        if !(o.smooth_m.is_finite() && o.smooth_m >= 0.0) {
-            return Err(JobError::Invalid(format!(
-                "smooth_m must be a finite number of metres ≥ 0, got {}",
-                o.smooth_m
-            )));
-        }
-        Ok(())
+        self.options.validate().map_err(JobError::from)
     }
 
     fn key(&self) -> String {

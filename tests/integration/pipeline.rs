@@ -426,7 +426,7 @@ fn inputs_are_read_with_a_size_limit() {
 }
 
 #[test]
-fn polar_pipeline_covers_every_shipped_sounding() {
+fn polar_pipeline_runs_every_shipped_sounding() {
     // data/*.csv are byte-identical copies of soundings the polar pipeline runs.
     let csvs = |dir: &Path| -> Vec<PathBuf> {
         let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -482,6 +482,21 @@ fn polar_pipeline_covers_every_shipped_sounding() {
                 r.stdout
             );
         }
+    }
+    // And it runs: every job succeeds (exit 0), each render writes its frame.
+    let dir = tempfile::tempdir().unwrap();
+    pipeline_ok(
+        &repo_file("pipelines/polar.toml"),
+        dir.path(),
+        &["-j", "2", "-q"],
+    );
+    let manifest = json_file(&dir.path().join("manifest.json"));
+    assert_eq!(manifest["jobs"].as_object().unwrap().len(), 3 * atmospheres);
+    for p in csvs(&tests) {
+        let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
+        let frame = dir.path().join(format!("ghost_ship_{stem}/400x200.png"));
+        let img = image::open(&frame).unwrap_or_else(|e| panic!("{}: {e}", frame.display()));
+        assert_eq!((img.width(), img.height()), (400, 200));
     }
 }
 
