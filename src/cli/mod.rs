@@ -1,7 +1,9 @@
-//! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
-//! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis),
-//! [`render`] (scenes to images), [`pipeline`] (batch runs of all three) and [`bench`] (time
-//! against error, the stress suite). Errors go back to `main` as one `anyhow` chain.
+//! Command-line layer: raw arguments (clap; bad values are usage errors, exit status 2, through
+//! value parsers) → the typed requests of the library's jobs layer (`ghostship::jobs`) → their
+//! products, printed or written. One file per command: [`profile`] (stages 1–3 and their
+//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`pipeline`] (batch
+//! runs of all three, shards and merge) and [`bench`] (time against error, the stress suite).
+//! Errors go back to `main` as one `anyhow` chain.
 
 pub mod bench;
 pub mod pipeline;
