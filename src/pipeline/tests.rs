@@ -151,7 +151,7 @@ fn rejects_bad_values() {
         ),
         (
             "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 1\nelevation_deg = \"0:1:0.1\"\ndistances_m = [1.0]\ntarget_heights_m = [0.0]\n",
-            "target heights",
+            "target_heights_m",
         ),
         ("[[profile\n", "unclosed"),
     ] {
