@@ -19,10 +19,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use ghostship::atmosphere::load_scene_atmosphere;
+use ghostship::jobs::render::provenance;
 use ghostship::output::film::write_films;
 use ghostship::output::{exr, png, write_atomic};
-use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
+use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
 const SCENES: [&str; 9] = [
@@ -93,7 +93,7 @@ fn stages(scene_path: &Path, dir: &Path) -> [f64; 8] {
         quiet: true,
         ..RenderOptions::default()
     };
-    let (t_atm, atm) = timed(|| load_scene_atmosphere(&scene.atmosphere).expect("atmosphere"));
+    let (t_atm, atm) = timed(|| scene.atmosphere.load().expect("atmosphere"));
     let (t_tracer, tracer) = timed(|| {
         prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &options).expect("tracer")
     });

@@ -7,9 +7,10 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{Criterion, criterion_group};
-use ghostship::atmosphere::{LoadedAtmosphere, load_scene_atmosphere};
+use ghostship::atmosphere::LoadedAtmosphere;
+use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
-use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
+use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
 const SCENES: [&str; 9] = [
@@ -30,7 +31,9 @@ fn load(name: &str, width: u32, height: u32) -> (Scene, Option<LoadedAtmosphere>
     let mut scene = Scene::from_file(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     scene.camera.width = width;
     scene.camera.height = height;
-    let atm = load_scene_atmosphere(&scene.atmosphere)
+    let atm = scene
+        .atmosphere
+        .load()
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     (scene, atm)
 }

@@ -6,9 +6,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use ghostship::jobs::render::provenance;
 use ghostship::output::film::write_film;
 use ghostship::output::png;
-use ghostship::render::{ConstantCurvatureRays, RenderOptions, provenance, render_scene};
+use ghostship::render::{ConstantCurvatureRays, RenderOptions, render_scene};
 use ghostship::scene::Scene;
 
 fn main() -> anyhow::Result<()> {

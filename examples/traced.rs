@@ -10,10 +10,10 @@ use std::time::Instant;
 
 use anyhow::Context;
 use ghostship::analysis::{TraceRequest, trace_plot_png, trace_report};
-use ghostship::atmosphere::load_scene_atmosphere;
+use ghostship::jobs::render::provenance;
 use ghostship::output::film::write_film;
 use ghostship::output::png;
-use ghostship::render::{RenderOptions, prepare_tracer, provenance, render_scene};
+use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::{AtmosphereSettings, Scene};
 
 fn arg<T: std::str::FromStr>(args: &[String], name: &str) -> Option<T> {
@@ -48,7 +48,8 @@ fn main() -> anyhow::Result<()> {
         straight: false,
         ..scene.atmosphere.clone()
     };
-    let atmosphere = load_scene_atmosphere(&settings)?
+    let atmosphere = settings
+        .load()?
         .context("a curved-ray atmosphere is always loaded")?
         .refractive;
     let options = RenderOptions {

@@ -12,12 +12,11 @@ use std::sync::Arc;
 
 use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
 use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
-use crate::scene::{AtmosphereSettings, AtmosphereSpec};
 use crate::sounding::{ReadOptions, Sounding, read_sounding};
 use crate::tracer::StratifiedIndex;
 
 /// What the user named: a sounding file, a synthetic atmosphere TOML, or the standard atmosphere.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
 pub enum AtmosphereSource {
     /// A radiosonde sounding (normalised CSV, Wyoming, IGRA2; the format is read from the content).
     Sounding(PathBuf),
@@ -77,7 +76,7 @@ impl std::fmt::Display for AtmosphereSource {
 }
 
 /// How to build the atmosphere.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AtmosphereOptions {
     /// Smoothing scale of the sounding fit (m); see [`FitOptions::smooth_m`]. Ignored for
     /// synthetic and standard atmospheres.
@@ -86,6 +85,26 @@ pub struct AtmosphereOptions {
     pub wavelength_nm: f64,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
     pub igra2_time: Option<String>,
+}
+
+impl AtmosphereOptions {
+    /// Check the wavelength (300–1700 nm) and the smoothing scale (finite, ≥ 0 m).
+    pub fn validate(&self) -> Result<(), AtmosphereError> {
+        let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
+        if !(self.wavelength_nm >= lo && self.wavelength_nm <= hi) {
+            return Err(AtmosphereError::InvalidOption(format!(
+                "wavelength {} nm (wavelength_nm) is outside {lo}–{hi} nm",
+                self.wavelength_nm
+            )));
+        }
+        if !(self.smooth_m.is_finite() && self.smooth_m >= 0.0) {
+            return Err(AtmosphereError::InvalidOption(format!(
+                "smoothing scale {} m (smooth_m) must be finite and ≥ 0",
+                self.smooth_m
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl Default for AtmosphereOptions {
@@ -163,48 +182,12 @@ pub enum AtmosphereError {
     },
 }
 
-/// The atmosphere a scene asks for, loaded like every command's (its `[atmosphere]` section:
-/// source, wavelength, smoothing, IGRA2 time); `None` when the scene traces straight rays, which
-/// need no air.
-pub fn load_scene_atmosphere(
-    settings: &AtmosphereSettings,
-) -> Result<Option<LoadedAtmosphere>, AtmosphereError> {
-    if settings.straight {
-        return Ok(None);
-    }
-    let source = match &settings.source {
-        AtmosphereSpec::Sounding(p) => AtmosphereSource::Sounding(p.clone()),
-        AtmosphereSpec::Synthetic(p) => AtmosphereSource::Synthetic(p.clone()),
-        AtmosphereSpec::Us1976 => AtmosphereSource::Us1976,
-    };
-    let options = AtmosphereOptions {
-        smooth_m: settings
-            .smooth_m
-            .unwrap_or(AtmosphereOptions::default().smooth_m),
-        wavelength_nm: settings.wavelength_nm,
-        igra2_time: settings.igra2_time.clone(),
-    };
-    load_atmosphere(&source, &options).map(Some)
-}
-
 /// Read, fit and refract the atmosphere `source` names.
 pub fn load_atmosphere(
     source: &AtmosphereSource,
     options: &AtmosphereOptions,
 ) -> Result<LoadedAtmosphere, AtmosphereError> {
-    let (lo, hi) = crate::refractivity::WAVELENGTH_RANGE_NM;
-    if !(options.wavelength_nm >= lo && options.wavelength_nm <= hi) {
-        return Err(AtmosphereError::InvalidOption(format!(
-            "wavelength {} nm is outside {lo}–{hi} nm",
-            options.wavelength_nm
-        )));
-    }
-    if !(options.smooth_m.is_finite() && options.smooth_m >= 0.0) {
-        return Err(AtmosphereError::InvalidOption(format!(
-            "smoothing scale {} m must be finite and ≥ 0",
-            options.smooth_m
-        )));
-    }
+    options.validate()?;
     let source_name = source.to_string();
     let (sounding, column, top_of_data_m, description): (
         Option<Sounding>,

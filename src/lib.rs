@@ -10,12 +10,20 @@
 //! scene file ─parse→ Scene ────────────────────────────────────┤
 //!                                                              ▼
 //!                                        tracer → paths, transfer curves → renderer → EXR/PNG
+//!
+//! pipeline file ─resolve→ planned jobs ─jobs→ products (named bytes) → files + manifest.json
 //! ```
+//!
+//! [`jobs`] is the layer the commands and pipelines share: one typed request per job kind, its
+//! products as bytes, one writer, the manifest; [`pipeline`] expands and validates pipeline
+//! files into those requests; [`input`] reads every input file with a size limit.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod analysis;
 pub mod atmosphere;
+pub mod input;
+pub mod jobs;
 pub mod output;
 pub mod pipeline;
 pub mod profile;

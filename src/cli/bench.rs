@@ -102,8 +102,11 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
         (AccuracyConfig::full(), FrameConfig::full())
     };
     if let Some(n) = args.rays {
-        if !(3..=super::trace::MAX_RAYS).contains(&n) {
-            anyhow::bail!("--rays {n}: give 3 to {} rays", super::trace::MAX_RAYS);
+        if !(3..=ghostship::jobs::trace::MAX_RAYS).contains(&n) {
+            anyhow::bail!(
+                "--rays {n}: give 3 to {} rays",
+                ghostship::jobs::trace::MAX_RAYS
+            );
         }
         config.rays = n;
     }

@@ -1,7 +1,9 @@
-//! Command-line layer: raw arguments (clap) → validated options → library calls. One file per
-//! command: [`profile`] (stages 1–3 and their report), [`trace`] (the transfer analysis),
-//! [`render`] (scenes to images), [`pipeline`] (batch runs of all three) and [`bench`] (time
-//! against error, the stress suite). Errors go back to `main` as one `anyhow` chain.
+//! Command-line layer: raw arguments (clap; bad values are usage errors, exit status 2, through
+//! value parsers) → the typed requests of the library's jobs layer (`ghostship::jobs`) → their
+//! products, printed or written. One file per command: [`profile`] (stages 1–3 and their
+//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`pipeline`] (batch
+//! runs of all three, shards and merge) and [`bench`] (time against error, the stress suite).
+//! Errors go back to `main` as one `anyhow` chain.
 
 pub mod bench;
 pub mod pipeline;
@@ -85,6 +87,36 @@ fn write_quietly(out: &mut impl Write, text: &[u8]) -> std::io::Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         other => other,
     }
+}
+
+/// Write each product to its path (atomically, through the jobs layer's writer) and, unless
+/// `quiet`, say so on stderr.
+pub fn write_files(
+    files: &[(std::path::PathBuf, ghostship::jobs::Product)],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    ghostship::jobs::writer::write_products_to(
+        files.iter().map(|(p, product)| (p.as_path(), product)),
+    )?;
+    if !quiet {
+        for (path, _) in files {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// Write `products` into `dir` under their names (see [`write_files`]).
+pub fn write_into(
+    dir: &std::path::Path,
+    products: &[ghostship::jobs::Product],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let files: Vec<_> = products
+        .iter()
+        .map(|p| (dir.join(&p.name), p.clone()))
+        .collect();
+    write_files(&files, quiet)
 }
 
 /// The error and its causes on one line, `outer: inner: …` (like anyhow's `{:#}`), leaving out a

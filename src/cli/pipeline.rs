@@ -1,27 +1,17 @@
-//! `ghostship pipeline run`: a pipeline file → [`ResolvedPipeline`] → its profile, trace and
-//! render jobs, one after another (each parallel inside), into `out/<pipeline name>/` or
-//! `--out DIR`, with a progress bar over the jobs; then the list of files written. Render jobs
-//! write `<name>_<W>x<H>.png/.exr` per size, or `<name>.png/.exr` at the scene's own size.
+//! `ghostship pipeline run|merge`: a pipeline file → [`ResolvedPipeline`] (every job expanded,
+//! validated and planned) → the jobs layer's run ([`run_jobs`]) into `out/<pipeline>/` or
+//! `--out DIR`, with a progress bar over the jobs → a summary table; `merge` combines the
+//! manifests of a sharded run. The file format is documented in docs/pipeline.md.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::Context;
-use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource, load_atmosphere};
-use ghostship::output::film::write_films;
-use ghostship::output::png::DEFAULT_EXPOSURE;
-use ghostship::output::write_atomic;
-use ghostship::pipeline::{ImageFormat, ProfileJob, RenderJob, ResolvedPipeline, TraceJob};
-use ghostship::render::{RenderOptions, provenance};
-use ghostship::scene::Scene;
-use ghostship::tracer::TracerConfig;
+use ghostship::jobs::manifest::{Shard, merge};
+use ghostship::jobs::run::{JobOutcome, RunOptions, RunReport, run_jobs};
+use ghostship::pipeline::ResolvedPipeline;
 use indicatif::{ProgressBar, ProgressStyle};
-
-use super::profile::{
-    DEFAULT_LAYERS_TOP_M, DEFAULT_PLOT_TOP_M, ProfileOptions, profile_products, write_profile,
-};
-use super::render::render_film;
-use super::trace::{TraceOptions, trace_products};
 
 /// Arguments of `ghostship pipeline`.
 #[derive(Debug, clap::Args)]
@@ -34,219 +24,214 @@ pub struct PipelineArgs {
 /// Pipeline sub-commands.
 #[derive(Debug, clap::Subcommand)]
 pub enum PipelineAction {
-    /// Run every job of a pipeline file (profile jobs → <out>/<job>/profile.csv, layers.json,
-    /// profile.png; trace jobs → <out>/<job>.json and <out>/<job>.png).
+    /// Run the jobs of a pipeline file that changed since the last run (the file format:
+    /// docs/pipeline.md). Each job writes into <out>/<job>/ (profile: profile.csv, layers.json,
+    /// profile.png; trace: trace.json, trace.png; render: <W>x<H>.png/.exr); <out>/manifest.json
+    /// records the SHA-256 of every input and output.
     Run(RunArgs),
+    /// Combine the shard manifests (manifest-shard-K-of-N.json) of a run split with --shard into
+    /// <first DIR>/manifest.json, checking that the shards hold exactly the pipeline's jobs, each
+    /// once, all successful (outputs in other folders are copied into the first).
+    Merge(MergeArgs),
+}
+
+/// `--jobs`: a whole number ≥ 1.
+fn parse_parallel_jobs(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("{text:?} is not a whole number ≥ 1")),
+    }
 }
 
 /// Arguments of `ghostship pipeline run`.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// The pipeline file (TOML with [[profile]], [[trace]] and [[render]] tables).
+    /// The pipeline file (TOML with [[profile]], [[trace]] and [[render]] tables; see
+    /// docs/pipeline.md).
     #[arg(value_name = "PIPELINE.toml")]
     pub pipeline: PathBuf,
-    /// Output folder [default: out/<pipeline name>/].
+    /// Output folder, relative to the current folder [default: out/<pipeline name>/]. A
+    /// filesystem root is refused.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Jobs run at the same time (each also uses every core inside).
+    #[arg(short = 'j', long = "jobs", value_name = "N", default_value_t = 1, value_parser = parse_parallel_jobs)]
+    pub parallel_jobs: usize,
+    /// Rerun every job, even those unchanged since the last run.
+    #[arg(long)]
+    pub force: bool,
+    /// List the jobs and whether each would run or be skipped; write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Run only part K of N of the jobs (K = 1…N; the split is deterministic and balanced by
+    /// estimated cost); writes <out>/manifest-shard-K-of-N.json. Combine with `pipeline merge`.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
+    /// Also list every output file.
+    #[arg(short, long)]
+    pub verbose: bool,
+}
+
+/// Arguments of `ghostship pipeline merge`.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Folders holding the shards' manifests and outputs (the merged manifest goes into the
+    /// first).
+    #[arg(value_name = "DIR", required = true)]
+    pub dirs: Vec<PathBuf>,
 }
 
 /// Run `ghostship pipeline …`.
 pub fn run(args: PipelineArgs, quiet: bool) -> anyhow::Result<()> {
     match args.action {
         PipelineAction::Run(run_args) => run_pipeline(&run_args, quiet),
+        PipelineAction::Merge(merge_args) => {
+            let path = merge(&merge_args.dirs)?;
+            if !quiet {
+                super::print_stdout(&format!("merged into {}\n", path.display()))?;
+            }
+            Ok(())
+        }
     }
-}
-
-fn atmosphere_options(
-    wavelength_nm: Option<f64>,
-    smooth_m: Option<f64>,
-    igra2_time: Option<&str>,
-) -> AtmosphereOptions {
-    let d = AtmosphereOptions::default();
-    AtmosphereOptions {
-        smooth_m: smooth_m.unwrap_or(d.smooth_m),
-        wavelength_nm: wavelength_nm.unwrap_or(d.wavelength_nm),
-        igra2_time: igra2_time.map(str::to_string),
-    }
-}
-
-fn profile_job(job: &ProfileJob, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let options = ProfileOptions {
-        source: AtmosphereSource::parse(&job.atmosphere),
-        atmosphere: atmosphere_options(job.wavelength_nm, job.smooth_m, job.igra2_time.as_deref()),
-        plot_top_agl_m: DEFAULT_PLOT_TOP_M,
-        layers_top_agl_m: DEFAULT_LAYERS_TOP_M,
-    };
-    let atm = load_atmosphere(&options.source, &options.atmosphere)?;
-    let products = profile_products(&atm, &options)?;
-    write_profile(&out.join(&job.name), &products)
-}
-
-fn trace_options(job: &TraceJob) -> anyhow::Result<TraceOptions> {
-    let tracer = TracerConfig {
-        tolerance_m: job
-            .tolerance_m
-            .unwrap_or(TracerConfig::default().tolerance_m),
-        ..TracerConfig::default()
-    };
-    TraceOptions::new(
-        AtmosphereSource::parse(&job.atmosphere),
-        atmosphere_options(job.wavelength_nm, job.smooth_m, job.igra2_time.as_deref()),
-        job.observer_height_m,
-        &job.elevation_deg,
-        job.distances_m.clone(),
-        job.target_heights_m.clone(),
-        tracer,
-        false,
-    )
-}
-
-fn trace_job(job: &TraceJob, options: &TraceOptions, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let atm = load_atmosphere(&options.source, &options.atmosphere)?;
-    let (report, png) = trace_products(&atm, options, true)?;
-    let json_path = out.join(format!("{}.json", job.name));
-    let mut json = report.to_json()?;
-    json.push('\n');
-    write_atomic(&json_path, json.as_bytes())?;
-    let mut written = vec![json_path];
-    if let Some(png) = png {
-        let png_path = out.join(format!("{}.png", job.name));
-        write_atomic(&png_path, &png)?;
-        written.push(png_path);
-    }
-    Ok(written)
-}
-
-fn render_job(
-    job: &RenderJob,
-    scene: &Scene,
-    size: Option<(u32, u32)>,
-    label: &str,
-    out: &Path,
-) -> anyhow::Result<Vec<PathBuf>> {
-    let mut scene = scene.clone();
-    if let Some((width, height)) = size {
-        scene.camera.width = width;
-        scene.camera.height = height;
-    }
-    let options = RenderOptions {
-        samples_per_pixel: job.spp,
-        quiet: true,
-        tolerance_m: job
-            .tolerance_m
-            .unwrap_or(RenderOptions::default().tolerance_m),
-        ..RenderOptions::default()
-    };
-    let film = render_film(&scene, &options)?;
-    let meta = provenance(&scene, &options);
-    let written: Vec<PathBuf> = job
-        .formats
-        .iter()
-        .map(|format| {
-            let ext = match format {
-                ImageFormat::Png => "png",
-                ImageFormat::Exr => "exr",
-            };
-            out.join(format!("{label}.{ext}"))
-        })
-        .collect();
-    // PNG and EXR are encoded (and written) in parallel.
-    write_films(&film, &written, &meta, DEFAULT_EXPOSURE)?;
-    Ok(written)
 }
 
 fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
+    let start = Instant::now();
     let pipeline = ResolvedPipeline::from_file(&args.pipeline)?;
-    // Check every trace job before running anything, so a typo in the last one costs nothing.
-    let traces = pipeline
-        .traces
-        .iter()
-        .map(|job| {
-            trace_options(job).with_context(|| {
-                format!(
-                    "invalid pipeline {}: trace job {:?}",
-                    args.pipeline.display(),
-                    job.name
-                )
-            })
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
     let out = args
         .out
         .clone()
         .unwrap_or_else(|| Path::new("out").join(&pipeline.name));
-    // Load every scene before running anything, for the same reason.
-    let scenes = pipeline
-        .renders
-        .iter()
-        .map(|job| {
-            Scene::from_file(&job.scene).with_context(|| {
-                format!(
-                    "invalid pipeline {}: render job {:?}",
-                    args.pipeline.display(),
-                    job.name
-                )
-            })
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let renders: usize = pipeline.renders.iter().map(|r| r.sizes.len().max(1)).sum();
-    let total = (pipeline.profiles.len() + pipeline.traces.len() + renders) as u64;
-    let bar = if quiet || !std::io::stderr().is_terminal() {
+    let options = RunOptions {
+        out_dir: out.clone(),
+        parallel_jobs: args.parallel_jobs,
+        force: args.force,
+        dry_run: args.dry_run,
+        shard: args.shard,
+        pipeline: pipeline.name.clone(),
+        pipeline_sha256: pipeline.sha256.clone(),
+    };
+    let bar = if quiet || args.dry_run || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
     } else {
-        ProgressBar::new(total)
+        ProgressBar::new(0)
     };
     bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} jobs  {msg}")
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} jobs  {wide_msg}")
             .context("progress bar template")?
             .progress_chars("=> "),
     );
-    let mut written = Vec::new();
-    for job in &pipeline.profiles {
-        bar.set_message(format!("profile {}", job.name));
-        let files =
-            profile_job(job, &out).with_context(|| format!("profile job {:?} failed", job.name))?;
-        written.extend(files);
-        bar.inc(1);
-    }
-    for (job, options) in pipeline.traces.iter().zip(&traces) {
-        bar.set_message(format!("trace {}", job.name));
-        let files = trace_job(job, options, &out)
-            .with_context(|| format!("trace job {:?} failed", job.name))?;
-        written.extend(files);
-        bar.inc(1);
-    }
-    for (job, scene) in pipeline.renders.iter().zip(&scenes) {
-        let sizes: Vec<Option<(u32, u32)>> = if job.sizes.is_empty() {
-            vec![None]
-        } else {
-            job.sizes.iter().copied().map(Some).collect()
-        };
-        for size in sizes {
-            let label = match size {
-                Some((w, h)) => format!("{}_{w}x{h}", job.name),
-                None => job.name.clone(),
-            };
-            bar.set_message(format!("render {label}"));
-            let files = render_job(job, scene, size, &label, &out)
-                .with_context(|| format!("render job {label:?} failed"))?;
-            written.extend(files);
-            bar.inc(1);
-        }
-    }
+    let report = run_jobs(&pipeline.jobs, &options, &bar)?;
     bar.finish_and_clear();
     if !quiet {
-        let mut text = format!(
-            "pipeline {}: {} job(s), {} file(s) in {}\n",
-            pipeline.name,
-            total,
-            written.len(),
-            out.display()
+        super::print_stdout(&summary_table(&report, &out, args, start.elapsed()))?;
+    }
+    let failed: Vec<String> = report
+        .jobs
+        .iter()
+        .filter_map(|j| match &j.outcome {
+            JobOutcome::Failed(reason) => Some(format!("  {}: {reason}", j.name)),
+            _ => None,
+        })
+        .collect();
+    if !failed.is_empty() {
+        const SHOWN: usize = 20;
+        let more = failed.len().saturating_sub(SHOWN);
+        anyhow::bail!(
+            "{} of {} job(s) failed (every reason is in {}):\n{}{}",
+            failed.len(),
+            report.jobs.len(),
+            report.manifest.as_deref().unwrap_or(&out).display(),
+            failed[..failed.len().min(SHOWN)].join("\n"),
+            if more > 0 {
+                format!("\n  … and {more} more")
+            } else {
+                String::new()
+            }
         );
-        for path in &written {
-            text.push_str(&format!("  {}\n", path.display()));
-        }
-        super::print_stdout(&text)?;
     }
     Ok(())
+}
+
+/// One row per job that ran, failed or would run (unchanged jobs are counted on one line unless
+/// `--verbose` or `--dry-run`), then the totals.
+fn summary_table(
+    report: &RunReport,
+    out: &Path,
+    args: &RunArgs,
+    elapsed: std::time::Duration,
+) -> String {
+    let width = report
+        .jobs
+        .iter()
+        .map(|j| j.name.len())
+        .max()
+        .unwrap_or(3)
+        .max(3);
+    let header = format!(
+        "{:<width$}  {:<7}  {:<9}  {:>8}  outputs\n",
+        "job", "kind", "status", "time"
+    );
+    let mut text = String::new();
+    let (mut ran, mut skipped, mut failed) = (0, 0, 0);
+    for job in &report.jobs {
+        let status = match &job.outcome {
+            JobOutcome::Ran => {
+                ran += 1;
+                "ok"
+            }
+            JobOutcome::Skipped | JobOutcome::WouldSkip => {
+                skipped += 1;
+                "unchanged"
+            }
+            JobOutcome::Failed(_) => {
+                failed += 1;
+                "FAILED"
+            }
+            JobOutcome::WouldRun => {
+                ran += 1;
+                "would run"
+            }
+        };
+        let show = args.verbose
+            || args.dry_run
+            || !matches!(job.outcome, JobOutcome::Skipped | JobOutcome::WouldSkip);
+        if !show {
+            continue;
+        }
+        text.push_str(&format!(
+            "{:<width$}  {:<7}  {:<9}  {:>7.2}s  {}\n",
+            job.name,
+            job.kind,
+            status,
+            job.duration.as_secs_f64(),
+            job.outputs.len()
+        ));
+        if let JobOutcome::Failed(reason) = &job.outcome {
+            text.push_str(&format!("    {reason}\n"));
+        }
+        if args.verbose {
+            for path in &job.outputs {
+                text.push_str(&format!("    {}\n", path.display()));
+            }
+        }
+    }
+    if !text.is_empty() {
+        text.insert_str(0, &header);
+    }
+    let verb = if args.dry_run { "would run" } else { "ran" };
+    text.push_str(&format!(
+        "{} job(s){}: {ran} {verb}, {skipped} unchanged (skipped), {failed} failed; {:.2} s; output in {}\n",
+        report.jobs.len(),
+        args.shard.map(|s| format!(" in shard {s}")).unwrap_or_default(),
+        elapsed.as_secs_f64(),
+        out.display()
+    ));
+    if !report.removed_temp_files.is_empty() {
+        text.push_str(&format!(
+            "removed {} temporary file(s) left by killed runs\n",
+            report.removed_temp_files.len()
+        ));
+    }
+    text
 }

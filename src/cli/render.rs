@@ -1,18 +1,46 @@
-//! `ghostship render`: a scene file → [`Scene`] → its atmosphere (loaded like every other
-//! command's) → the ray tracer the scene asks for → [`Film`] → PNG and/or EXR files.
+//! `ghostship render`: a scene file → [`RenderRequest`] (the jobs layer: its atmosphere loaded
+//! like every other command's, the ray tracer the scene asks for) → a film → the PNG and/or EXR
+//! files named by `-o` (the format follows each file's extension).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use ghostship::atmosphere::load_scene_atmosphere;
-use ghostship::output::film::{FilmFormat, write_films};
+use ghostship::jobs::render::{RenderSettings, parse_size};
+use ghostship::jobs::{AtmosphereCache, Product, RenderRequest};
+use ghostship::output::film::{ImageFormat, encode_film};
 use ghostship::output::png::DEFAULT_EXPOSURE;
-use ghostship::pipeline::parse_size;
-use ghostship::render::{
-    Film, RenderOptions, check_tracer_tolerance, prepare_tracer, provenance, render_scene,
-};
+use ghostship::render::{RenderOptions, check_tracer_tolerance};
 use ghostship::scene::Scene;
+use rayon::prelude::*;
+
+/// `-o FILE`: a path whose extension names a known image format.
+fn parse_output(text: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(text);
+    match ImageFormat::from_path(&path) {
+        Some(_) => Ok(path),
+        None => Err(format!(
+            "{text}: unknown image format (use a .png or .exr file name)"
+        )),
+    }
+}
+
+/// `--tolerance-m`: within the tracer's accepted range.
+fn parse_tolerance(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number"))?;
+    check_tracer_tolerance(v).map_err(|e| e.to_string())?;
+    Ok(v)
+}
+
+/// `--exposure`: finite and > 0.
+fn parse_exposure(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{text:?} is not a finite number > 0")),
+    }
+}
 
 /// Arguments of `ghostship render`.
 #[derive(Debug, clap::Args)]
@@ -21,8 +49,9 @@ pub struct RenderArgs {
     #[arg(value_name = "SCENE.toml")]
     pub scene: PathBuf,
     /// Output files; the format follows the extension: `.png` (8-bit sRGB) or `.exr` (linear f32
-    /// RGBA with provenance). Repeatable [default: out/render/<scene stem>.png and .exr].
-    #[arg(short = 'o', long = "output", value_name = "FILE")]
+    /// RGBA with provenance). Repeatable. Relative paths are relative to the current folder
+    /// [default: out/render/<scene stem>.png and .exr].
+    #[arg(short = 'o', long = "output", value_name = "FILE", value_parser = parse_output)]
     pub outputs: Vec<PathBuf>,
     /// Trace every pixel sample's ray with the full 3-D integrator (the paper's method; slow —
     /// it validates the fast elevation-fan path).
@@ -36,37 +65,23 @@ pub struct RenderArgs {
     pub spp: Option<u32>,
     /// Image size in pixels, WIDTHxHEIGHT (e.g. 1920x1080) [default: the scene's]. The
     /// horizontal field of view stays; the vertical one follows the aspect ratio.
-    #[arg(long, value_name = "WxH")]
-    pub size: Option<String>,
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
     /// The ray tracer's error tolerance on the ray heights at the card distances, in metres (from
-    /// 1e-6 to 10; default 1 mm; the paper used 1 cm per step). Recorded in the EXR provenance. Smaller is slower; straight rays (closed
-    /// form) ignore it.
-    #[arg(long, value_name = "M", default_value_t = ghostship::render::RenderOptions::default().tolerance_m)]
+    /// 1e-6 to 10; default 1 mm; the paper used 1 cm per step). Recorded in the EXR provenance.
+    /// Smaller is slower; straight rays (closed form) ignore it.
+    #[arg(long, value_name = "M", value_parser = parse_tolerance,
+          default_value_t = RenderOptions::default().tolerance_m)]
     pub tolerance_m: f64,
     /// PNG exposure: linear radiance (1 = the white horizon sky) is multiplied by this before the
     /// sRGB transfer function and 8-bit quantisation. EXR files are never scaled.
-    #[arg(long, value_name = "X", default_value_t = DEFAULT_EXPOSURE)]
+    #[arg(long, value_name = "X", value_parser = parse_exposure, default_value_t = DEFAULT_EXPOSURE)]
     pub exposure: f64,
 }
 
 /// Run `ghostship render`.
 pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
-    let mut scene = Scene::from_file(&args.scene)?;
-    if args.straight {
-        scene.atmosphere.straight = true;
-    }
-    if let Some(size) = &args.size {
-        let (width, height) = parse_size(size).map_err(|e| anyhow::anyhow!("--size: {e}"))?;
-        scene.camera.width = width;
-        scene.camera.height = height;
-    }
-    if !(args.exposure.is_finite() && args.exposure > 0.0) {
-        anyhow::bail!(
-            "--exposure must be a finite number > 0, got {}",
-            args.exposure
-        );
-    }
-    check_tracer_tolerance(args.tolerance_m).map_err(|e| anyhow::anyhow!("--tolerance-m: {e}"))?;
+    let scene = Scene::from_file(&args.scene)?;
     let outputs = if args.outputs.is_empty() {
         let stem = args
             .scene
@@ -81,33 +96,45 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
     } else {
         args.outputs.clone()
     };
-    for path in &outputs {
-        if FilmFormat::from_path(path).is_none() {
-            anyhow::bail!(
-                "output {}: unknown image format (use a .png or .exr file name)",
-                path.display()
-            );
+    let request = RenderRequest::new(
+        scene,
+        RenderSettings {
+            sizes: vec![args.size],
+            spp: args.spp,
+            tolerance_m: args.tolerance_m,
+            exposure: args.exposure,
+            exact: args.exact,
+            straight: args.straight,
+            ..RenderSettings::default()
+        },
+    )?;
+    let atmosphere = match &request.atmosphere {
+        Some(a) => Some(AtmosphereCache::new().get(a)?),
+        None => None,
+    };
+    if !quiet {
+        // The same notes `profile` prints (skipped rows, suspect steps, ...).
+        for w in atmosphere.iter().filter_map(|a| a.sounding.as_ref()) {
+            for note in &w.warnings {
+                eprintln!("Ingest note: {note}");
+            }
         }
     }
-    let options = RenderOptions {
-        exact: args.exact,
-        samples_per_pixel: args.spp,
-        quiet,
-        tolerance_m: args.tolerance_m,
-        ..RenderOptions::default()
-    };
     let start = Instant::now();
-    let film = render_film(&scene, &options)
+    let (film, meta) = request
+        .film(args.size, atmosphere.as_deref(), quiet)
         .with_context(|| format!("cannot render {}", args.scene.display()))?;
     let render_s = start.elapsed().as_secs_f64();
-    let meta = provenance(&scene, &options);
-    // PNG and EXR are encoded (and written) in parallel.
-    write_films(&film, &outputs, &meta, args.exposure)?;
-    if !quiet {
-        for path in &outputs {
-            eprintln!("wrote {}", path.display());
-        }
-    }
+    // PNG and EXR are encoded in parallel.
+    let files = outputs
+        .par_iter()
+        .map(|path| {
+            let format = ImageFormat::from_path(path).unwrap_or(ImageFormat::Png);
+            let bytes = encode_film(&film, format, &meta, args.exposure)?;
+            Ok((path.clone(), Product::new(format.extension(), bytes)))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    super::write_files(&files, quiet)?;
     if !quiet {
         eprintln!(
             "{}x{} in {:.0} ms ({} fan rays{})",
@@ -115,7 +142,7 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
             film.height,
             render_s * 1e3,
             film.stats.fan_rays,
-            if options.exact {
+            if args.exact {
                 format!(", {} per-sample rays", film.stats.sample_rays)
             } else {
                 String::new()
@@ -123,32 +150,4 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// Resolve the scene's atmosphere (unless it asks for straight rays), choose the tracer and
-/// render. Shared with the pipeline's render jobs.
-pub fn render_film(scene: &Scene, options: &RenderOptions) -> anyhow::Result<Film> {
-    let atmosphere = load_scene_atmosphere(&scene.atmosphere)?;
-    if !options.quiet
-        && let Some(sounding) = atmosphere.as_ref().and_then(|a| a.sounding.as_ref())
-    {
-        // The same notes `profile` prints (skipped rows, suspect steps, ...).
-        for w in &sounding.warnings {
-            eprintln!("Ingest note: {w}");
-        }
-    }
-    let tracer = prepare_tracer(scene, atmosphere.as_ref().map(|a| &a.refractive), options)?;
-    let film = render_scene(scene, tracer.as_ref(), options)?;
-    if film.stats.non_finite_samples > 0 {
-        // Never silent, even with --quiet: these pixels are not what the physics says.
-        eprintln!(
-            "warning: {}: {} sample(s) had non-finite radiance and were shaded as horizon sky",
-            scene
-                .source_path
-                .as_deref()
-                .map_or_else(|| "scene".into(), |p| p.display().to_string()),
-            film.stats.non_finite_samples
-        );
-    }
-    Ok(film)
 }

@@ -1,20 +1,14 @@
-//! `ghostship trace`: arguments → [`TraceOptions`] (a validated
-//! [`TraceRequest`](ghostship::analysis::TraceRequest)) → load the atmosphere, trace the fan,
-//! print the report (JSON or CSV) and optionally write the fan + transfer plot.
+//! `ghostship trace`: arguments → [`TraceJobRequest`] → load the atmosphere, trace the fan (the
+//! jobs layer), print the report (JSON or CSV) on stdout and optionally write the fan +
+//! transfer plot.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use ghostship::analysis::{TraceReport, TraceRequest, trace_plot_png, trace_report};
-use ghostship::atmosphere::{
-    AtmosphereOptions, AtmosphereSource, LoadedAtmosphere, UniformIndex, load_atmosphere,
-};
-use ghostship::output::write_atomic;
-use ghostship::refractivity::DEFAULT_WAVELENGTH_NM;
-use ghostship::tracer::{StratifiedIndex, TracerConfig};
+use ghostship::jobs::trace::{ElevationSpec, parse_elevation_spec};
+use ghostship::jobs::{AtmosphereCache, Product, TraceJobRequest};
+use ghostship::tracer::TracerConfig;
 
-/// Most rays a fan may have.
-pub const MAX_RAYS: usize = ghostship::analysis::MAX_FAN_RAYS;
+use super::profile::AtmosphereArgs;
 
 /// How the report is printed on stdout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -42,9 +36,10 @@ pub struct TraceArgs {
     #[arg(
         long,
         value_name = "DEG|DEG,DEG,...|FROM:TO:STEP",
-        allow_hyphen_values = true
+        allow_hyphen_values = true,
+        value_parser = parse_elevation_spec
     )]
-    pub elevation_deg: String,
+    pub elevation_deg: ElevationSpec,
     /// Ground distances of the targets in metres, comma-separated (heights of every ray are
     /// reported there; images are searched there).
     #[arg(long, value_name = "M,...", value_delimiter = ',', default_values_t = [10_000.0, 20_000.0, 30_000.0])]
@@ -58,15 +53,9 @@ pub struct TraceArgs {
     /// BENCHMARKS.md).
     #[arg(long, value_name = "M", default_value_t = 1e-3)]
     pub tolerance_m: f64,
-    /// Vacuum wavelength for the refractive index, in nanometres (300–1700).
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_WAVELENGTH_NM)]
-    pub wavelength_nm: f64,
-    /// Smoothing scale of the sounding fit, in metres (0 = none). Ignored for .toml and us1976.
-    #[arg(long, value_name = "M", default_value_t = 20.0)]
-    pub smooth_m: f64,
-    /// Which sounding of a multi-sounding IGRA2 file: "YYYY-MM-DD HH" (UTC). Default: the first.
-    #[arg(long, value_name = "YYYY-MM-DD HH")]
-    pub igra2_time: Option<String>,
+    /// How to build the atmosphere.
+    #[command(flatten)]
+    pub atmosphere_options: AtmosphereArgs,
     /// Top of the atmosphere in metres above the surface: rays above it have escaped.
     #[arg(long, value_name = "M", default_value_t = 40_000.0)]
     pub top_m: f64,
@@ -82,210 +71,10 @@ pub struct TraceArgs {
     /// Output on stdout.
     #[arg(long, value_enum, default_value_t = TraceFormat::Json)]
     pub format: TraceFormat,
-    /// Also draw the ray fan and the transfer curves into this PNG file.
+    /// Also draw the ray fan and the transfer curves into this PNG file (a relative path is
+    /// relative to the current folder).
     #[arg(long, value_name = "FILE.png")]
     pub plot: Option<PathBuf>,
-}
-
-/// The rays to trace, as given on the command line.
-#[derive(Debug, Clone, PartialEq)]
-pub enum ElevationFan {
-    /// `count` rays from `from_deg` to `to_deg`, evenly spaced (`FROM:TO:STEP`).
-    Range {
-        /// Lowest elevation (deg).
-        from_deg: f64,
-        /// Highest elevation (deg): FROM + (count − 1)·STEP, at most TO.
-        to_deg: f64,
-        /// Number of rays (≥ 1).
-        count: usize,
-    },
-    /// Explicit elevations (deg), strictly ascending: one value or a comma-separated list.
-    List(Vec<f64>),
-}
-
-/// Parse the `--elevation-deg` value (degrees): one elevation (`0.5`), a comma-separated list in
-/// strictly ascending order (`-0.1,0,0.25`; a list out of order, or with a repeated value, is
-/// refused rather than silently sorted, so the rows of the report are the rays as listed), or
-/// an evenly spaced fan `FROM:TO:STEP` (STEP > 0, TO ≥ FROM; when (TO − FROM)/STEP is not a whole
-/// number the fan stops at the last step below TO). 1 to [`MAX_RAYS`] rays, every elevation
-/// strictly between −90° and 90°.
-pub fn parse_elevation_fan(text: &str) -> Result<ElevationFan, String> {
-    let inside = |v: f64| v > -90.0 && v < 90.0;
-    if !text.contains(':') {
-        let mut list = Vec::new();
-        for item in text.split(',') {
-            let v = item
-                .trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| {
-                    format!(
-                        "elevation {item:?} in {text:?} is not a number of degrees (give one \
-                         elevation, a comma-separated list like \"-0.1,0,0.25\" or a fan \
-                         FROM:TO:STEP like \"-0.4:0.6:0.001\")"
-                    )
-                })?;
-            if !inside(v) {
-                return Err(format!(
-                    "elevation {v} in {text:?}: elevations must lie strictly between -90° and 90°"
-                ));
-            }
-            if let Some(&last) = list.last()
-                && v <= last
-            {
-                return Err(format!(
-                    "elevations {text:?} must be listed in strictly ascending order ({v} follows \
-                     {last})"
-                ));
-            }
-            list.push(v);
-        }
-        if list.len() > MAX_RAYS {
-            return Err(format!(
-                "elevation list {text:?} has {} rays; at most {MAX_RAYS} are allowed",
-                list.len()
-            ));
-        }
-        return Ok(ElevationFan::List(list));
-    }
-    let parts: Vec<&str> = text.split(':').collect();
-    let [from, to, step] = parts.as_slice() else {
-        return Err(format!(
-            "elevation fan {text:?} is not FROM:TO:STEP in degrees (e.g. \"-0.4:0.6:0.001\")"
-        ));
-    };
-    let num = |name: &str, s: &str| {
-        s.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("elevation fan {text:?}: {name} {s:?} is not a number"))
-    };
-    let (from, to, step) = (num("FROM", from)?, num("TO", to)?, num("STEP", step)?);
-    if step <= 0.0 {
-        return Err(format!("elevation fan {text:?}: STEP must be > 0"));
-    }
-    if to < from {
-        return Err(format!("elevation fan {text:?}: TO must not be below FROM"));
-    }
-    if !(inside(from) && inside(to)) {
-        return Err(format!(
-            "elevation fan {text:?}: elevations must lie strictly between -90° and 90°"
-        ));
-    }
-    // A relative slack so that 0.6 reached by steps of 0.001 counts despite rounding.
-    let intervals = ((to - from) / step * (1.0 + 1e-9)).floor();
-    if intervals + 1.0 > MAX_RAYS as f64 {
-        return Err(format!(
-            "elevation fan {text:?} has {} rays; at most {MAX_RAYS} are allowed (use a larger STEP)",
-            intervals + 1.0
-        ));
-    }
-    let count = intervals as usize + 1;
-    Ok(ElevationFan::Range {
-        from_deg: from,
-        to_deg: from + (count - 1) as f64 * step,
-        count,
-    })
-}
-
-/// Validated options of `trace` (also built by pipeline jobs).
-#[derive(Debug, Clone, PartialEq)]
-pub struct TraceOptions {
-    /// What to load.
-    pub source: AtmosphereSource,
-    /// How to load it.
-    pub atmosphere: AtmosphereOptions,
-    /// What to trace.
-    pub request: TraceRequest,
-    /// Trace through n ≡ 1 instead of the atmosphere.
-    pub straight: bool,
-}
-
-impl TraceOptions {
-    /// Build and check the request from its parts; `elevation_deg` is what
-    /// [`parse_elevation_fan`] reads (one value, an ascending list or `FROM:TO:STEP`).
-    #[allow(clippy::too_many_arguments)] // one argument per request field
-    pub fn new(
-        source: AtmosphereSource,
-        atmosphere: AtmosphereOptions,
-        observer_height_m: f64,
-        elevation_deg: &str,
-        mut distances_m: Vec<f64>,
-        target_heights_m: Vec<f64>,
-        tracer: TracerConfig,
-        straight: bool,
-    ) -> anyhow::Result<Self> {
-        let fan = parse_elevation_fan(elevation_deg).map_err(anyhow::Error::msg)?;
-        if !(observer_height_m.is_finite() && observer_height_m >= 0.0) {
-            anyhow::bail!("observer height {observer_height_m} m must be ≥ 0 m above the surface");
-        }
-        if distances_m.is_empty() {
-            anyhow::bail!("give at least one target distance");
-        }
-        distances_m.sort_by(f64::total_cmp);
-        let (elevation_min_deg, elevation_max_deg, elevation_count, elevations_deg) = match fan {
-            ElevationFan::Range {
-                from_deg,
-                to_deg,
-                count,
-            } => (from_deg, to_deg, count, Vec::new()),
-            ElevationFan::List(list) => {
-                let (lo, hi) = (list[0], list[list.len() - 1]);
-                (lo, hi, list.len(), list)
-            }
-        };
-        let request = TraceRequest {
-            observer_height_m,
-            elevation_min_deg,
-            elevation_max_deg,
-            elevation_count,
-            elevations_deg,
-            distances_m,
-            target_heights_m,
-            wavelength_nm: atmosphere.wavelength_nm,
-            tracer,
-        };
-        request.validate()?;
-        if observer_height_m >= request.tracer.top_m {
-            anyhow::bail!(
-                "observer height {observer_height_m} m is not below the top of the atmosphere ({} m)",
-                request.tracer.top_m
-            );
-        }
-        Ok(TraceOptions {
-            source,
-            atmosphere,
-            request,
-            straight,
-        })
-    }
-}
-
-/// Trace `options.request` through `atm` (or through n ≡ 1 when `options.straight`); with
-/// `plot`, also draw the fan and transfer curves as PNG bytes.
-pub fn trace_products(
-    atm: &LoadedAtmosphere,
-    options: &TraceOptions,
-    plot: bool,
-) -> anyhow::Result<(TraceReport, Option<Vec<u8>>)> {
-    let index: &dyn StratifiedIndex = if options.straight {
-        &UniformIndex
-    } else {
-        &atm.refractive
-    };
-    let report = trace_report(index, &options.request)
-        .with_context(|| format!("cannot trace through {}", atm.source))?;
-    let png = if plot {
-        Some(
-            trace_plot_png(index, &options.request, &report)
-                .with_context(|| format!("cannot plot the trace through {}", atm.source))?,
-        )
-    } else {
-        None
-    };
-    Ok((report, png))
 }
 
 /// Run `ghostship trace`.
@@ -296,13 +85,8 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
         max_distance_m: args.max_distance_m,
         ..TracerConfig::default()
     };
-    let options = TraceOptions::new(
-        AtmosphereSource::parse(&args.atmosphere),
-        AtmosphereOptions {
-            smooth_m: args.smooth_m,
-            wavelength_nm: args.wavelength_nm,
-            igra2_time: args.igra2_time,
-        },
+    let request = TraceJobRequest::new(
+        args.atmosphere_options.request(&args.atmosphere),
         args.observer_height_m,
         &args.elevation_deg,
         args.distance_m,
@@ -310,100 +94,15 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
         tracer,
         args.straight,
     )?;
-    let atm = load_atmosphere(&options.source, &options.atmosphere)?;
-    let (report, png) = trace_products(&atm, &options, args.plot.is_some())?;
+    let atm = AtmosphereCache::new().get(&request.atmosphere)?;
+    let (report, png) = request.report(&atm, args.plot.is_some())?;
     let text = match args.format {
         TraceFormat::Json => report.to_json()? + "\n",
         TraceFormat::Csv => String::from_utf8_lossy(&report.rays_csv()?).into_owned(),
     };
     super::print_stdout(&text)?;
     if let (Some(path), Some(png)) = (&args.plot, png) {
-        write_atomic(path, &png)?;
-        if !quiet {
-            eprintln!("wrote {}", path.display());
-        }
+        super::write_files(&[(path.clone(), Product::new("trace.png", png))], quiet)?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn rays(text: &str) -> usize {
-        match parse_elevation_fan(text).unwrap() {
-            ElevationFan::Range { count, .. } => count,
-            ElevationFan::List(v) => v.len(),
-        }
-    }
-
-    #[test]
-    fn fan_spec() {
-        let ElevationFan::Range {
-            from_deg,
-            to_deg,
-            count,
-        } = parse_elevation_fan("-0.4:0.6:0.001").unwrap()
-        else {
-            panic!("a range")
-        };
-        assert_eq!((from_deg, count), (-0.4, 1001));
-        assert!((to_deg - 0.6).abs() < 1e-12);
-        let ElevationFan::Range { to_deg, count, .. } = parse_elevation_fan("0:1:0.3").unwrap()
-        else {
-            panic!("a range")
-        };
-        assert_eq!(count, 4);
-        assert!((to_deg - 0.9).abs() < 1e-12);
-        // Fewer than 3 rays are fine now: the report says what it cannot analyse.
-        assert_eq!(rays("0:1:1"), 2);
-        assert_eq!(rays("0.5:0.5:0.1"), 1);
-        for bad in [
-            "1:0:0.1",
-            "0:1:0",
-            "0:1:-1",
-            "0:1",
-            "0:1:0.1:2",
-            "a:1:0.1",
-            "0:10:0.00001",
-            "-90:0:1",
-        ] {
-            assert!(parse_elevation_fan(bad).is_err(), "{bad}");
-        }
-    }
-
-    #[test]
-    fn single_elevations_and_lists() {
-        assert_eq!(
-            parse_elevation_fan("0.5").unwrap(),
-            ElevationFan::List(vec![0.5])
-        );
-        assert_eq!(
-            parse_elevation_fan("-0.1,0, 0.25").unwrap(),
-            ElevationFan::List(vec![-0.1, 0.0, 0.25])
-        );
-        let err = parse_elevation_fan("0.2,0.1").unwrap_err();
-        assert!(err.contains("ascending"), "{err}");
-        let err = parse_elevation_fan("0.1,0.1").unwrap_err();
-        assert!(err.contains("ascending"), "{err}");
-        for bad in ["", "0.1,", "x", "0.1,,0.2", "95", "nan", "inf"] {
-            assert!(parse_elevation_fan(bad).is_err(), "{bad:?}");
-        }
-    }
-
-    #[test]
-    fn a_list_becomes_the_request_fan() {
-        let options = TraceOptions::new(
-            AtmosphereSource::Us1976,
-            AtmosphereOptions::default(),
-            10.0,
-            "-0.1,0,0.25",
-            vec![1000.0],
-            vec![20.0],
-            TracerConfig::default(),
-            false,
-        )
-        .unwrap();
-        assert_eq!(options.request.elevations_deg(), vec![-0.1, 0.0, 0.25]);
-    }
 }

@@ -9,16 +9,27 @@ use super::png::encode_png;
 use super::{WriteError, write_atomic};
 use crate::render::Film;
 
-/// An image file format for films.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FilmFormat {
+/// An image file format for films: the one list of formats every command and pipeline uses.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum ImageFormat {
     /// OpenEXR, linear f32 RGBA.
     Exr,
     /// PNG, 8-bit sRGB.
     Png,
 }
 
-impl FilmFormat {
+impl ImageFormat {
+    /// The file extension, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Self::Exr => "exr",
+            Self::Png => "png",
+        }
+    }
+
     /// The format named by `path`'s extension (case-insensitive), if known.
     pub fn from_path(path: &Path) -> Option<Self> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
@@ -50,13 +61,13 @@ pub enum FilmExportError {
 /// Encode `film` in `format` (`exposure` applies to PNG only; EXR stays scene-linear).
 pub fn encode_film(
     film: &Film,
-    format: FilmFormat,
+    format: ImageFormat,
     meta: &ExrMetadata,
     exposure: f64,
 ) -> Result<Vec<u8>, FilmExportError> {
     Ok(match format {
-        FilmFormat::Exr => encode_exr(film, meta)?,
-        FilmFormat::Png => encode_png(film, exposure)?,
+        ImageFormat::Exr => encode_exr(film, meta)?,
+        ImageFormat::Png => encode_png(film, exposure)?,
     })
 }
 
@@ -71,18 +82,20 @@ pub fn write_films<P: AsRef<Path> + Sync>(
     meta: &ExrMetadata,
     exposure: f64,
 ) -> Result<(), FilmExportError> {
-    let mut by_format: [(FilmFormat, Vec<&Path>); 2] =
-        [(FilmFormat::Png, Vec::new()), (FilmFormat::Exr, Vec::new())];
+    let mut by_format: [(ImageFormat, Vec<&Path>); 2] = [
+        (ImageFormat::Png, Vec::new()),
+        (ImageFormat::Exr, Vec::new()),
+    ];
     for path in paths {
         let path = path.as_ref();
-        let format = FilmFormat::from_path(path)
+        let format = ImageFormat::from_path(path)
             .ok_or_else(|| FilmExportError::UnknownFormat(path.into()))?;
         let slot = by_format.iter_mut().find(|(f, _)| *f == format);
         if let Some((_, list)) = slot {
             list.push(path);
         }
     }
-    let encode_and_write = |(format, paths): &(FilmFormat, Vec<&Path>)| {
+    let encode_and_write = |(format, paths): &(ImageFormat, Vec<&Path>)| {
         if paths.is_empty() {
             return Ok(());
         }
@@ -107,7 +120,7 @@ pub fn write_film(
     exposure: f64,
 ) -> Result<(), FilmExportError> {
     let format =
-        FilmFormat::from_path(path).ok_or_else(|| FilmExportError::UnknownFormat(path.into()))?;
+        ImageFormat::from_path(path).ok_or_else(|| FilmExportError::UnknownFormat(path.into()))?;
     let bytes = encode_film(film, format, meta, exposure)?;
     write_atomic(path, &bytes)?;
     Ok(())
@@ -120,15 +133,15 @@ mod tests {
     #[test]
     fn format_from_extension() {
         assert_eq!(
-            FilmFormat::from_path(Path::new("a/b.EXR")),
-            Some(FilmFormat::Exr)
+            ImageFormat::from_path(Path::new("a/b.EXR")),
+            Some(ImageFormat::Exr)
         );
         assert_eq!(
-            FilmFormat::from_path(Path::new("b.png")),
-            Some(FilmFormat::Png)
+            ImageFormat::from_path(Path::new("b.png")),
+            Some(ImageFormat::Png)
         );
-        assert_eq!(FilmFormat::from_path(Path::new("b.jpg")), None);
-        assert_eq!(FilmFormat::from_path(Path::new("b")), None);
+        assert_eq!(ImageFormat::from_path(Path::new("b.jpg")), None);
+        assert_eq!(ImageFormat::from_path(Path::new("b")), None);
     }
 
     #[test]
@@ -166,8 +179,8 @@ mod tests {
             dir.path().join("c.PNG"),
         ];
         write_films(&film, &paths, &meta, 0.85).unwrap();
-        let png = encode_film(&film, FilmFormat::Png, &meta, 0.85).unwrap();
-        let exr = encode_film(&film, FilmFormat::Exr, &meta, 0.85).unwrap();
+        let png = encode_film(&film, ImageFormat::Png, &meta, 0.85).unwrap();
+        let exr = encode_film(&film, ImageFormat::Exr, &meta, 0.85).unwrap();
         assert_eq!(std::fs::read(&paths[0]).unwrap(), png);
         assert_eq!(std::fs::read(&paths[1]).unwrap(), exr);
         assert_eq!(std::fs::read(&paths[2]).unwrap(), png);
@@ -195,7 +208,7 @@ mod tests {
         };
         let meta = ExrMetadata::default();
         for film in [&short, &empty] {
-            for format in [FilmFormat::Exr, FilmFormat::Png] {
+            for format in [ImageFormat::Exr, ImageFormat::Png] {
                 assert!(
                     encode_film(film, format, &meta, 1.0).is_err(),
                     "{format:?} {}x{}",

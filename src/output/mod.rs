@@ -1,6 +1,8 @@
 //! Output — the one place that writes files. Exporters elsewhere return bytes; this module writes
-//! them atomically (temporary file in the same folder, then rename), so a failed run never leaves a
-//! partly written output behind.
+//! them atomically (temporary file in the same folder, then rename), so a failed or killed run
+//! never leaves a partly written output under its final name. Temporary files are named
+//! `.<name>.ghostship-tmp.<host>.<pid>`: [`remove_dead_temp_files`] finds those whose process
+//! has died on this host and deletes them.
 
 pub mod exr;
 pub mod film;
@@ -37,7 +39,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "output".into());
-    let tmp = parent.join(format!(".{file_name}.tmp-{}", std::process::id()));
+    let tmp = parent.join(format!(
+        ".{file_name}{TEMP_MARKER}{}.{}",
+        host_name(),
+        std::process::id()
+    ));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -48,6 +54,83 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(wrap)
+}
+
+/// What sits between an output's name and the host and pid in its temporary file's name.
+const TEMP_MARKER: &str = ".ghostship-tmp.";
+
+/// This machine's name, reduced to letters, digits and `-` (temp names are shared by hosts
+/// writing into one network folder, so each host only removes its own).
+fn host_name() -> &'static str {
+    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HOST.get_or_init(|| {
+        let raw = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+            .unwrap_or_default();
+        let name: String = raw
+            .trim()
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+            .collect();
+        if name.is_empty() { "host".into() } else { name }
+    })
+}
+
+/// The pid of a temporary file left by [`write_atomic`] on this host (also the older
+/// `.<name>.tmp-<pid>` form), or `None` for any other file.
+fn temp_file_pid(file_name: &str) -> Option<u32> {
+    if !file_name.starts_with('.') {
+        return None;
+    }
+    if let Some((_, rest)) = file_name.rsplit_once(TEMP_MARKER) {
+        let (host, pid) = rest.rsplit_once('.')?;
+        return (host == host_name()).then(|| pid.parse().ok())?;
+    }
+    file_name.rsplit_once(".tmp-")?.1.parse().ok()
+}
+
+/// Whether process `pid` is running (on Linux, from `/proc`; elsewhere every pid counts as
+/// running, so nothing is removed).
+fn process_alive(pid: u32) -> bool {
+    if !Path::new("/proc/self").exists() {
+        return true;
+    }
+    Path::new("/proc").join(pid.to_string()).exists()
+}
+
+/// Delete, under `dir` (recursively), the temporary files of writers on this host whose process
+/// is no longer running; returns the files removed. Missing folders are not an error.
+pub fn remove_dead_temp_files(dir: &Path) -> Result<Vec<PathBuf>, WriteError> {
+    let mut removed = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(folder) = stack.pop() {
+        let entries = match std::fs::read_dir(&folder) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(source) => {
+                return Err(WriteError {
+                    path: folder,
+                    source,
+                });
+            }
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if is_dir {
+                stack.push(path);
+            } else if temp_file_pid(&name).is_some_and(|pid| !process_alive(pid)) {
+                std::fs::remove_file(&path).map_err(|source| WriteError {
+                    path: path.clone(),
+                    source,
+                })?;
+                removed.push(path);
+            }
+        }
+    }
+    removed.sort();
+    Ok(removed)
 }
 
 #[cfg(test)]
@@ -63,6 +146,29 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"two");
         let leftovers: Vec<_> = std::fs::read_dir(p.parent().unwrap()).unwrap().collect();
         assert_eq!(leftovers.len(), 1);
+    }
+
+    #[test]
+    fn removes_only_dead_writers_temp_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let sub = dir.path().join("job");
+        std::fs::create_dir_all(&sub).unwrap();
+        // pid 0 is never a process's; ours is alive; another host's file is not ours to judge.
+        let dead = sub.join(format!(".a.png{TEMP_MARKER}{}.0", host_name()));
+        let alive = sub.join(format!(
+            ".b.png{TEMP_MARKER}{}.{}",
+            host_name(),
+            std::process::id()
+        ));
+        let other_host = sub.join(format!(".c.png{TEMP_MARKER}elsewhere-{}.0", host_name()));
+        let legacy = dir.path().join(".layers.json.tmp-0");
+        let plain = dir.path().join("d.png");
+        for p in [&dead, &alive, &other_host, &legacy, &plain] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        let removed = remove_dead_temp_files(dir.path()).unwrap();
+        assert_eq!(removed, vec![legacy.clone(), dead.clone()]);
+        assert!(alive.exists() && other_host.exists() && plain.exists());
     }
 
     #[test]

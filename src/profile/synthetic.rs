@@ -390,10 +390,12 @@ impl SyntheticAtmosphere {
 
     /// Read and parse a synthetic atmosphere file.
     pub fn from_file(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::input::read_limited_text(path, crate::input::MAX_TOML_BYTES).map_err(
+            |source| ProfileError::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+        )?;
         Self::from_toml_str(&text, path)
     }
 

@@ -501,29 +501,6 @@ fn card_column_range(
     Some((first, end))
 }
 
-/// Provenance for an EXR of `scene` rendered with `options` (scene hash, observer height,
-/// wavelength, fan tolerance or "exact", tracer tolerance, samples per pixel).
-pub fn provenance(scene: &Scene, options: &RenderOptions) -> crate::output::exr::ExrMetadata {
-    let spp = options
-        .samples_per_pixel
-        .unwrap_or(scene.camera.samples_per_pixel);
-    crate::output::exr::ExrMetadata {
-        scene_hash: scene.hash_hex.clone(),
-        observer_height_m: scene.camera.height_m,
-        wavelength_nm: scene.atmosphere.wavelength_nm,
-        tolerance_px: (!options.exact).then_some(options.tolerance_px),
-        tracer_tolerance_m: options.tolerance_m,
-        extra: vec![
-            ("samples_per_pixel".into(), spp.to_string()),
-            (
-                "straight_rays".into(),
-                scene.atmosphere.straight.to_string(),
-            ),
-            ("earth_radius_m".into(), scene.earth_radius_m.to_string()),
-        ],
-    }
-}
-
 /// Render `scene` through `tracer`.
 pub fn render_scene(
     scene: &Scene,

@@ -84,7 +84,8 @@ impl Texture {
             path: path.to_path_buf(),
             source,
         };
-        let bytes = std::fs::read(path).map_err(|e| wrap(image::ImageError::IoError(e)))?;
+        let bytes = crate::input::read_limited(path, crate::input::MAX_IMAGE_BYTES)
+            .map_err(|e| wrap(image::ImageError::IoError(e)))?;
         let texture = Self::from_image_bytes(&bytes).map_err(wrap)?;
         Ok((texture, Sha256::digest(&bytes).into()))
     }

@@ -67,6 +67,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
+
+use crate::atmosphere::{
+    AtmosphereError, AtmosphereOptions, AtmosphereSource, LoadedAtmosphere, load_atmosphere,
+};
 use sha2::{Digest, Sha256};
 
 pub use camera::Camera;
@@ -116,22 +120,11 @@ pub enum SceneError {
     },
 }
 
-/// Where the atmosphere comes from; the scene only names it, the caller resolves it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub enum AtmosphereSpec {
-    /// A radiosonde sounding file (resolved path).
-    Sounding(PathBuf),
-    /// A synthetic layered atmosphere (TOML; resolved path).
-    Synthetic(PathBuf),
-    /// The U.S. Standard Atmosphere 1976.
-    Us1976,
-}
-
 /// The atmosphere section of a scene.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AtmosphereSettings {
-    /// The source of the air column.
-    pub source: AtmosphereSpec,
+    /// The source of the air column (paths resolved against the scene file's folder).
+    pub source: AtmosphereSource,
     /// Wavelength for the refractive index (nm).
     pub wavelength_nm: f64,
     /// Trace straight rays (n ≡ 1) instead.
@@ -140,6 +133,32 @@ pub struct AtmosphereSettings {
     pub smooth_m: Option<f64>,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`, UTC); `None`: the first.
     pub igra2_time: Option<String>,
+}
+
+impl AtmosphereSettings {
+    /// What the section names and how to load it, as every command loads atmospheres (source,
+    /// wavelength, smoothing, IGRA2 time); `None` when the scene traces straight rays, which
+    /// need no air.
+    pub fn resolve(&self) -> Option<(AtmosphereSource, AtmosphereOptions)> {
+        if self.straight {
+            return None;
+        }
+        let options = AtmosphereOptions {
+            smooth_m: self
+                .smooth_m
+                .unwrap_or(AtmosphereOptions::default().smooth_m),
+            wavelength_nm: self.wavelength_nm,
+            igra2_time: self.igra2_time.clone(),
+        };
+        Some((self.source.clone(), options))
+    }
+
+    /// Load the atmosphere [`resolve`](Self::resolve) names; `None` for straight rays.
+    pub fn load(&self) -> Result<Option<LoadedAtmosphere>, AtmosphereError> {
+        self.resolve()
+            .map(|(source, options)| load_atmosphere(&source, &options))
+            .transpose()
+    }
 }
 
 /// A validated scene in SI units.
@@ -319,10 +338,12 @@ pub fn samples_per_pixel_root(spp: u32) -> Option<u32> {
 impl Scene {
     /// Load a scene file; paths inside are relative to its folder.
     pub fn from_file(path: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::input::read_limited_text(path, crate::input::MAX_TOML_BYTES).map_err(
+            |source| SceneError::Read {
+                path: path.to_path_buf(),
+                source,
+            },
+        )?;
         let base = path.parent().unwrap_or(Path::new("."));
         let mut scene = Self::from_toml_str(&text, base, path)?;
         scene.source_path = Some(path.to_path_buf());
@@ -395,16 +416,16 @@ impl Scene {
 
         let ra = &raw.atmosphere;
         let source = match (&ra.sounding, &ra.synthetic, &ra.standard) {
-            (Some(p), None, None) => AtmosphereSpec::Sounding(resolve(p)),
-            (None, Some(p), None) => AtmosphereSpec::Synthetic(resolve(p)),
-            (None, None, Some(s)) if s.eq_ignore_ascii_case("us1976") => AtmosphereSpec::Us1976,
+            (Some(p), None, None) => AtmosphereSource::Sounding(resolve(p)),
+            (None, Some(p), None) => AtmosphereSource::Synthetic(resolve(p)),
+            (None, None, Some(s)) if s.eq_ignore_ascii_case("us1976") => AtmosphereSource::Us1976,
             (None, None, Some(s)) => {
                 return Err(c.invalid(
                     "atmosphere.standard",
                     format!("the only standard atmosphere is \"us1976\", got {s:?}"),
                 ));
             }
-            (None, None, None) => AtmosphereSpec::Us1976,
+            (None, None, None) => AtmosphereSource::Us1976,
             _ => {
                 return Err(c.invalid(
                     "atmosphere",
@@ -414,7 +435,7 @@ impl Scene {
         };
         let igra2_time = match (&ra.igra2_time, &source) {
             (None, _) => None,
-            (Some(t), AtmosphereSpec::Sounding(_)) => Some(t.clone()),
+            (Some(t), AtmosphereSource::Sounding(_)) => Some(t.clone()),
             (Some(_), _) => {
                 return Err(c.invalid(
                     "atmosphere.igra2_time",
@@ -629,19 +650,20 @@ impl Scene {
             card.image_path = file_name(&card.image_path);
         }
         view.atmosphere.source = match &view.atmosphere.source {
-            AtmosphereSpec::Sounding(p) => AtmosphereSpec::Sounding(file_name(p)),
-            AtmosphereSpec::Synthetic(p) => AtmosphereSpec::Synthetic(file_name(p)),
-            AtmosphereSpec::Us1976 => AtmosphereSpec::Us1976,
+            AtmosphereSource::Sounding(p) => AtmosphereSource::Sounding(file_name(p)),
+            AtmosphereSource::Synthetic(p) => AtmosphereSource::Synthetic(file_name(p)),
+            AtmosphereSource::Us1976 => AtmosphereSource::Us1976,
         };
         view.source_path = None;
         h.update(serde_json::to_vec(&view).unwrap_or_default());
         // The atmosphere file enters by content too: editing a layer changes the image, so it
         // must change the hash. An unreadable file (the render will fail to load it anyway)
         // is marked as such.
-        if let AtmosphereSpec::Sounding(p) | AtmosphereSpec::Synthetic(p) = &self.atmosphere.source
+        if let AtmosphereSource::Sounding(p) | AtmosphereSource::Synthetic(p) =
+            &self.atmosphere.source
         {
             h.update(b"\0atmosphere\0");
-            match std::fs::read(p) {
+            match crate::input::read_limited(p, crate::input::MAX_SOUNDING_BYTES) {
                 Ok(bytes) => h.update(bytes),
                 Err(_) => h.update(b"unreadable"),
             }
@@ -669,7 +691,7 @@ mod tests {
     #[test]
     fn defaults_fill_in() {
         let s = parse(MINIMAL).unwrap();
-        assert_eq!(s.atmosphere.source, AtmosphereSpec::Us1976);
+        assert_eq!(s.atmosphere.source, AtmosphereSource::Us1976);
         assert_eq!(s.atmosphere.wavelength_nm, 550.0);
         assert_eq!(s.earth_radius_m, 6_371_000.0);
         assert_eq!(s.camera.samples_per_pixel, 1);
@@ -748,7 +770,7 @@ mod tests {
         let s = parse(&text).unwrap();
         assert_eq!(
             s.atmosphere.source,
-            AtmosphereSpec::Synthetic(PathBuf::from("/base/../fata.toml"))
+            AtmosphereSource::Synthetic(PathBuf::from("/base/../fata.toml"))
         );
         assert!(s.atmosphere.straight);
     }

@@ -136,6 +136,21 @@ fn parse_header(
     })
 }
 
+/// The nominal times (`"YYYY-MM-DD HH"`) of every sounding in an IGRA2 text, in file order;
+/// `None` if the text is not IGRA2 or a header cannot be read.
+pub(crate) fn times(path: &Path, text: &str) -> Result<Option<Vec<String>>, SoundingError> {
+    let Some(format) = detect(text) else {
+        return Ok(None);
+    };
+    let mut times = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.starts_with('#') && is_header(line) {
+            times.push(parse_header(path, i + 1, line, format)?.time);
+        }
+    }
+    Ok(Some(times))
+}
+
 /// Reads one sounding of an IGRA2 data or derived file.
 pub(crate) fn read(
     path: &Path,

@@ -101,14 +101,21 @@ impl ReadOptions {
     }
 }
 
+/// The bytes of the sounding file at `path`, read with the input size limit.
+fn read_bytes(path: &Path) -> Result<Vec<u8>, SoundingError> {
+    crate::input::read_limited(path, crate::input::MAX_SOUNDING_BYTES).map_err(|source| {
+        SoundingError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    })
+}
+
 /// Reads and validates the sounding in the file at `path` (any supported format, detected from
 /// the content). Never panics, whatever the bytes; non-UTF-8 input is a
 /// [`SoundingError::NotUtf8`] naming the line.
 pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, SoundingError> {
-    let bytes = std::fs::read(path).map_err(|source| SoundingError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = read_bytes(path)?;
     let text = match std::str::from_utf8(&bytes) {
         Ok(text) => text,
         Err(e) => {
@@ -122,6 +129,15 @@ pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, Sou
         }
     };
     parse_sounding(text, path, options)
+}
+
+/// The nominal times (`"YYYY-MM-DD HH"`, UTC) of every sounding in the IGRA2 file at `path`, in
+/// file order (the values [`ReadOptions::igra2_time`] accepts); `None` for a file in another
+/// format (which holds one sounding).
+pub fn igra2_times(path: &Path) -> Result<Option<Vec<String>>, SoundingError> {
+    let bytes = read_bytes(path)?;
+    let text = String::from_utf8_lossy(&bytes);
+    igra2::times(path, &text)
 }
 
 /// Parses and validates a sounding from `text`; `source` names it in errors and in

@@ -26,7 +26,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use crate::atmosphere::{AtmosphereError, LoadedAtmosphere, load_scene_atmosphere};
+use crate::atmosphere::{AtmosphereError, LoadedAtmosphere};
 use crate::output::png::{DEFAULT_EXPOSURE, film_to_srgb8};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::render::traced::cards_top_m;
@@ -227,12 +227,13 @@ pub fn load_paper_scenes(scenes_dir: &Path) -> Result<Vec<PaperScene>, FrameErro
                 source: Box::new(source),
             })?;
             let name = file.trim_end_matches(".toml").to_string();
-            let atmosphere = load_scene_atmosphere(&scene.atmosphere).map_err(|source| {
-                FrameError::Atmosphere {
+            let atmosphere = scene
+                .atmosphere
+                .load()
+                .map_err(|source| FrameError::Atmosphere {
                     name: name.clone(),
                     source: Box::new(source),
-                }
-            })?;
+                })?;
             Ok(PaperScene {
                 name,
                 scene,

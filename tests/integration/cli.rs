@@ -4,53 +4,8 @@
 
 use std::path::Path;
 
-use assert_cmd::cargo::cargo_bin_cmd;
-
+use crate::support::cli::{fails, ghostship, json_file, ok, pipeline_ok, usage_error};
 use crate::support::data::{data_file, repo_file, sounding};
-
-fn ghostship() -> assert_cmd::Command {
-    cargo_bin_cmd!("ghostship")
-}
-
-struct Run {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
-}
-
-fn run(args: &[&str]) -> Run {
-    let out = ghostship().args(args).output().expect("binary runs");
-    Run {
-        code: out.status.code(),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-fn ok(args: &[&str]) -> Run {
-    let r = run(args);
-    assert_eq!(
-        r.code,
-        Some(0),
-        "ghostship {args:?} failed:\nstdout: {}\nstderr: {}",
-        r.stdout,
-        r.stderr
-    );
-    r
-}
-
-fn fails(args: &[&str]) -> Run {
-    let r = run(args);
-    assert_eq!(
-        r.code,
-        Some(1),
-        "ghostship {args:?} should fail with status 1: {}",
-        r.stderr
-    );
-    assert!(r.stderr.starts_with("error: "), "{}", r.stderr);
-    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
-    r
-}
 
 fn png_size(path: &Path) -> (u32, u32) {
     let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -66,10 +21,6 @@ fn read_profile_csv(path: &Path) -> (String, Vec<Vec<f64>>) {
         .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
         .collect();
     (header, rows)
-}
-
-fn json_file(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]
@@ -404,7 +355,8 @@ fn bad_elevation_specs_are_explained() {
         ("-1:1:0.00001", "at most 100000"),
         ("x:1:0.1", "not a number"),
     ] {
-        let r = fails(&[
+        // A usage error (clap's value parser): status 2, nothing traced.
+        let r = usage_error(&[
             "trace",
             "--atmosphere",
             "us1976",
@@ -452,26 +404,30 @@ distances_m = [3000.0]
     )
     .unwrap();
     let out = dir.path().join("results");
-    let r = ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let r = pipeline_ok(&pipeline, &out, &[]);
     for f in ["profile.csv", "layers.json", "profile.png"] {
         assert!(out.join("inferior_mirage").join(f).is_file(), "{f}");
         assert!(out.join("dmh").join(f).is_file(), "{f}");
     }
-    let trace = json_file(&out.join("us1976_transfer.json"));
+    let trace = json_file(&out.join("us1976_transfer/trace.json"));
     assert_eq!(trace["rays"].as_array().unwrap().len(), 11);
-    assert!(out.join("us1976_transfer.png").is_file());
-    assert!(r.stdout.contains("us1976_transfer.json"), "{}", r.stdout);
+    assert!(out.join("us1976_transfer/trace.png").is_file());
+    // Quiet by default: a summary row per job, no list of paths (the manifest has them).
+    assert!(r.stdout.contains("us1976_transfer"), "{}", r.stdout);
+    assert!(!r.stdout.contains("trace.json"), "{}", r.stdout);
+    let manifest = json_file(&out.join("manifest.json"));
+    assert!(
+        manifest["jobs"]["us1976_transfer"]["outputs"]["us1976_transfer/trace.json"]["sha256"]
+            .is_string(),
+        "{manifest}"
+    );
+    let r = pipeline_ok(&pipeline, &out, &["--verbose", "--force"]);
+    assert!(r.stdout.contains("trace.json"), "{}", r.stdout);
 
-    // A render job whose scene is missing is named, before anything runs.
+    // A render job whose scene is missing is named, with line and column, before anything runs.
     std::fs::write(&pipeline, "[[render]]\nscene = \"x.toml\"\n").unwrap();
     let r = fails(&["pipeline", "run", pipeline.to_str().unwrap()]);
-    assert!(r.stderr.contains("render job \"x\""), "{}", r.stderr);
+    assert!(r.stderr.contains("small.toml:2:9"), "{}", r.stderr);
     assert!(r.stderr.contains("x.toml"), "{}", r.stderr);
     // A bad trace job is named.
     std::fs::write(
@@ -480,8 +436,12 @@ distances_m = [3000.0]
     )
     .unwrap();
     let r = fails(&["pipeline", "run", pipeline.to_str().unwrap()]);
-    assert!(r.stderr.contains("us1976_transfer"), "{}", r.stderr);
-    assert!(r.stderr.contains("small.toml"), "{}", r.stderr);
+    assert!(r.stderr.contains("small.toml:4:17"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("TO must not be below FROM"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
@@ -501,10 +461,54 @@ fn help_mentions_units_and_usage_errors_exit_2() {
     ] {
         assert!(r.stdout.contains(needle), "trace --help lacks {needle}");
     }
-    let r = run(&["trace", "--no-such-option"]);
-    assert_eq!(r.code, Some(2), "{}", r.stderr);
-    let r = run(&["profile"]);
-    assert_eq!(r.code, Some(2), "{}", r.stderr);
+    let r = ok(&["pipeline", "run", "--help"]);
+    for needle in [
+        "docs/pipeline.md",
+        "--shard",
+        "--dry-run",
+        "--force",
+        "--jobs",
+    ] {
+        assert!(
+            r.stdout.contains(needle),
+            "pipeline run --help lacks {needle}"
+        );
+    }
+    let r = ok(&["render", "--help"]);
+    assert!(
+        r.stdout.contains("current folder"),
+        "render --help: {}",
+        r.stdout
+    );
+    usage_error(&["trace", "--no-such-option"]);
+    usage_error(&["profile"]);
+    // Bad values are usage errors too, refused by clap's value parsers before any work.
+    let scene = data_file("scenes/fig01_horizon_straight.toml");
+    let scene = scene.to_str().unwrap();
+    for (args, needle) in [
+        (&["render", scene, "--size", "100"][..], "WIDTHxHEIGHT"),
+        (&["render", scene, "--size", "0x10"][..], "1 to 16384"),
+        (&["render", scene, "-o", "x.jpg"][..], "x.jpg"),
+        (&["render", scene, "--exposure", "0"][..], "exposure"),
+        (
+            &[
+                "trace",
+                "-a",
+                "us1976",
+                "--observer-height-m",
+                "2",
+                "--elevation-deg",
+                "1:0:0.1",
+            ][..],
+            "TO must not be below FROM",
+        ),
+        (&["pipeline", "run", "p.toml", "--shard", "5/4"][..], "K/N"),
+        (&["pipeline", "run", "p.toml", "-j", "0"][..], "≥ 1"),
+        (&["pipeline", "merge"][..], "DIR"),
+    ] {
+        let r = usage_error(args);
+        assert!(r.stderr.contains(needle), "{args:?}: {}", r.stderr);
+    }
 }
 
 #[test]
@@ -568,14 +572,7 @@ fn igra2_time_chooses_the_sounding() {
 fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
     let pipeline = repo_file("pipelines/soundings.toml");
     let dir = tempfile::tempdir().unwrap();
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--quiet",
-    ]);
+    pipeline_ok(&pipeline, dir.path(), &["--quiet"]);
     for job in [
         "utqiagvik",
         "danmarkshavn",
@@ -590,8 +587,9 @@ fn shipped_soundings_pipeline_runs_and_shows_the_mirages() {
         }
     }
     let trace = |name: &str| {
-        assert!(dir.path().join(format!("{name}_transfer.png")).is_file());
-        json_file(&dir.path().join(format!("{name}_transfer.json")))
+        let job = dir.path().join(format!("{name}_transfer"));
+        assert!(job.join("trace.png").is_file());
+        json_file(&job.join("trace.json"))
     };
     // Fata Morgana: stacked layers fold the transfer curve, so some image is inverted.
     let fm = trace("fata_morgana");
@@ -685,7 +683,7 @@ fn render_straight_and_curved_differ_and_bad_input_is_reported() {
     );
 
     // Unknown output format, bad spp, bad scene field (with line), missing scene.
-    let r = fails(&["render", scene.to_str().unwrap(), "-o", "x.jpg"]);
+    let r = usage_error(&["render", scene.to_str().unwrap(), "-o", "x.jpg"]);
     assert!(r.stderr.contains("x.jpg"), "{}", r.stderr);
     let r = fails(&[
         "render",
@@ -719,17 +717,11 @@ fn pipeline_render_job_writes_every_size_and_format() {
     )
     .unwrap();
     let out = dir.path().join("o");
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    for (name, w, h) in [("fig01_64x32", 64, 32), ("fig01_40x40", 40, 40)] {
-        let img = image::open(out.join(format!("{name}.png"))).unwrap();
+    pipeline_ok(&pipeline, &out, &[]);
+    for (name, w, h) in [("64x32", 64, 32), ("40x40", 40, 40)] {
+        let img = image::open(out.join(format!("fig01/{name}.png"))).unwrap();
         assert_eq!((img.width(), img.height()), (w, h));
-        assert!(out.join(format!("{name}.exr")).is_file());
+        assert!(out.join(format!("fig01/{name}.exr")).is_file());
     }
 }
 
@@ -1057,7 +1049,7 @@ fn a_closed_stdout_pipe_ends_every_command_quietly() {
     );
     assert_eq!(status.code(), Some(0), "pipeline: {stderr}");
     assert!(stderr.is_empty(), "pipeline: {stderr}");
-    assert!(out_dir.join("us1976_transfer.json").is_file());
+    assert!(out_dir.join("us1976_transfer/trace.json").is_file());
     for args in [&["--help"][..], &["trace", "--help"][..]] {
         let (status, stderr) = with_closed_stdout(args, 0);
         assert_eq!(status.code(), Some(0), "{args:?}: {stderr}");
@@ -1136,7 +1128,7 @@ fn render_tolerance_is_validated_used_and_recorded() {
         "{differing} of 3200 pixels differ between 1 cm and 1 mm"
     );
     for bad in ["0", "-0.01", "nan", "inf", "11", "1e-7"] {
-        let r = fails(&[
+        let r = usage_error(&[
             "render",
             scene.to_str().unwrap(),
             &format!("--tolerance-m={bad}"),
@@ -1157,15 +1149,8 @@ fn render_tolerance_is_validated_used_and_recorded() {
     )
     .unwrap();
     let out = dir.path().join("o");
-    ok(&[
-        "pipeline",
-        "run",
-        pipeline.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
-    let lines = exr_provenance(&out.join("f_40x20.exr"));
+    pipeline_ok(&pipeline, &out, &["-q"]);
+    let lines = exr_provenance(&out.join("f/40x20.exr"));
     assert!(
         lines.contains(&"tracer_tolerance_m=0.05".to_string()),
         "{lines:?}"

@@ -7,6 +7,7 @@ mod cli;
 mod end_to_end;
 mod images;
 mod ingest;
+mod pipeline;
 mod profile;
 mod reference_tracer;
 mod refractivity;

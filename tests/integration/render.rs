@@ -676,7 +676,7 @@ fn figure_scenes_parse_and_render_with_constant_curvature() {
 fn scene_paths_resolve_against_the_scene_file() {
     let scene = Scene::from_file(&data_dir().join("scenes/fig04_superior_mirage.toml")).unwrap();
     match &scene.atmosphere.source {
-        ghostship::scene::AtmosphereSpec::Synthetic(p) => {
+        ghostship::atmosphere::AtmosphereSource::Synthetic(p) => {
             assert_eq!(
                 p,
                 &data_dir().join("scenes").join("../superior_mirage.toml")

@@ -10,15 +10,17 @@
 use std::sync::Arc;
 
 use ghostship::analysis::{Image, Reach, TransferCurve, find_images};
+use ghostship::atmosphere::AtmosphereSource;
+use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
 use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::traced::render_tracer_config;
 use ghostship::render::{
-    CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, provenance, render_scene,
+    CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, render_scene,
 };
 use ghostship::scene::card::srgb_to_linear;
-use ghostship::scene::{AtmosphereSpec, Scene, Texture, assets};
+use ghostship::scene::{Scene, Texture, assets};
 use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
 use crate::render::at_edge;
@@ -31,12 +33,12 @@ fn load_scene(name: &str) -> Scene {
 
 fn atmosphere(scene: &Scene) -> RefractiveAtmosphere {
     let column: Arc<dyn AirColumn> = match &scene.atmosphere.source {
-        AtmosphereSpec::Synthetic(p) => Arc::new(
+        AtmosphereSource::Synthetic(p) => Arc::new(
             SyntheticAtmosphere::from_file(p)
                 .unwrap_or_else(|e| panic!("atmosphere {}: {e}", p.display())),
         ),
-        AtmosphereSpec::Us1976 => Arc::new(StandardAtmosphere::default()),
-        AtmosphereSpec::Sounding(p) => panic!("test scenes use no soundings: {}", p.display()),
+        AtmosphereSource::Us1976 => Arc::new(StandardAtmosphere::default()),
+        AtmosphereSource::Sounding(p) => panic!("test scenes use no soundings: {}", p.display()),
     };
     RefractiveAtmosphere::new(column, scene.atmosphere.wavelength_nm).expect("atmosphere")
 }

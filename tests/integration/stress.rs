@@ -30,7 +30,6 @@ use std::sync::{Arc, OnceLock};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use ghostship::atmosphere::load_scene_atmosphere;
 use ghostship::profile::Profile;
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
@@ -936,9 +935,7 @@ fn stress_render_has_no_non_finite_pixel() {
             let path = dir.path().join("scene.toml");
             std::fs::write(&path, text).unwrap();
             let scene = Scene::from_file(&path).unwrap();
-            let atm = load_scene_atmosphere(&scene.atmosphere)
-                .unwrap()
-                .expect("curved rays");
+            let atm = scene.atmosphere.load().unwrap().expect("curved rays");
             let options = RenderOptions {
                 exact,
                 quiet: true,

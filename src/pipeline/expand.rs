@@ -1,0 +1,349 @@
+//! Pipeline — expansion of one job table into jobs. In: the names a job table gives (an
+//! atmosphere file, a glob of soundings, an IGRA2 file with a time selection, `us1976`; scene
+//! files or globs) relative to the pipeline file. Out: the concrete atmosphere sources and
+//! scene paths, each with the label the manifest records, and the `{stem}`-style job names.
+
+use std::path::{Component, Path, PathBuf};
+
+use crate::atmosphere::AtmosphereSource;
+
+/// One concrete atmosphere of an expanded job.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AtmosphereChoice {
+    /// What to load.
+    pub source: AtmosphereSource,
+    /// Which IGRA2 sounding (`"YYYY-MM-DD HH"`), if one was chosen.
+    pub igra2_time: Option<String>,
+    /// `{stem}` in job names: the file stem, with `_YYYYMMDDHH` for one of several IGRA2
+    /// soundings.
+    pub stem: String,
+}
+
+/// Whether `text` holds a glob wildcard (`*`, `?` or `[`).
+pub fn is_glob(text: &str) -> bool {
+    text.contains(['*', '?', '['])
+}
+
+/// `*` (any run of characters) and `?` (one character) matching of a whole file name.
+fn wildcard_match(pattern: &[char], name: &[char]) -> bool {
+    match pattern.split_first() {
+        None => name.is_empty(),
+        Some(('*', rest)) => (0..=name.len()).any(|i| wildcard_match(rest, &name[i..])),
+        Some(('?', rest)) => !name.is_empty() && wildcard_match(rest, &name[1..]),
+        Some((c, rest)) => name.first() == Some(c) && wildcard_match(rest, &name[1..]),
+    }
+}
+
+/// The regular files matching `pattern` (wildcards `*` and `?` in the file name only; hidden
+/// files are not matched), sorted by name.
+pub fn glob_files(pattern: &Path) -> Result<Vec<PathBuf>, String> {
+    let name = pattern
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let dir = pattern.parent().unwrap_or(Path::new(""));
+    if is_glob(&dir.to_string_lossy()) {
+        return Err(format!(
+            "{}: wildcards are allowed in the file name only",
+            pattern.display()
+        ));
+    }
+    if name.contains('[') {
+        return Err(format!(
+            "{}: only the wildcards * and ? are supported",
+            pattern.display()
+        ));
+    }
+    let listing = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let entries = std::fs::read_dir(listing)
+        .map_err(|e| format!("cannot list {}: {e}", listing.display()))?;
+    let pattern_chars: Vec<char> = name.chars().collect();
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .filter_map(|e| {
+            let file = e.file_name().to_string_lossy().into_owned();
+            let chars: Vec<char> = file.chars().collect();
+            (!file.starts_with('.') && wildcard_match(&pattern_chars, &chars))
+                .then(|| dir.join(file))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(format!("no file matches {}", pattern.display()));
+    }
+    Ok(files)
+}
+
+/// Which IGRA2 soundings a job's `igra2_time` selects: one `"YYYY-MM-DD HH"`, `"all"`, or an
+/// inclusive range `"FROM..TO"` (either end may be left out).
+#[derive(Debug, Clone, PartialEq)]
+pub enum TimeSelection {
+    /// The file's first sounding (no `igra2_time`).
+    First,
+    /// One sounding.
+    One(String),
+    /// Every sounding from `from` to `to` (inclusive; `None`: open).
+    Range(Option<String>, Option<String>),
+}
+
+impl TimeSelection {
+    /// Parse an `igra2_time` value.
+    pub fn parse(text: Option<&str>) -> Result<Self, String> {
+        let Some(text) = text.map(str::trim) else {
+            return Ok(TimeSelection::First);
+        };
+        if text.eq_ignore_ascii_case("all") {
+            return Ok(TimeSelection::Range(None, None));
+        }
+        let check = |t: &str| -> Result<Option<String>, String> {
+            let t = t.trim();
+            if t.is_empty() {
+                return Ok(None);
+            }
+            let b = t.as_bytes();
+            let ok = b.len() == 13
+                && [4, 7].iter().all(|&i| b[i] == b'-')
+                && b[10] == b' '
+                && b.iter()
+                    .enumerate()
+                    .all(|(i, c)| [4, 7, 10].contains(&i) || c.is_ascii_digit());
+            if ok {
+                Ok(Some(t.to_string()))
+            } else {
+                Err(format!(
+                    "igra2_time {text:?}: expected \"YYYY-MM-DD HH\", \"all\" or \"FROM..TO\""
+                ))
+            }
+        };
+        match text.split_once("..") {
+            Some((from, to)) => Ok(TimeSelection::Range(check(from)?, check(to)?)),
+            None => Ok(TimeSelection::One(check(text)?.unwrap_or_default())),
+        }
+    }
+}
+
+/// The atmospheres `names` (each a file, a glob or `us1976`, relative to `folder`) and
+/// `times` select.
+pub fn atmospheres(
+    names: &[String],
+    times: &TimeSelection,
+    folder: &Path,
+) -> Result<Vec<AtmosphereChoice>, String> {
+    let mut out = Vec::new();
+    for name in names {
+        let source = AtmosphereSource::parse(name);
+        let Some(path) = source.path() else {
+            out.push(AtmosphereChoice {
+                source,
+                igra2_time: None,
+                stem: "us1976".into(),
+            });
+            continue;
+        };
+        let path = folder.join(path);
+        let files = if is_glob(name) {
+            glob_files(&path)?
+        } else {
+            check_file(&path)?;
+            vec![path]
+        };
+        for file in files {
+            out.extend(with_times(
+                AtmosphereSource::parse(&file.to_string_lossy()),
+                times,
+            )?);
+        }
+    }
+    Ok(out)
+}
+
+/// `path` is a readable regular file.
+pub fn check_file(path: &Path) -> Result<(), String> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(_) => Err(format!("{} is not a regular file", path.display())),
+        Err(e) => Err(format!("{}: {e}", path.display())),
+    }
+}
+
+fn with_times(
+    source: AtmosphereSource,
+    times: &TimeSelection,
+) -> Result<Vec<AtmosphereChoice>, String> {
+    let stem = source.stem();
+    let (from, to) = match times {
+        TimeSelection::First => (None, None),
+        TimeSelection::One(t) => {
+            if let Some(path) = source.path()
+                && let Some(all) = crate::sounding::igra2_times(path).map_err(|e| e.to_string())?
+                && !all.contains(t)
+            {
+                return Err(format!(
+                    "{}: no IGRA2 sounding at {t:?} (the file holds: {})",
+                    path.display(),
+                    all.join(", ")
+                ));
+            }
+            return Ok(vec![AtmosphereChoice {
+                source,
+                igra2_time: Some(t.clone()),
+                stem,
+            }]);
+        }
+        TimeSelection::Range(from, to) => (from.clone(), to.clone()),
+    };
+    let Some(path) = source.path().filter(|_| *times != TimeSelection::First) else {
+        return Ok(vec![AtmosphereChoice {
+            source,
+            igra2_time: None,
+            stem,
+        }]);
+    };
+    let Some(all) = crate::sounding::igra2_times(path).map_err(|e| e.to_string())? else {
+        // Not IGRA2: the file's one sounding is all of them.
+        return Ok(vec![AtmosphereChoice {
+            source,
+            igra2_time: None,
+            stem,
+        }]);
+    };
+    let chosen: Vec<String> = all
+        .into_iter()
+        .filter(|t| from.as_ref().is_none_or(|f| t >= f) && to.as_ref().is_none_or(|e| t <= e))
+        .collect();
+    if chosen.is_empty() {
+        return Err(format!(
+            "{}: no IGRA2 sounding in the time range",
+            path.display()
+        ));
+    }
+    Ok(chosen
+        .into_iter()
+        .map(|t| AtmosphereChoice {
+            stem: format!("{stem}_{}", t.replace(['-', ' '], "")),
+            source: source.clone(),
+            igra2_time: Some(t),
+        })
+        .collect())
+}
+
+/// `template` with `{stem}`, `{scene}` and `{height}` replaced; an unknown `{…}` is an error.
+pub fn job_name(
+    template: &str,
+    stem: &str,
+    scene: &str,
+    height_m: Option<f64>,
+) -> Result<String, String> {
+    let height = height_m.map(|h| format!("{h}m")).unwrap_or_default();
+    let mut out = String::new();
+    let mut rest = template;
+    while let Some(open) = rest.find('{') {
+        out.push_str(&rest[..open]);
+        let close = rest[open..]
+            .find('}')
+            .ok_or_else(|| format!("name {template:?}: unclosed {{"))?;
+        out.push_str(match &rest[open + 1..open + close] {
+            "stem" => stem,
+            "scene" => scene,
+            "height" => &height,
+            other => {
+                return Err(format!(
+                    "name {template:?}: unknown placeholder {{{other}}} (use {{stem}}, {{scene}} or {{height}})"
+                ));
+            }
+        });
+        rest = &rest[open + close + 1..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// `path` relative to `base`, both made absolute and normalised lexically (`a/../b` → `b`), with
+/// `/` separators: the label a manifest records, the same from any working directory.
+pub fn relative_label(path: &Path, base: &Path) -> String {
+    let path = normalise(path);
+    let base = normalise(base);
+    let common = path
+        .components()
+        .zip(base.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut parts: Vec<String> = base
+        .components()
+        .skip(common)
+        .map(|_| "..".into())
+        .collect();
+    parts.extend(
+        path.components()
+            .skip(common)
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    parts.join("/")
+}
+
+fn normalise(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = PathBuf::new();
+    for c in absolute.components() {
+        match c {
+            Component::ParentDir => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            other => out.push(other),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wildcards() {
+        let m = |p: &str, n: &str| {
+            wildcard_match(
+                &p.chars().collect::<Vec<_>>(),
+                &n.chars().collect::<Vec<_>>(),
+            )
+        };
+        assert!(m("*.csv", "a.csv") && m("a?c", "abc") && m("*", "") && m("a*b*c", "axxbyc"));
+        assert!(!m("*.csv", "a.csv.bak") && !m("a?c", "ac"));
+    }
+
+    #[test]
+    fn names_and_labels() {
+        assert_eq!(
+            job_name("{stem}_{scene}_{height}", "u", "fig", Some(10.0)).unwrap(),
+            "u_fig_10m"
+        );
+        assert!(job_name("{nope}", "u", "", None).is_err());
+        assert_eq!(
+            relative_label(
+                Path::new("/r/pipelines/../data/x.csv"),
+                Path::new("/r/pipelines")
+            ),
+            "../data/x.csv"
+        );
+    }
+
+    #[test]
+    fn time_selections() {
+        assert_eq!(TimeSelection::parse(None).unwrap(), TimeSelection::First);
+        assert_eq!(
+            TimeSelection::parse(Some("ALL")).unwrap(),
+            TimeSelection::Range(None, None)
+        );
+        assert_eq!(
+            TimeSelection::parse(Some("2010-06-01 00..")).unwrap(),
+            TimeSelection::Range(Some("2010-06-01 00".into()), None)
+        );
+        assert!(TimeSelection::parse(Some("2010-6-1")).is_err());
+    }
+}

@@ -1,0 +1,430 @@
+//! Pipeline — job tables. In: one `[[profile]]`, `[[trace]]` or `[[render]]` table (the
+//! `[defaults]` merged in) with the spans of its keys. Out: the named, validated job requests
+//! it expands to (every atmosphere × scene × observer height it names), or the problems found,
+//! each at the key it concerns.
+
+use std::ops::Range;
+use std::path::Path;
+
+use serde::Deserialize;
+use toml::de::{DeTable, DeValue};
+
+use super::expand::{AtmosphereChoice, TimeSelection, atmospheres, check_file, glob_files};
+use crate::atmosphere::AtmosphereOptions;
+use crate::jobs::cache::AtmosphereRequest;
+use crate::jobs::render::{RenderSettings, parse_size};
+use crate::jobs::trace::parse_elevation_spec;
+use crate::jobs::{JobRequest, ProfileRequest, RenderRequest, TraceJobRequest};
+use crate::output::film::ImageFormat;
+use crate::scene::Scene;
+use crate::tracer::TracerConfig;
+
+/// Keys a `[[profile]]` table accepts.
+pub const PROFILE_KEYS: &[&str] = &[
+    "name",
+    "atmosphere",
+    "igra2_time",
+    "wavelength_nm",
+    "smooth_m",
+    "plot_top_m",
+    "layers_top_m",
+];
+/// Keys a `[[trace]]` table accepts.
+pub const TRACE_KEYS: &[&str] = &[
+    "name",
+    "atmosphere",
+    "igra2_time",
+    "wavelength_nm",
+    "smooth_m",
+    "observer_height_m",
+    "elevation_deg",
+    "distances_m",
+    "target_heights_m",
+    "tolerance_m",
+    "top_m",
+    "max_distance_m",
+    "straight",
+];
+/// Keys a `[[render]]` table accepts.
+pub const RENDER_KEYS: &[&str] = &[
+    "name",
+    "scene",
+    "atmosphere",
+    "igra2_time",
+    "observer_height_m",
+    "sizes",
+    "formats",
+    "spp",
+    "tolerance_m",
+    "exposure",
+    "exact",
+    "straight",
+];
+
+/// A problem at a byte range of the pipeline file.
+pub type Problem = (Range<usize>, String);
+
+/// One value or a list of them.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "a number or a list of numbers (for paths: a string or a list of strings)"
+)]
+pub enum OneOrMany<T> {
+    /// A single value.
+    One(T),
+    /// A list.
+    Many(Vec<T>),
+}
+
+impl<T: Clone> OneOrMany<T> {
+    fn to_vec(&self) -> Vec<T> {
+        match self {
+            OneOrMany::One(v) => vec![v.clone()],
+            OneOrMany::Many(v) => v.clone(),
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProfile {
+    name: Option<String>,
+    atmosphere: OneOrMany<String>,
+    igra2_time: Option<String>,
+    wavelength_nm: Option<f64>,
+    smooth_m: Option<f64>,
+    plot_top_m: Option<f64>,
+    layers_top_m: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTrace {
+    name: Option<String>,
+    atmosphere: OneOrMany<String>,
+    igra2_time: Option<String>,
+    wavelength_nm: Option<f64>,
+    smooth_m: Option<f64>,
+    observer_height_m: OneOrMany<f64>,
+    elevation_deg: String,
+    distances_m: Vec<f64>,
+    target_heights_m: Option<Vec<f64>>,
+    tolerance_m: Option<f64>,
+    top_m: Option<f64>,
+    max_distance_m: Option<f64>,
+    straight: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRender {
+    name: Option<String>,
+    scene: OneOrMany<String>,
+    atmosphere: Option<OneOrMany<String>>,
+    igra2_time: Option<String>,
+    observer_height_m: Option<OneOrMany<f64>>,
+    sizes: Option<Vec<String>>,
+    formats: Option<Vec<ImageFormat>>,
+    spp: Option<u32>,
+    tolerance_m: Option<f64>,
+    exposure: Option<f64>,
+    exact: Option<bool>,
+    straight: Option<bool>,
+}
+
+/// A job table with the spans of its keys, and where problems go.
+pub struct Table<'a, 'i> {
+    /// The merged table.
+    pub table: &'a DeTable<'i>,
+    /// Span of the table (its header line for `[[…]]` tables).
+    pub span: Range<usize>,
+    /// The pipeline file's folder (relative paths are resolved against it).
+    pub folder: &'a Path,
+    /// Problems found so far.
+    pub problems: Vec<Problem>,
+}
+
+impl Table<'_, '_> {
+    fn span_of(&self, key: &str) -> Range<usize> {
+        self.table
+            .get(key)
+            .map(|v| v.span())
+            .unwrap_or_else(|| self.span.clone())
+    }
+
+    fn problem(&mut self, key: &str, message: impl Into<String>) {
+        let span = self.span_of(key);
+        self.problems.push((span, message.into()));
+    }
+
+    /// A problem whose message names the key it is about (the longest key of the table that
+    /// the message mentions), or else the table.
+    fn problem_in_message(&mut self, message: String) {
+        let key = self
+            .table
+            .keys()
+            .map(|k| k.get_ref().as_ref())
+            .filter(|k: &&str| message.contains(*k))
+            .max_by_key(|k| k.len())
+            .map(str::to_string)
+            .unwrap_or_default();
+        self.problem(&key, message);
+    }
+
+    fn raw<T: for<'de> Deserialize<'de>>(&mut self) -> Option<T> {
+        let spanned = toml::Spanned::new(self.span.clone(), self.table.clone());
+        let value = toml::Spanned::new(self.span.clone(), DeValue::Table(spanned.into_inner()));
+        match T::deserialize(toml::de::ValueDeserializer::from(value)) {
+            Ok(raw) => Some(raw),
+            Err(e) => {
+                let span = e.span().unwrap_or_else(|| self.span.clone());
+                self.problems.push((span, e.message().to_string()));
+                None
+            }
+        }
+    }
+
+    fn atmospheres(&mut self, names: &[String], igra2_time: Option<&str>) -> Vec<AtmosphereChoice> {
+        let times = match TimeSelection::parse(igra2_time) {
+            Ok(t) => t,
+            Err(e) => {
+                self.problem("igra2_time", e);
+                return Vec::new();
+            }
+        };
+        match atmospheres(names, &times, self.folder) {
+            Ok(list) => list,
+            Err(e) => {
+                self.problem("atmosphere", e);
+                Vec::new()
+            }
+        }
+    }
+
+    fn name(&mut self, template: &str, stem: &str, scene: &str, height: Option<f64>) -> String {
+        super::expand::job_name(template, stem, scene, height).unwrap_or_else(|e| {
+            self.problem("name", e);
+            String::new()
+        })
+    }
+}
+
+/// A job with its name.
+pub type NamedJob = (String, JobRequest);
+
+fn atmosphere_request(
+    choice: &AtmosphereChoice,
+    wavelength_nm: Option<f64>,
+    smooth_m: Option<f64>,
+) -> AtmosphereRequest {
+    let d = AtmosphereOptions::default();
+    AtmosphereRequest {
+        source: choice.source.clone(),
+        options: AtmosphereOptions {
+            smooth_m: smooth_m.unwrap_or(d.smooth_m),
+            wavelength_nm: wavelength_nm.unwrap_or(d.wavelength_nm),
+            igra2_time: choice.igra2_time.clone(),
+        },
+    }
+}
+
+/// The jobs of a `[[profile]]` table.
+pub fn profile_jobs(t: &mut Table) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawProfile>() else {
+        return Vec::new();
+    };
+    let template = raw.name.clone().unwrap_or_else(|| "{stem}".into());
+    let mut jobs = Vec::new();
+    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.igra2_time.as_deref()) {
+        let name = t.name(&template, &choice.stem, "", None);
+        let request = ProfileRequest::new(
+            atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m),
+            raw.plot_top_m
+                .unwrap_or(crate::jobs::profile::DEFAULT_PLOT_TOP_M),
+            raw.layers_top_m
+                .unwrap_or(crate::jobs::profile::DEFAULT_LAYERS_TOP_M),
+        );
+        match request {
+            Ok(r) => jobs.push((name, JobRequest::Profile(r))),
+            Err(e) => t.problem_in_message(e.to_string()),
+        }
+    }
+    jobs
+}
+
+/// The jobs of a `[[trace]]` table.
+pub fn trace_jobs(t: &mut Table) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawTrace>() else {
+        return Vec::new();
+    };
+    let heights = raw.observer_height_m.to_vec();
+    let template = raw.name.clone().unwrap_or_else(|| {
+        if heights.len() > 1 {
+            "{stem}_transfer_{height}".into()
+        } else {
+            "{stem}_transfer".into()
+        }
+    });
+    let spec = match parse_elevation_spec(&raw.elevation_deg) {
+        Ok(s) => s,
+        Err(e) => {
+            t.problem("elevation_deg", e);
+            return Vec::new();
+        }
+    };
+    let d = TracerConfig::default();
+    let tracer = TracerConfig {
+        tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
+        top_m: raw.top_m.unwrap_or(d.top_m),
+        max_distance_m: raw.max_distance_m,
+        ..d
+    };
+    let mut jobs = Vec::new();
+    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.igra2_time.as_deref()) {
+        for &height in &heights {
+            let name = t.name(&template, &choice.stem, "", Some(height));
+            let request = TraceJobRequest::new(
+                atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m),
+                height,
+                &spec,
+                raw.distances_m.clone(),
+                raw.target_heights_m.clone().unwrap_or_else(|| vec![20.0]),
+                tracer.clone(),
+                raw.straight.unwrap_or(false),
+            );
+            match request {
+                Ok(r) => jobs.push((name, JobRequest::Trace(r))),
+                Err(e) => t.problem_in_message(e.to_string()),
+            }
+        }
+    }
+    jobs
+}
+
+/// The jobs of a `[[render]]` table.
+pub fn render_jobs(t: &mut Table, own_keys: &[String]) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawRender>() else {
+        return Vec::new();
+    };
+    let Some(settings) = render_settings(t, &raw) else {
+        return Vec::new();
+    };
+    if raw.atmosphere.is_none() && own_keys.iter().any(|k| k == "igra2_time") {
+        t.problem(
+            "igra2_time",
+            "igra2_time needs an `atmosphere` in this table",
+        );
+    }
+    let choices: Vec<Option<AtmosphereChoice>> = match &raw.atmosphere {
+        None => vec![None],
+        Some(names) => t
+            .atmospheres(&names.to_vec(), raw.igra2_time.as_deref())
+            .into_iter()
+            .map(Some)
+            .collect(),
+    };
+    let heights: Vec<Option<f64>> = match &raw.observer_height_m {
+        None => vec![None],
+        Some(h) => h.to_vec().into_iter().map(Some).collect(),
+    };
+    let template = raw.name.clone().unwrap_or_else(|| {
+        let mut n = String::from("{scene}");
+        if raw.atmosphere.is_some() {
+            n.push_str("_{stem}");
+        }
+        if heights.len() > 1 {
+            n.push_str("_{height}");
+        }
+        n
+    });
+    let mut jobs = Vec::new();
+    for scene_path in scene_paths(t, &raw.scene.to_vec()) {
+        let scene = match Scene::from_file(&scene_path) {
+            Ok(s) => s,
+            Err(e) => {
+                t.problem("scene", crate::jobs::run::error_text(&e));
+                continue;
+            }
+        };
+        let scene_stem = stem(&scene_path);
+        for choice in &choices {
+            for &height in &heights {
+                let stem = choice.as_ref().map_or("", |c| c.stem.as_str());
+                let name = t.name(&template, stem, &scene_stem, height);
+                let settings = RenderSettings {
+                    atmosphere: choice.as_ref().map(|c| c.source.clone()),
+                    igra2_time: choice.as_ref().and_then(|c| c.igra2_time.clone()),
+                    observer_height_m: height,
+                    ..settings.clone()
+                };
+                match RenderRequest::new(scene.clone(), settings) {
+                    Ok(r) => jobs.push((name, JobRequest::Render(r))),
+                    Err(e) => t.problem_in_message(e.to_string()),
+                }
+            }
+        }
+    }
+    jobs
+}
+
+fn render_settings(t: &mut Table, raw: &RawRender) -> Option<RenderSettings> {
+    let d = RenderSettings::default();
+    let mut sizes = Vec::new();
+    for s in raw.sizes.iter().flatten() {
+        match parse_size(s) {
+            Ok(size) => sizes.push(Some(size)),
+            Err(e) => t.problem("sizes", e),
+        }
+    }
+    if raw.sizes.as_ref().is_some_and(|s| s.is_empty()) {
+        t.problem(
+            "sizes",
+            "sizes is empty (leave it out for the scene's own size)",
+        );
+    }
+    if raw.formats.as_ref().is_some_and(|f| f.is_empty()) {
+        t.problem("formats", "formats is empty");
+        return None;
+    }
+    let mut formats = raw.formats.clone().unwrap_or(d.formats.clone());
+    formats.sort();
+    formats.dedup();
+    Some(RenderSettings {
+        sizes: if sizes.is_empty() {
+            d.sizes.clone()
+        } else {
+            sizes
+        },
+        formats,
+        spp: raw.spp,
+        tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
+        exposure: raw.exposure.unwrap_or(d.exposure),
+        exact: raw.exact.unwrap_or(false),
+        straight: raw.straight.unwrap_or(false),
+        ..d
+    })
+}
+
+fn scene_paths(t: &mut Table, names: &[String]) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for name in names {
+        let path = t.folder.join(name);
+        let found = if super::expand::is_glob(name) {
+            glob_files(&path)
+        } else {
+            check_file(&path).map(|()| vec![path])
+        };
+        match found {
+            Ok(list) => out.extend(list),
+            Err(e) => t.problem("scene", e),
+        }
+    }
+    out
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "job".into())
+}
