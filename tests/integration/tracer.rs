@@ -216,7 +216,13 @@ fn flat_earth_square_linear_index_gives_parabola() {
         "parabola: worst error {worst:.2e} m at tolerance {} m",
         cfg.tolerance_m
     );
+    // The ray is a parabola in the optical parameter, which every Runge–Kutta stage integrates
+    // exactly: only rounding is left (README's accuracy table: < 1e-9 m).
     assert!(worst < 0.1 * cfg.tolerance_m, "worst error {worst} m");
+    assert!(
+        worst < 1e-9,
+        "worst error {worst} m: the parabola should be exact to rounding"
+    );
 }
 
 /// palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (docs/references.md §2.1): (observed zenith
@@ -341,7 +347,8 @@ fn planar_and_3d_paths_agree() {
             match (a, b) {
                 (Some(a), Some(b)) => {
                     worst = worst.max((a - b).abs());
-                    assert!((a - b).abs() < 0.01, "α {alpha_deg}: {a} vs {b}")
+                    // README's accuracy table: < 6 mm out to 100 km at the 1 cm tolerance.
+                    assert!((a - b).abs() < 0.006, "α {alpha_deg}: {a} vs {b}")
                 }
                 (None, None) => {}
                 _ => panic!("α {alpha_deg}: {a:?} vs {b:?}"),
