@@ -9,6 +9,7 @@ mod end_to_end;
 mod images;
 mod ingest;
 mod profile;
+mod readme;
 mod reference_tracer;
 mod refractivity;
 mod render;
