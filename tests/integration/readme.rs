@@ -232,3 +232,48 @@ fn fig12_novaya_zemlya_sun_strips() {
         "{squeezes:?}"
     );
 }
+
+#[test]
+fn superior_mirage_duct_and_critical_angle() {
+    use ghostship::refractivity::{RegimeOptions, detect_regimes, ducts};
+    // "What the physics says": the +10 K layer at 100 m turns back only rays that meet it at
+    // less than ≈ 0.23° (README said 0.27° until this test); the duct it forms reaches down to
+    // ≈ 28 m.
+    let scene = load_scene("fig04_superior_mirage.toml");
+    let atm = atmosphere(&scene);
+    let layers = detect_regimes(&atm, 500.0, &RegimeOptions::default());
+    let found = ducts(&layers);
+    assert_eq!(found.len(), 1, "{found:?}");
+    let duct = &found[0];
+    // The steepest ray the layer turns back, launched where M is largest below the layer (where
+    // a ray from below meets the layer's bending): bisect between turned back (ground or trapped)
+    // and escaped.
+    let radius = scene.earth_radius_m;
+    let m = |h: f64| ((atm.index_and_derivative(h).0 - 1.0) + h / radius) * 1e6;
+    let h_max = (0..=4000)
+        .map(|i| duct.base_agl_m + (duct.top_agl_m - duct.base_agl_m) * i as f64 / 4000.0)
+        .max_by(|a, b| m(*a).total_cmp(&m(*b)))
+        .unwrap();
+    let t = tracer_for(&atm, radius);
+    let escapes =
+        |a: f64| t.trace(h_max, a, &[]).unwrap().termination == Some(Termination::Escaped);
+    let (mut lo, mut hi) = (0.0f64, 2f64.to_radians());
+    assert!(!escapes(lo) && escapes(hi));
+    for _ in 0..50 {
+        let mid = 0.5 * (lo + hi);
+        if escapes(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let critical_deg = lo.to_degrees();
+    let from_m = (2.0 * duct.m_deficit * 1e-6).sqrt().to_degrees();
+    eprintln!(
+        "superior mirage duct {:.2}–{:.2} m AGL, M deficit {:.3} (√(2ΔM) {from_m:.4}°); M largest at \
+         {h_max:.2} m, steepest ray turned back from there {critical_deg:.4}°",
+        duct.base_agl_m, duct.top_agl_m, duct.m_deficit
+    );
+    assert!(rounds_to(duct.base_agl_m, "28"), "{duct:?}");
+    assert!(rounds_to(critical_deg, "0.23"), "{critical_deg}");
+}
