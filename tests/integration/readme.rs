@@ -257,17 +257,9 @@ fn superior_mirage_duct_and_critical_angle() {
     let t = tracer_for(&atm, radius);
     let escapes =
         |a: f64| t.trace(h_max, a, &[]).unwrap().termination == Some(Termination::Escaped);
-    let (mut lo, mut hi) = (0.0f64, 2f64.to_radians());
-    assert!(!escapes(lo) && escapes(hi));
-    for _ in 0..50 {
-        let mid = 0.5 * (lo + hi);
-        if escapes(mid) {
-            hi = mid;
-        } else {
-            lo = mid;
-        }
-    }
-    let critical_deg = lo.to_degrees();
+    let critical_deg = crate::support::bisect(0.0, 2f64.to_radians(), 50, escapes)
+        .0
+        .to_degrees();
     let from_m = (2.0 * duct.m_deficit * 1e-6).sqrt().to_degrees();
     eprintln!(
         "superior mirage duct {:.2}–{:.2} m AGL, M deficit {:.3} (√(2ΔM) {from_m:.4}°); M largest at \

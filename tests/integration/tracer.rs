@@ -113,17 +113,7 @@ fn constant_index_gives_straight_lines() {
 pub(crate) fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
     let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
     // −11.5° is below the sea horizon of any camera up to the 40 km top.
-    let (mut lo, mut hi) = (-0.2, 0.0);
-    assert!(hits(lo) && !hits(hi));
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if hits(mid) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi
+    crate::support::bisect(-0.2, 0.0, 60, |a| !hits(a)).1
 }
 
 #[test]
