@@ -269,3 +269,55 @@ fn superior_mirage_duct_and_critical_angle() {
     assert!(rounds_to(duct.base_agl_m, "28"), "{duct:?}");
     assert!(rounds_to(critical_deg, "0.23"), "{critical_deg}");
 }
+
+#[test]
+fn flat_rows_of_the_paper_frames() {
+    use ghostship::render::{FLAT_ROW_FRACTION, RenderOptions};
+    // "a row whose elevations span less than 0.01 px (every row of these ≤ 1.1° frames at
+    // 400×200, 40–100 % of them at 1920×1080) shares one fan lookup": the renderer's own test
+    // (centre column against the edge column, limit FLAT_ROW_FRACTION × tolerance_px × the
+    // smallest pixel angle), applied to every curved-ray paper scene at both sizes.
+    let limit_px = FLAT_ROW_FRACTION * RenderOptions::default().tolerance_px;
+    assert!(rounds_to(limit_px, "0.01"), "{limit_px}");
+    let scenes = [
+        "fig01b_horizon_curved.toml",
+        "fig02_horizon_distortion.toml",
+        "fig04a_superior_mirage_paper_camera.toml",
+        "fig04_superior_mirage.toml",
+        "fig08_inferior_mirage.toml",
+        "fig10_fata_morgana.toml",
+        "fig12_novaya_zemlya.toml",
+        "fig12b_novaya_zemlya_strips.toml",
+    ];
+    let mut fractions_1080 = Vec::new();
+    for name in scenes {
+        let scene = load_scene(name);
+        assert!(scene.camera.hfov_rad.to_degrees() <= 1.1, "{name}");
+        for (w, h) in [(400, 200), (1920, 1080)] {
+            let mut cam = scene.camera;
+            (cam.width, cam.height) = (w, h);
+            let frame = cam.frame();
+            let limit = limit_px * cam.min_pixel_angle_rad();
+            let flat = (0..h)
+                .filter(|&y| {
+                    let y = y as f64 + 0.5;
+                    let centre = frame.view_direction((w / 2) as f64 + 0.5, y).elevation_rad;
+                    let edge = frame.view_direction(0.5, y).elevation_rad;
+                    (centre - edge).abs() <= limit
+                })
+                .count();
+            let fraction = flat as f64 / h as f64;
+            eprintln!("{name} {w}×{h}: {flat} of {h} rows flat ({fraction:.2})");
+            if w == 400 {
+                assert_eq!(flat, h as usize, "{name}: every row flat at 400×200");
+            } else {
+                fractions_1080.push(fraction);
+            }
+        }
+    }
+    let (lo, hi) = fractions_1080
+        .iter()
+        .fold((1.0f64, 0.0f64), |(l, u), &f| (l.min(f), u.max(f)));
+    eprintln!("1920×1080: {lo:.2}–{hi:.2} of the rows flat");
+    assert!(rounds_to(100.0 * lo, "40") && hi == 1.0, "{lo}–{hi}");
+}
