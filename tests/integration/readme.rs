@@ -27,6 +27,14 @@ fn rounds_to(value: f64, printed: &str) -> bool {
     (value - target).abs() <= 0.5 * 10f64.powi(-(decimals as i32))
 }
 
+fn show(images: &[Image]) -> String {
+    images
+        .iter()
+        .map(|i| format!("{:.1}–{:.1} m", i.height_at_min_m, i.height_at_max_m))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 fn orientations(images: &[Image]) -> String {
     images
         .iter()
@@ -320,4 +328,56 @@ fn flat_rows_of_the_paper_frames() {
         .fold((1.0f64, 0.0f64), |(l, u), &f| (l.min(f), u.max(f)));
     eprintln!("1920×1080: {lo:.2}–{hi:.2} of the rows flat");
     assert!(rounds_to(100.0 * lo, "40") && hi == 1.0, "{lo}–{hi}");
+}
+
+#[test]
+fn fata_morgana_from_10_m_upper_layer_only() {
+    // "From 10 m only the upper layer bends rays back: they turn above 121 m and reach the sea
+    // 65–82 km out. A 250 m target shows three images from 40 to 60 km, two from 65 to 90 km."
+    // Turning heights from Bouguer's invariant (where n·r falls to n₀·r₀·cos α).
+    let scene = load_scene("fig10_fata_morgana.toml");
+    let atm = atmosphere(&scene);
+    let radius = scene.earth_radius_m;
+    let t = tracer_for(&atm, radius);
+    let h0 = 10.0;
+    let nr = |h: f64| atm.index_and_derivative(h).0 * (radius + h);
+    let (mut lowest_turn, mut near, mut far) = (f64::INFINITY, f64::INFINITY, 0.0f64);
+    for i in 1..=1000 {
+        let alpha = (0.5 * i as f64 / 1000.0).to_radians();
+        let rec = t.trace(h0, alpha, &[]).unwrap();
+        if rec.termination != Some(Termination::Ground) {
+            continue;
+        }
+        let invariant = nr(h0) * alpha.cos();
+        let turn = (0..)
+            .map(|k| h0 + 0.01 * k as f64)
+            .find(|&h| nr(h) <= invariant || h > 1000.0)
+            .unwrap();
+        lowest_turn = lowest_turn.min(turn);
+        near = near.min(rec.end.distance_m);
+        far = far.max(rec.end.distance_m);
+    }
+    eprintln!(
+        "Fata Morgana from 10 m: rays turned back from {lowest_turn:.2} m up, landing {:.1}–{:.1} km",
+        near / 1000.0,
+        far / 1000.0
+    );
+    let mut ten = scene.clone();
+    ten.camera.height_m = h0;
+    for km in (40..=90).step_by(5) {
+        let im = predicted_images(&atm, &ten, km as f64 * 1000.0, 250.0);
+        eprintln!("  {km} km: {} {}", orientations(&im), show(&im));
+        let expected = if km <= 60 { "EIE" } else { "IE" };
+        assert_eq!(orientations(&im), expected, "{km} km: {im:?}");
+    }
+    // The layers: +5 K centred at 80 m and +15 K at 120 m, each 15 m thick.
+    assert!(
+        lowest_turn > 80.0 + 7.5 && lowest_turn < 120.0 + 7.5,
+        "{lowest_turn}"
+    );
+    assert!(lowest_turn > 121.0, "{lowest_turn}");
+    assert!(
+        rounds_to(near / 1000.0, "65") && rounds_to(far / 1000.0, "82"),
+        "{near}–{far}"
+    );
 }
