@@ -45,7 +45,7 @@ fn parse_exposure(text: &str) -> Result<f64, String> {
 /// Arguments of `ghostship render`.
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
-    /// The scene file (TOML: camera, atmosphere, earth, sky, sea, cards, sun).
+    /// The scene file (TOML; every key, unit, default and range: docs/scene.md).
     #[arg(value_name = "SCENE.toml")]
     pub scene: PathBuf,
     /// Output files; the format follows the extension: `.png` (8-bit sRGB) or `.exr` (linear f32

@@ -132,14 +132,14 @@ mod tests {
         let s20 = standard(20_000.0);
         assert!((s20.temperature_k - 216.65).abs() < 1e-9);
         assert!(
-            (s20.pressure_pa / 100.0 - 54.748).abs() < 0.005,
+            (s20.pressure_pa / 100.0 - 54.748).abs() < 0.001,
             "{}",
             s20.pressure_pa
         );
         let s32 = standard(32_000.0);
         assert!((s32.temperature_k - 228.65).abs() < 1e-9);
         assert!(
-            (s32.pressure_pa / 100.0 - 8.6801).abs() < 0.001,
+            (s32.pressure_pa / 100.0 - 8.6801).abs() < 0.0001,
             "{}",
             s32.pressure_pa
         );

@@ -284,7 +284,7 @@ struct FlatRow<'a> {
 }
 
 /// Most bands a row is cut into by [`flat_bands`]; a row that needs more is shaded pixel by pixel.
-const MAX_FLAT_BANDS: usize = 8;
+pub const MAX_FLAT_BANDS: usize = 8;
 
 /// One band of a flat row: the columns at the same distance from the centre column as the
 /// right-half columns [`start`, `end`), shaded at the elevation of column `start`.
@@ -300,8 +300,9 @@ struct FlatBand {
 /// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
 /// depends on nothing else, and changes monotonically with it), whose elevations stay within
 /// `limit_rad` of the band's first column. `None` if that takes more than [`MAX_FLAT_BANDS`]
-/// or an elevation is not finite. Bands are returned by their right-half column ranges.
-fn flat_bands(
+/// or an elevation is not finite. Each band is given by its first right-half column and the
+/// elevation (rad) it is shaded at; it runs to the next band's first column.
+pub fn flat_bands(
     frame: &CameraFrame,
     y: u32,
     width: u32,

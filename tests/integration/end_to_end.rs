@@ -267,8 +267,9 @@ fn us1976_ciddor_table_matches_palrefro_and_the_almanac_dip() {
         ..config(0.001)
     };
     let tracer = Tracer::new(&atm, cfg).unwrap();
-    let cases = PALREFRO_US1976_550NM;
-    for (zd, expected, tol) in cases {
+    // README's accuracy table: within 0.005′ at 45…89.5°, within 0.01′ at the horizon.
+    for (zd, expected) in PALREFRO_US1976_550NM {
+        let tol = if zd < 90.0 { 0.005 } else { 0.01 };
         let alpha = (90.0_f64 - zd).to_radians();
         let rec = tracer.trace(0.0, alpha, &[]).unwrap();
         assert_eq!(rec.termination, Some(Termination::Escaped), "ZD {zd}");

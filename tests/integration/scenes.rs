@@ -26,12 +26,12 @@ use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 use crate::render::at_edge;
 use crate::support::data::data_dir;
 
-fn load_scene(name: &str) -> Scene {
+pub(crate) fn load_scene(name: &str) -> Scene {
     let path = data_dir().join("scenes").join(name);
     Scene::from_file(&path).unwrap_or_else(|e| panic!("scene {}: {e}", path.display()))
 }
 
-fn atmosphere(scene: &Scene) -> RefractiveAtmosphere {
+pub(crate) fn atmosphere(scene: &Scene) -> RefractiveAtmosphere {
     let column: Arc<dyn AirColumn> = match &scene.atmosphere.source {
         AtmosphereSource::Synthetic(p) => Arc::new(
             SyntheticAtmosphere::from_file(p)
@@ -96,7 +96,7 @@ fn pixel_of(scene: &Scene, azimuth_rad: f64, elevation_rad: f64) -> Option<(u32,
 }
 
 /// Transfer curve h(D; α) over the frame's elevations (plus a margin) and its images of [0, H].
-fn predicted_images<S: StratifiedIndex + ?Sized>(
+pub(crate) fn predicted_images<S: StratifiedIndex + ?Sized>(
     index: &S,
     scene: &Scene,
     distance_m: f64,

@@ -113,17 +113,7 @@ fn constant_index_gives_straight_lines() {
 pub(crate) fn sea_horizon_rad<S: StratifiedIndex>(tracer: &Tracer<'_, S>, h0: f64) -> f64 {
     let hits = |a: f64| tracer.trace(h0, a, &[]).unwrap().termination == Some(Termination::Ground);
     // −11.5° is below the sea horizon of any camera up to the 40 km top.
-    let (mut lo, mut hi) = (-0.2, 0.0);
-    assert!(hits(lo) && !hits(hi));
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if hits(mid) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi
+    crate::support::bisect(-0.2, 0.0, 60, |a| !hits(a)).1
 }
 
 #[test]
@@ -216,21 +206,32 @@ fn flat_earth_square_linear_index_gives_parabola() {
         "parabola: worst error {worst:.2e} m at tolerance {} m",
         cfg.tolerance_m
     );
+    // The ray is a parabola in the optical parameter, which every Runge–Kutta stage integrates
+    // exactly: only rounding is left (README's accuracy table: < 1e-9 m).
     assert!(worst < 0.1 * cfg.tolerance_m, "worst error {worst} m");
+    assert!(
+        worst < 1e-9,
+        "worst error {worst} m: the parabola should be exact to rounding"
+    );
 }
 
 /// palRefro, 15 °C, 1013.25 hPa, 0.55 µm, dry (docs/references.md §2.1): (observed zenith
-/// distance in degrees, refraction in arcmin, allowed error in arcmin). Shared with the
-/// end-to-end checks.
-pub(crate) const PALREFRO_US1976_550NM: [(f64, f64, f64); 7] = [
-    (45.0, 0.953, 0.02),
-    (80.0, 5.223, 0.02),
-    (85.0, 9.666, 0.02),
-    (88.0, 17.789, 0.02),
-    (89.0, 23.545, 0.02),
-    (89.5, 27.650, 0.02),
-    (90.0, 33.000, 0.05),
+/// distance in degrees, refraction in arcmin). Shared with the end-to-end checks, which set their
+/// own bounds (README's accuracy table quotes both).
+pub(crate) const PALREFRO_US1976_550NM: [(f64, f64); 7] = [
+    (45.0, 0.953),
+    (80.0, 5.223),
+    (85.0, 9.666),
+    (88.0, 17.789),
+    (89.0, 23.545),
+    (89.5, 27.650),
+    (90.0, 33.000),
 ];
+
+/// Allowed error (arcmin) of the tracer through the SLALIB-form US1976 field at each zenith
+/// distance of [`PALREFRO_US1976_550NM`], as README's accuracy table states it: 0.005′ to 89°,
+/// 0.01′ at 89.5°, 0.02′ at the horizon.
+const SLALIB_FIELD_BOUND_ARCMIN: [f64; 7] = [0.005, 0.005, 0.005, 0.005, 0.005, 0.01, 0.02];
 
 #[test]
 fn us1976_astronomical_refraction_matches_palrefro() {
@@ -241,8 +242,10 @@ fn us1976_astronomical_refraction_matches_palrefro() {
         ..TracerConfig::default()
     };
     let tracer = Tracer::new(&field, cfg).unwrap();
-    let cases = PALREFRO_US1976_550NM;
-    for (zd, expected, tol) in cases {
+    for ((zd, expected), tol) in PALREFRO_US1976_550NM
+        .into_iter()
+        .zip(SLALIB_FIELD_BOUND_ARCMIN)
+    {
         let alpha = (90.0_f64 - zd).to_radians();
         let rec = tracer.trace(0.0, alpha, &[]).unwrap();
         assert_eq!(rec.termination, Some(Termination::Escaped), "ZD {zd}");
@@ -334,7 +337,8 @@ fn planar_and_3d_paths_agree() {
             match (a, b) {
                 (Some(a), Some(b)) => {
                     worst = worst.max((a - b).abs());
-                    assert!((a - b).abs() < 0.01, "α {alpha_deg}: {a} vs {b}")
+                    // README's accuracy table: < 6 mm out to 100 km at the 1 cm tolerance.
+                    assert!((a - b).abs() < 0.006, "α {alpha_deg}: {a} vs {b}")
                 }
                 (None, None) => {}
                 _ => panic!("α {alpha_deg}: {a:?} vs {b:?}"),

@@ -11,3 +11,19 @@ pub mod cli;
 pub mod data;
 pub mod fans;
 pub mod reference;
+
+/// Bisects [lo, hi] `iterations` times for the boundary of a predicate that is false at `lo`
+/// and true at `hi` (both asserted), returning the last (false, true) bracket.
+pub fn bisect(lo: f64, hi: f64, iterations: u32, is_high: impl Fn(f64) -> bool) -> (f64, f64) {
+    assert!(!is_high(lo) && is_high(hi), "no boundary in [{lo}, {hi}]");
+    let (mut lo, mut hi) = (lo, hi);
+    for _ in 0..iterations {
+        let mid = 0.5 * (lo + hi);
+        if is_high(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    (lo, hi)
+}
