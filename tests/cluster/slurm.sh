@@ -249,9 +249,10 @@ while read -r f; do
 done <"$WORK/outputs.local"
 log "$count output files byte-identical"
 
-# The manifests' outputs: every object with a path and a sha256, as "path sha256" lines.
+# The manifests' outputs as "path sha256" lines: every job's `outputs` map (path relative to
+# the output folder → {sha256, bytes}).
 manifest_outputs() {
-    jq -r '[.. | objects | select(has("path") and has("sha256")) | "\(.path) \(.sha256)"]
+    jq -r '[.jobs[] | (.outputs // {}) | to_entries[] | "\(.key) \(.value.sha256)"]
            | sort | .[]' "$1"
 }
 [[ -f "$LOCAL/manifest.json" ]] || fail "the local run wrote no manifest.json"
