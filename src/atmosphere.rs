@@ -3,9 +3,6 @@
 //! (smoothing scale, wavelength, IGRA2 launch time). Out: a [`LoadedAtmosphere`] holding the
 //! sounding (if any), the air column and the [`RefractiveAtmosphere`] built on it, or one
 //! [`AtmosphereError`] whose chain names the file and the place in it.
-//!
-//! Also here: [`UniformIndex`], air of constant index n ≡ 1, for straight-ray (no refraction)
-//! geometry through the same tracer and analysis as real air.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -13,7 +10,6 @@ use std::sync::Arc;
 use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
 use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
 use crate::sounding::{ReadOptions, Sounding, read_sounding};
-use crate::tracer::StratifiedIndex;
 
 /// What the user named: a sounding file, a synthetic atmosphere TOML, or the standard atmosphere.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
@@ -284,23 +280,9 @@ fn sounding_description(sounding: &Sounding) -> String {
     }
 }
 
-/// Air of constant refractive index n ≡ 1 (dn/dh = 0): rays through it are straight lines, the
-/// paper's Figure 1 geometry. Traced by the same integrator as real air, it reproduces
-/// [`straight_ray`](crate::tracer::straight_ray) to the tracer's tolerance, so every analysis
-/// (images, horizons) works unchanged with refraction switched off.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct UniformIndex;
-
-impl StratifiedIndex for UniformIndex {
-    fn index_and_derivative(&self, _height_m: f64) -> (f64, f64) {
-        (1.0, 0.0)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tracer::{Tracer, TracerConfig, straight_ray};
 
     fn data(name: &str) -> PathBuf {
         PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name)
@@ -383,27 +365,5 @@ mod tests {
         )
         .unwrap_err();
         assert!(err.to_string().contains("wavelength"), "{err}");
-    }
-
-    #[test]
-    fn uniform_index_traces_straight_rays() {
-        // The integrator through n ≡ 1 against the closed-form line–sphere geometry.
-        let cfg = TracerConfig::default();
-        let tracer = Tracer::new(&UniformIndex, cfg.clone()).unwrap();
-        let distances = [5_000.0, 10_000.0, 20_000.0];
-        for elevation_deg in [-0.1_f64, 0.0, 0.05, 0.3] {
-            let a = elevation_deg.to_radians();
-            let traced = tracer.trace(10.0, a, &distances).unwrap();
-            let exact = straight_ray(10.0, a, cfg.earth_radius_m, cfg.top_m, &distances).unwrap();
-            for (t, e) in traced.heights_m.iter().zip(&exact.heights_m) {
-                match (t, e) {
-                    (Some(t), Some(e)) => {
-                        assert!((t - e).abs() < 0.05, "{elevation_deg}: {t} vs {e}")
-                    }
-                    (None, None) => {}
-                    other => panic!("{elevation_deg}: {other:?}"),
-                }
-            }
-        }
     }
 }

@@ -414,7 +414,7 @@ impl TraceReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::atmosphere::UniformIndex;
+    use crate::tracer::UniformIndex;
 
     fn request(count: usize, lo: f64, hi: f64, list: Vec<f64>) -> TraceRequest {
         TraceRequest {

@@ -5,7 +5,8 @@
 use super::cache::AtmosphereRequest;
 use super::{JobError, Product};
 use crate::analysis::{TraceReport, TraceRequest, trace_plot_png, trace_report};
-use crate::atmosphere::{LoadedAtmosphere, UniformIndex};
+use crate::atmosphere::LoadedAtmosphere;
+use crate::tracer::UniformIndex;
 use crate::tracer::{StratifiedIndex, TracerConfig};
 
 /// Most rays a fan may have.

@@ -49,7 +49,7 @@
 
 use rayon::prelude::*;
 
-use super::fan::{FanEnd, FanRay, RayTracer};
+use super::ray_model::{FanEnd, FanRay, RayTracer};
 
 /// What the fan needs to know about the scene to decide where to refine.
 #[derive(Debug, Clone)]
@@ -484,7 +484,7 @@ impl ElevationFan {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::fan::StraightRays;
+    use crate::render::ray_model::StraightRays;
     use crate::units::EARTH_RADIUS_M;
 
     fn spec(distances: Vec<f64>, tops: Vec<f64>) -> FanSpec {

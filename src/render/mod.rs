@@ -25,10 +25,10 @@
 //! image is the same whatever the thread count (rows are rendered in parallel, each pixel on its
 //! own). With one sample per pixel the pixel centre is used.
 
+pub mod curved;
 pub mod elevation_fan;
-pub mod fan;
+pub mod ray_model;
 mod shade;
-pub mod traced;
 
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -38,10 +38,10 @@ use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
 use crate::scene::{Scene, samples_per_pixel_root};
+pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
-pub use fan::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
+pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AngleTable, Shader, ViewCard, wrap_pi};
-pub use traced::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]

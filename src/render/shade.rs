@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::fan::FanEnd;
+use super::ray_model::FanEnd;
 use crate::scene::camera::ViewDirection;
 use crate::scene::{Sun, Texture};
 

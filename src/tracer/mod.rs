@@ -28,7 +28,7 @@ pub use bouguer::{BouguerEnvelope, Fate, FateWatch};
 pub use ray::{
     HookAction, NoHook, RayHook, RayPoint, RayRecord, Termination, TracerConfig, TracerError,
 };
-pub use straight::straight_ray;
+pub use straight::{UniformIndex, straight_ray};
 pub use system::Ground;
 
 use system::{FieldSystem, PlanarSystem};

@@ -7,7 +7,11 @@
 //!
 //! In polar form about Earth's centre a straight line is r(θ) = K / cos(α + θ), with
 //! K = (R + h₀)·cos α, and its local elevation is ψ = α + θ.
+//!
+//! Also here: [`UniformIndex`], the same air (n ≡ 1) as a [`StratifiedIndex`], for straight-ray
+//! geometry through the integrator and every analysis built on it.
 
+use super::StratifiedIndex;
 use super::ray::{RayPoint, RayRecord, Termination, TracerError};
 
 /// Trace a straight ray from `observer_height_m` at `elevation_rad` over a sphere of
@@ -87,9 +91,45 @@ pub fn straight_ray(
     Ok(record)
 }
 
+/// Air of constant refractive index n ≡ 1 (dn/dh = 0): rays through it are straight lines, the
+/// paper's Figure 1 geometry. Traced by the same integrator as real air, it reproduces
+/// [`straight_ray`] to the tracer's tolerance, so every analysis
+/// (images, horizons) works unchanged with refraction switched off.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct UniformIndex;
+
+impl StratifiedIndex for UniformIndex {
+    fn index_and_derivative(&self, _height_m: f64) -> (f64, f64) {
+        (1.0, 0.0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tracer::{Tracer, TracerConfig};
+
+    #[test]
+    fn uniform_index_traces_straight_rays() {
+        // The integrator through n ≡ 1 against the closed-form line–sphere geometry.
+        let cfg = TracerConfig::default();
+        let tracer = Tracer::new(&UniformIndex, cfg.clone()).unwrap();
+        let distances = [5_000.0, 10_000.0, 20_000.0];
+        for elevation_deg in [-0.1_f64, 0.0, 0.05, 0.3] {
+            let a = elevation_deg.to_radians();
+            let traced = tracer.trace(10.0, a, &distances).unwrap();
+            let exact = straight_ray(10.0, a, cfg.earth_radius_m, cfg.top_m, &distances).unwrap();
+            for (t, e) in traced.heights_m.iter().zip(&exact.heights_m) {
+                match (t, e) {
+                    (Some(t), Some(e)) => {
+                        assert!((t - e).abs() < 0.05, "{elevation_deg}: {t} vs {e}")
+                    }
+                    (None, None) => {}
+                    other => panic!("{elevation_deg}: {other:?}"),
+                }
+            }
+        }
+    }
 
     #[test]
     fn geometric_dip_grazes_the_ground() {

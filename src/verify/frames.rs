@@ -29,7 +29,7 @@ use std::time::Instant;
 use crate::atmosphere::{AtmosphereError, LoadedAtmosphere};
 use crate::output::png::{DEFAULT_EXPOSURE, film_to_srgb8};
 use crate::refractivity::RefractiveAtmosphere;
-use crate::render::traced::cards_top_m;
+use crate::render::curved::cards_top_m;
 use crate::render::{
     CurvedRays, FanEnd, FanRay, Film, PrepareError, RayTracer, RenderError, RenderOptions,
     TRACER_TOLERANCE_RANGE_M, prepare_tracer, render_scene, render_tracer_config,

@@ -4,8 +4,8 @@
 //! moves one shows here.
 
 use ghostship::analysis::Image;
-use ghostship::atmosphere::UniformIndex;
-use ghostship::render::traced::render_tracer_config;
+use ghostship::render::curved::render_tracer_config;
+use ghostship::tracer::UniformIndex;
 use ghostship::tracer::{StratifiedIndex, Termination, Tracer, TracerConfig};
 use ghostship::units::ARCMIN_PER_RAD;
 

@@ -15,7 +15,7 @@ use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
 use ghostship::profile::{AirColumn, StandardAtmosphere, SyntheticAtmosphere};
 use ghostship::refractivity::RefractiveAtmosphere;
-use ghostship::render::traced::render_tracer_config;
+use ghostship::render::curved::render_tracer_config;
 use ghostship::render::{
     CurvedRays, ExactRays, Film, RayTracer, RenderOptions, prepare_tracer, render_scene,
 };

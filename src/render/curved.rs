@@ -25,7 +25,7 @@ use std::cell::RefCell;
 use glam::DVec3;
 
 use super::RenderOptions;
-use super::fan::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
+use super::ray_model::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
