@@ -142,15 +142,15 @@ impl std::fmt::Debug for LoadedAtmosphere {
     }
 }
 
-/// Why an atmosphere could not be loaded. The message says which atmosphere; the source (the
-/// stage's own error) says where in the file and what.
+/// Why an atmosphere could not be loaded. The source (the stage's own error) names the file and
+/// says where in it and what, so the messages of the file stages do not repeat the file name.
 #[derive(Debug, thiserror::Error)]
 pub enum AtmosphereError {
     /// The options are out of range.
     #[error("invalid atmosphere option: {0}")]
     InvalidOption(String),
     /// The sounding could not be read.
-    #[error("cannot load atmosphere {source_name}")]
+    #[error("cannot load the atmosphere")]
     Sounding {
         /// The source as the user named it.
         source_name: String,
@@ -159,7 +159,7 @@ pub enum AtmosphereError {
         source: crate::sounding::SoundingError,
     },
     /// The sounding could not be fitted, or the synthetic atmosphere is invalid.
-    #[error("cannot load atmosphere {source_name}")]
+    #[error("cannot load the atmosphere")]
     Profile {
         /// The source as the user named it.
         source_name: String,
@@ -347,8 +347,9 @@ mod tests {
         )
         .unwrap_err();
         let chain = format!("{:#}", anyhow::Error::new(err));
-        assert!(chain.contains("cannot load atmosphere"), "{chain}");
-        assert!(chain.contains("bad.csv"), "{chain}");
+        assert!(chain.contains("cannot load the atmosphere"), "{chain}");
+        // The file is named once, by the stage that read it.
+        assert_eq!(chain.matches("bad.csv").count(), 1, "{chain}");
         assert!(chain.contains("line 2"), "{chain}");
         let err = load_atmosphere(
             &AtmosphereSource::Sounding(dir.path().join("missing.csv")),
