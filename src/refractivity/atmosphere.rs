@@ -20,7 +20,7 @@ use super::ciddor::{CiddorDispersion, DEFAULT_CO2_PPM};
 use super::dual::Dual;
 use super::table::{GridError, HermiteGrid, Lookup};
 use crate::profile::{AirColumn, AirSample};
-use crate::tracer::StratifiedIndex;
+use crate::tracer::{MinorBreak, StratifiedIndex};
 
 /// Lowest and highest wavelength (nm) the Ciddor formula is fitted for.
 pub const WAVELENGTH_RANGE_NM: (f64, f64) = (300.0, 1700.0);
@@ -117,8 +117,10 @@ pub struct RefractiveSample {
 /// tolerances (1e-14 in n and in dn/dh per metre) evaluate the exact formula instead. The
 /// measured errors are in [`table_max_error`](Self::table_max_error).
 ///
-/// The column's breaks (see [`breaks_m`](StratifiedIndex::breaks_m)) are kept where dn/dh or
-/// d²n/dh² measurably jumps, so the tracer ends its steps only where that matters.
+/// The column's breaks are split into those where dn/dh jumps (see
+/// [`breaks_m`](StratifiedIndex::breaks_m)) and the minor ones where only d²n/dh² does, with
+/// the size of that jump (see [`minor_breaks`](StratifiedIndex::minor_breaks)), so the tracer
+/// ends its steps only where that matters at its tolerance.
 pub struct RefractiveAtmosphere {
     column: Arc<dyn AirColumn>,
     surface_m: f64,
@@ -128,8 +130,10 @@ pub struct RefractiveAtmosphere {
     fine: HermiteGrid,
     coarse: HermiteGrid,
     error: TableError,
-    /// The column's breaks, as heights above the surface (m).
+    /// The column's breaks where dn/dh jumps, as heights above the surface (m).
     breaks_agl_m: Vec<f64>,
+    /// The column's breaks where only d²n/dh² jumps.
+    minor_breaks: Vec<MinorBreak>,
 }
 
 impl std::fmt::Debug for RefractiveAtmosphere {
@@ -222,6 +226,7 @@ impl RefractiveAtmosphere {
             spec.tolerance_dndh_per_m,
             &exact,
         )?;
+        let (breaks_agl_m, minor_breaks) = split_breaks(column.breaks_m(), surface_m, &exact)?;
         Ok(Self {
             surface_m,
             wavelength_nm,
@@ -233,7 +238,8 @@ impl RefractiveAtmosphere {
                 fine: fine_err,
                 coarse: coarse_err,
             },
-            breaks_agl_m: significant_breaks(column.breaks_m(), surface_m, &exact)?,
+            breaks_agl_m,
+            minor_breaks,
             column,
         })
     }
@@ -359,26 +365,31 @@ impl StratifiedIndex for RefractiveAtmosphere {
     fn breaks_m(&self) -> &[f64] {
         &self.breaks_agl_m
     }
+
+    /// The column's breaks where only d²n/dh² jumps, with the jump.
+    fn minor_breaks(&self) -> &[MinorBreak] {
+        &self.minor_breaks
+    }
 }
 
 /// Half-width (m) of the differences that measure a break's jumps.
 const BREAK_PROBE_M: f64 = 1e-3;
-/// A break is kept when dn/dh jumps by more than this (m⁻¹) across it …
+/// A break whose dn/dh jumps by more than this (m⁻¹) is a break the tracer always honours;
+/// below it, dn/dh is continuous to the precision of the one-sided differences and the level
+/// is a minor break, described by its jump of d²n/dh².
 const BREAK_MIN_SLOPE_JUMP_PER_M: f64 = 1e-15;
-/// … or d²n/dh² by more than this (m⁻²). Knots inside a linear stretch of a sounding (many in a
-/// densely written layered profile) jump by neither and cost the tracer nothing when dropped; a
-/// jump below this bound moves a ray by well under a micrometre at 26 km even in a 2 km step.
-const BREAK_MIN_CURVATURE_JUMP_PER_M2: f64 = 1e-13;
 
-/// The column's breaks (m above mean sea level) as heights above the surface, keeping those
-/// where dn/dh or d²n/dh² measurably jumps (one-sided differences of the exact dn/dh).
-fn significant_breaks(
+/// The column's breaks (m above mean sea level) as heights above the surface, split into those
+/// where dn/dh jumps and the minor ones where only d²n/dh² does, with that jump (one-sided
+/// differences of the exact dn/dh). Levels where neither jumps are dropped.
+fn split_breaks(
     breaks_msl_m: Vec<f64>,
     surface_m: f64,
     exact: &dyn Fn(f64) -> Result<(f64, f64), RefractivityError>,
-) -> Result<Vec<f64>, RefractivityError> {
+) -> Result<(Vec<f64>, Vec<MinorBreak>), RefractivityError> {
     let d = BREAK_PROBE_M;
-    let mut kept = Vec::new();
+    let mut major = Vec::new();
+    let mut minor = Vec::new();
     for b in crate::profile::normalise_breaks(breaks_msl_m) {
         let h = b - surface_m;
         if h <= 2.0 * d {
@@ -393,13 +404,16 @@ fn significant_breaks(
         );
         let slope_jump = ((2.0 * p1 - p2) - (2.0 * m1 - m2)).abs();
         let curvature_jump = ((p2 - p1) - (m1 - m2)).abs() / d;
-        if slope_jump > BREAK_MIN_SLOPE_JUMP_PER_M
-            || curvature_jump > BREAK_MIN_CURVATURE_JUMP_PER_M2
-        {
-            kept.push(h);
+        if slope_jump > BREAK_MIN_SLOPE_JUMP_PER_M {
+            major.push(h);
+        } else if curvature_jump > 0.0 {
+            minor.push(MinorBreak {
+                height_m: h,
+                curvature_jump_per_m2: curvature_jump,
+            });
         }
     }
-    Ok(kept)
+    Ok((major, minor))
 }
 
 /// Ciddor n − 1 as a dual in height.

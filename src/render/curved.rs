@@ -29,8 +29,8 @@ use super::ray_model::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
-    BouguerEnvelope, FateWatch, Ground, RayRecord, Spherical, StratifiedIndex, Termination, Tracer,
-    TracerConfig, TracerError, trace_field,
+    BouguerEnvelope, FateWatch, Ground, RayRecord, Settled, Spherical, StratifiedIndex,
+    Termination, Tracer, TracerConfig, TracerError, trace_field,
 };
 
 /// The tracer settings the renderer uses: [`TracerConfig::default`] (its tolerance, top at
@@ -235,7 +235,8 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
 /// azimuth into account when it shades (which card the ray meets), so the [`RayTracer`] trait
 /// needs no azimuth.
 pub struct ExactRays<'a, S: StratifiedIndex + ?Sized> {
-    field: Spherical<&'a S>,
+    /// The field in 3-D, its minor breaks settled once for `config`.
+    field: Settled<Spherical<&'a S>>,
     config: TracerConfig,
     fates: Fates,
 }
@@ -244,11 +245,12 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
     /// As [`CurvedRays::new`].
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
         config.validate()?;
+        let field = Spherical {
+            index,
+            earth_radius_m: config.earth_radius_m,
+        };
         Ok(Self {
-            field: Spherical {
-                index,
-                earth_radius_m: config.earth_radius_m,
-            },
+            field: Settled::new(field, &config),
             fates: Fates::new(index, &config, cards_top_m),
             config,
         })
@@ -270,7 +272,7 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         let (sin_a, cos_a) = azimuth_rad.sin_cos();
         let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
         let mut watch = self.fates.watch(
-            self.field.index,
+            self.field.field.index,
             camera_height_m,
             elevation_rad,
             distances_m,

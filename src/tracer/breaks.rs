@@ -8,6 +8,71 @@
 //! from fifth to first or second order; ending steps on breaks keeps the method's order (the
 //! same treatment a careful reference integrator gives a discontinuity).
 
+//!
+//! Which breaks a ray loop honours is settled once per tracer setting ([`settle`]): a field
+//! lists its breaks where dn/dh jumps (always kept) and its *minor* breaks, where only
+//! d²n/dh² jumps, by a known amount ([`MinorBreak`]). A minor break that a step straddles costs
+//! a direction error bounded by the jump, the step's length and its height change; those whose
+//! worst case, summed over all of them, fits a share of the error budget are dropped (a
+//! densely written sounding has thousands of knots that matter to no ray), the rest are kept.
+
+use super::TracerConfig;
+
+/// A level of a field where d²n/dh² jumps and dn/dh does not (a knot of a C¹ fit, say).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MinorBreak {
+    /// Height above the surface (m).
+    pub height_m: f64,
+    /// |Δ(d²n/dh²)| across the level (m⁻²).
+    pub curvature_jump_per_m2: f64,
+}
+
+/// Largest error, per unit of h² (step length h), of Dormand–Prince 5(4)'s quadrature weights on
+/// a ramp max(s − s₀, 0) with its kink anywhere in the step: max over u of
+/// |Σ bᵢ·(cᵢ − u)₊ − (1 − u)²/2| = 0.02247 (at u = 4/5, computed from the tableau). A step of
+/// length L and height change H that straddles a jump Δκ of d²n/dh² integrates the ray's
+/// curvature dn/dh with a ramp of slope Δκ·H/L in arc length, so its direction is off by at
+/// most this × Δκ·H·L. Rounded up, for the nonlinear stages that are not pure quadrature.
+const STRADDLE_KERNEL: f64 = 0.03;
+
+/// Share of the tolerance that straddled minor breaks may use up together.
+const STRADDLE_SHARE: f64 = 0.1;
+
+/// The breaks a ray loop with `config` must end its steps on, ascending: every one of `major`,
+/// and the minor breaks whose straddling could matter. `tolerance_per_m` is the ray's error
+/// budget per metre of path (tolerance over error length): a direction error ε costs ε × the
+/// error length, so the dropped minor breaks' worst-case direction errors, summed, stay within
+/// [`STRADDLE_SHARE`] × `tolerance_per_m`. The worst case of one straddle takes the longest step
+/// (`max_step_m`) and the largest height change a step can have there (the vertical cap at the
+/// break, reached from a start up to one cap above it).
+pub(crate) fn settle(
+    major: &[f64],
+    minor: &[MinorBreak],
+    config: &TracerConfig,
+    tolerance_per_m: f64,
+) -> Vec<f64> {
+    let k = config.vertical_step_per_height.min(0.5);
+    let worst_rad = |b: &MinorBreak| {
+        let cap = (config.vertical_step_base_m + k * b.height_m.max(0.0)) / (1.0 - k);
+        let height_change_m = cap.min(config.max_step_m);
+        STRADDLE_KERNEL * b.curvature_jump_per_m2 * height_change_m * config.max_step_m
+    };
+    let mut ranked: Vec<(f64, f64)> = minor.iter().map(|b| (worst_rad(b), b.height_m)).collect();
+    ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let budget_rad = STRADDLE_SHARE * tolerance_per_m;
+    let mut spent_rad = 0.0;
+    let mut kept: Vec<f64> = major.to_vec();
+    for (worst, height_m) in ranked {
+        spent_rad += worst;
+        if spent_rad > budget_rad {
+            kept.push(height_m);
+        }
+    }
+    kept.sort_by(f64::total_cmp);
+    kept.dedup();
+    kept
+}
+
 /// A root finder: `locate(g, a, c)` returns a root of `g` on [a, c].
 pub(crate) type Locate<'a> = dyn FnMut(&mut dyn FnMut(f64) -> f64, f64, f64) -> f64 + 'a;
 
@@ -183,5 +248,47 @@ mod tests {
             .first_exit((15.0, 15.0), Some(0.5), &mut h, &mut bisect)
             .unwrap();
         assert!(e.up && e.t < 0.5 && (h(e.t) - 20.0).abs() < 1e-9);
+    }
+
+    fn minor(height_m: f64, curvature_jump_per_m2: f64) -> MinorBreak {
+        MinorBreak {
+            height_m,
+            curvature_jump_per_m2,
+        }
+    }
+
+    /// The worst-case direction error of one straddle, as `settle` bounds it.
+    fn worst(b: &MinorBreak, c: &TracerConfig) -> f64 {
+        let k = c.vertical_step_per_height;
+        let cap = ((c.vertical_step_base_m + k * b.height_m) / (1.0 - k)).min(c.max_step_m);
+        STRADDLE_KERNEL * b.curvature_jump_per_m2 * cap * c.max_step_m
+    }
+
+    #[test]
+    fn settle_keeps_major_breaks_and_drops_only_what_fits_the_budget() {
+        let config = TracerConfig::default();
+        let minor: Vec<MinorBreak> = (1..=400)
+            .map(|i| minor(25.0 * i as f64, 1e-16 * (i % 7 + 1) as f64))
+            .chain([minor(10_500.0, 3.5e-14), minor(30.0, 1e-2)])
+            .collect();
+        let major = [100.0, 11_000.0];
+        for tolerance_m in [1.0, 1e-3, 1e-5, 1e-7] {
+            let per_m = tolerance_m / config.error_length_m;
+            let kept = settle(&major, &minor, &config, per_m);
+            assert!(kept.windows(2).all(|w| w[0] < w[1]), "ascending, distinct");
+            assert!(major.iter().all(|b| kept.contains(b)));
+            assert!(kept.contains(&30.0), "a 30 K jump's knot is always kept");
+            let dropped: f64 = minor
+                .iter()
+                .filter(|b| !kept.contains(&b.height_m))
+                .map(|b| worst(b, &config))
+                .sum();
+            assert!(dropped <= STRADDLE_SHARE * per_m, "{dropped:e} at {tolerance_m}");
+        }
+        let loose = settle(&major, &minor, &config, 1.0 / config.error_length_m);
+        let tight = settle(&major, &minor, &config, 1e-7 / config.error_length_m);
+        assert!(loose.iter().all(|b| tight.contains(b)), "tighter keeps more");
+        assert!(loose.len() < tight.len());
+        assert!(!loose.contains(&10_500.0) && tight.contains(&10_500.0));
     }
 }

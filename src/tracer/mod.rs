@@ -21,10 +21,11 @@ mod system;
 
 use std::sync::Arc;
 
-use glam::{DVec3, DVec4};
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 pub use bouguer::{BouguerEnvelope, Fate, FateWatch};
+pub use breaks::MinorBreak;
 pub use ray::{
     HookAction, NoHook, RayHook, RayPoint, RayRecord, Termination, TracerConfig, TracerError,
 };
@@ -37,9 +38,22 @@ use system::{FieldSystem, PlanarSystem};
 pub trait IndexField: Send + Sync {
     /// Refractive index and its gradient (m⁻¹) at `position_m`.
     fn index_and_gradient(&self, position_m: DVec3) -> (f64, DVec3);
+    /// The same at `origin_m + offset_m`, for the tracer, which keeps a ray's positions as
+    /// offsets from its observer: a field whose value depends on the height over a sphere
+    /// should take the height from the offset (as [`Spherical`] does) rather than from the
+    /// Earth-centred sum, whose ~1e-9 m rounding becomes force noise in strong layers.
+    /// Default: evaluates at the sum.
+    fn index_and_gradient_near(&self, origin_m: DVec3, offset_m: DVec3) -> (f64, DVec3) {
+        self.index_and_gradient(origin_m + offset_m)
+    }
     /// Heights above the ground (m, ascending) of the levels where the field is not smooth (see
     /// [`StratifiedIndex::breaks_m`]); the integrator ends its steps on them. Default: none.
     fn breaks_m(&self) -> &[f64] {
+        &[]
+    }
+    /// Levels where only d²n/dh² jumps, with the size of the jump (see
+    /// [`StratifiedIndex::minor_breaks`]). Default: none.
+    fn minor_breaks(&self) -> &[MinorBreak] {
         &[]
     }
 }
@@ -57,6 +71,12 @@ pub trait StratifiedIndex: Send + Sync {
     fn breaks_m(&self) -> &[f64] {
         &[]
     }
+    /// Further levels where only d²n/dh² jumps, each with the size of its jump (ascending). A
+    /// step straddling one loses little, so the tracer ends its steps only on those that could
+    /// matter at its tolerance (see `breaks::settle`). Default: none.
+    fn minor_breaks(&self) -> &[MinorBreak] {
+        &[]
+    }
 }
 
 impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
@@ -65,6 +85,9 @@ impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     }
     fn breaks_m(&self) -> &[f64] {
         (**self).breaks_m()
+    }
+    fn minor_breaks(&self) -> &[MinorBreak] {
+        (**self).minor_breaks()
     }
 }
 
@@ -83,8 +106,55 @@ impl<S: StratifiedIndex> IndexField for Spherical<S> {
         let (n, dn) = self.index.index_and_derivative(r - self.earth_radius_m);
         (n, position_m * (dn / r))
     }
+    fn index_and_gradient_near(&self, origin_m: DVec3, offset_m: DVec3) -> (f64, DVec3) {
+        let position_m = origin_m + offset_m;
+        let r = position_m.length();
+        let height_m = system::height_near(origin_m, offset_m, self.earth_radius_m, r);
+        let (n, dn) = self.index.index_and_derivative(height_m);
+        (n, position_m * (dn / r))
+    }
     fn breaks_m(&self) -> &[f64] {
         self.index.breaks_m()
+    }
+    fn minor_breaks(&self) -> &[MinorBreak] {
+        self.index.minor_breaks()
+    }
+}
+
+/// A 3-D field with its breaks settled once for one tracer setting (the minor breaks that matter
+/// at its tolerance over its `error_length_m` promoted to breaks, the rest dropped), for callers
+/// that trace many rays with [`trace_field`], which otherwise settles them on every call. Rays
+/// to targets beyond `error_length_m` get the breaks settled for `error_length_m`.
+#[derive(Debug, Clone)]
+pub struct Settled<F> {
+    /// The field.
+    pub field: F,
+    breaks_m: Vec<f64>,
+}
+
+impl<F: IndexField> Settled<F> {
+    /// `field` with its breaks settled for `config`.
+    pub fn new(field: F, config: &TracerConfig) -> Self {
+        let tolerance_per_m = config.tolerance_m / config.error_length_m;
+        let breaks_m = breaks::settle(
+            field.breaks_m(),
+            field.minor_breaks(),
+            config,
+            tolerance_per_m,
+        );
+        Settled { field, breaks_m }
+    }
+}
+
+impl<F: IndexField> IndexField for Settled<F> {
+    fn index_and_gradient(&self, position_m: DVec3) -> (f64, DVec3) {
+        self.field.index_and_gradient(position_m)
+    }
+    fn index_and_gradient_near(&self, origin_m: DVec3, offset_m: DVec3) -> (f64, DVec3) {
+        self.field.index_and_gradient_near(origin_m, offset_m)
+    }
+    fn breaks_m(&self) -> &[f64] {
+        &self.breaks_m
     }
 }
 
@@ -96,16 +166,28 @@ pub struct Tracer<'a, S: StratifiedIndex + ?Sized> {
     field: &'a S,
     config: TracerConfig,
     fates: Option<Arc<BouguerEnvelope>>,
+    /// The breaks the ray loop ends steps on, settled for rays whose error length is
+    /// `config.error_length_m` (see `breaks::settle`); shared by clones.
+    breaks_m: Arc<[f64]>,
 }
 
 impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
     /// A tracer through `field` with `config` (validated).
     pub fn new(field: &'a S, config: TracerConfig) -> Result<Self, TracerError> {
         config.validate()?;
+        let tolerance_per_m = config.tolerance_m / config.error_length_m;
+        let breaks_m = breaks::settle(
+            field.breaks_m(),
+            field.minor_breaks(),
+            &config,
+            tolerance_per_m,
+        )
+        .into();
         Ok(Tracer {
             field,
             config,
             fates: None,
+            breaks_m,
         })
     }
 
@@ -186,9 +268,27 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
         path: Option<&mut Vec<RayPoint>>,
     ) -> Result<(), TracerError> {
         self.check(observer_height_m, elevation_rad, distances_m)?;
+        // Targets beyond the error length shrink the budget per metre: settle again for them.
+        let error_length_m = ray::error_length_m(&self.config, distances_m);
+        let farther: Vec<f64>;
+        let breaks: &[f64] = if error_length_m > self.config.error_length_m
+            && !self.field.minor_breaks().is_empty()
+        {
+            farther = breaks::settle(
+                self.field.breaks_m(),
+                self.field.minor_breaks(),
+                &self.config,
+                self.config.tolerance_m / error_length_m,
+            );
+            &farther
+        } else {
+            &self.breaks_m
+        };
         let sys = PlanarSystem {
             field: self.field,
             radius_m: self.config.earth_radius_m,
+            observer_m: observer_height_m,
+            breaks,
         };
         let (n0, _) = self.field.index_and_derivative(observer_height_m);
         let mut hook = bouguer::Watched {
@@ -205,15 +305,10 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
             }),
         };
         let (sin_a, cos_a) = elevation_rad.sin_cos();
-        let state = DVec4::new(
-            0.0,
-            self.config.earth_radius_m + observer_height_m,
-            n0 * cos_a,
-            n0 * sin_a,
-        );
+        let state = sys.launch_state(DVec2::new(n0 * cos_a, n0 * sin_a));
         ray::integrate(
             &sys,
-            state.to_array(),
+            state,
             elevation_rad,
             &self.config,
             distances_m,
@@ -283,9 +378,24 @@ pub fn trace_field<F: IndexField + ?Sized>(
             top_m: config.top_m,
         });
     }
+    let settled: Vec<f64>;
+    let breaks: &[f64] = if field.minor_breaks().is_empty() {
+        field.breaks_m()
+    } else {
+        let tolerance_per_m = config.tolerance_m / ray::error_length_m(config, distances_m);
+        settled = breaks::settle(
+            field.breaks_m(),
+            field.minor_breaks(),
+            config,
+            tolerance_per_m,
+        );
+        &settled
+    };
     let sys = FieldSystem {
         field,
         ground,
+        origin_m,
+        breaks,
         start_direction: match ground {
             Ground::Sphere { .. } => up,
             Ground::Flat => DVec3::ZERO,
@@ -295,7 +405,7 @@ pub fn trace_field<F: IndexField + ?Sized>(
     let t = dir * n0;
     let elevation = dir.dot(up).clamp(-1.0, 1.0).asin();
     let mut record = RayRecord::default();
-    let state = [origin_m.x, origin_m.y, origin_m.z, t.x, t.y, t.z];
+    let state = [0.0, 0.0, 0.0, t.x, t.y, t.z];
     ray::integrate(
         &sys,
         state,

@@ -439,6 +439,14 @@ fn finish(
     }
 }
 
+/// The path length over which a ray's error budget is spread: the larger of the setting and the
+/// farthest target (see the module docs).
+pub(crate) fn error_length_m(cfg: &TracerConfig, targets: &[f64]) -> f64 {
+    targets
+        .last()
+        .map_or(cfg.error_length_m, |&d| d.max(cfg.error_length_m))
+}
+
 /// Integrate one ray. `y0` is the launch state, `elevation0` the apparent elevation (rad).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
@@ -454,9 +462,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     rec.reset(elevation0, targets.len());
     let top = cfg.top_m;
     let half = N / 2;
-    let error_length = targets
-        .last()
-        .map_or(cfg.error_length_m, |&d| d.max(cfg.error_length_m));
+    let error_length = error_length_m(cfg, targets);
     // Error per unit length: a step of h may err by tolerance·h/L (see the module docs).
     let tolerance_per_m = cfg.tolerance_m / error_length;
 
@@ -558,15 +564,29 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             match aim {
                 Some(a) if err <= 1.0 => {
                     let o = sys.observe(&step.y1);
-                    if let Some(polished) = a.polish(o.height_m, o.elevation_rad) {
-                        rec.rejected_steps += 1;
-                        aim = Some(polished);
-                        continue;
+                    match a.polish(o.height_m, o.elevation_rad) {
+                        Polish::Retake(polished) => {
+                            rec.rejected_steps += 1;
+                            aim = Some(polished);
+                            continue;
+                        }
+                        // The trial step that aimed here was too long to predict where the ray
+                        // goes (it may have reflected off a thin layer that the retaken step
+                        // enters): start over with half the aimed length.
+                        Polish::Missed => {
+                            rec.rejected_steps += 1;
+                            aim = None;
+                            h = 0.5 * a.step_m;
+                            continue;
+                        }
+                        // The next step starts a hair before the break and moves the bracket on
+                        // when it finds the crossing at its start; its first stage is taken past
+                        // it.
+                        Polish::Landed => {
+                            landed = true;
+                            rec.breaks_landed += 1;
+                        }
                     }
-                    // The next step starts a hair before the break and moves the bracket on
-                    // when it finds the crossing at its start; its first stage is taken past it.
-                    landed = true;
-                    rec.breaks_landed += 1;
                 }
                 None if !bracket.is_empty() => {
                     let o1 = sys.observe(&step.y1);
@@ -670,10 +690,12 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         event_prev = event1;
         // Requested distances up to the end of the step (or the terminating event).
         let limit_t = end.map_or(1.0, |(t, _)| t);
-        let limit_distance = if limit_t >= 1.0 {
-            obs1.distance_m
-        } else {
-            sys.distance(&get_dense(&mut dense).at(limit_t))
+        let limit_distance = match end {
+            // The event is the distance itself: a target on it must not be lost to the root's
+            // rounding.
+            Some((_, Termination::MaxDistance)) => cfg.max_distance_m.unwrap_or(f64::INFINITY),
+            _ if limit_t >= 1.0 => obs1.distance_m,
+            _ => sys.distance(&get_dense(&mut dense).at(limit_t)),
         };
         while next < targets.len() && targets[next] <= limit_distance {
             let d = get_dense(&mut dense);
@@ -849,6 +871,11 @@ const MIN_LANDING_STEP_M: f64 = 1e-6;
 /// Largest distance (m) from its aim point at which a step aimed at a break counts as landed.
 const LANDING_TOLERANCE_M: f64 = 3e-9;
 
+/// Largest miss (m) of an aimed step that can no longer be corrected and still counts as landed
+/// (a near-level ray, whose height hardly changes with the step length); a larger miss means
+/// the ray did not go where the trial step predicted, and the step is taken again shorter.
+const LANDING_SLACK_M: f64 = 1e-6;
+
 /// Retakes of an aimed step (Newton on its length) to bring its end onto the break.
 const MAX_POLISH: u8 = 2;
 
@@ -865,27 +892,49 @@ struct Aim {
     next_step_m: f64,
 }
 
+/// What an aimed step that passed the error test did.
+enum Polish {
+    /// It ended on its aim point.
+    Landed,
+    /// It missed by more than [`LANDING_TOLERANCE_M`]; retake it with this corrected length.
+    Retake(Aim),
+    /// It missed by more than [`LANDING_SLACK_M`] and cannot be corrected: the ray went
+    /// elsewhere than the trial step that aimed it predicted.
+    Missed,
+}
+
 impl Aim {
-    /// After the aimed step ended at `height_m` with local elevation `elevation_rad`: a corrected
-    /// step if it missed the break by more than [`LANDING_TOLERANCE_M`] and a Newton correction
-    /// is well conditioned, else `None` (landed).
-    fn polish(self, height_m: f64, elevation_rad: f64) -> Option<Aim> {
+    /// After the aimed step ended at `height_m` with local elevation `elevation_rad`: landed, a
+    /// corrected step (Newton on the step length) if it missed by more than
+    /// [`LANDING_TOLERANCE_M`] and the correction is well conditioned, else landed if within
+    /// [`LANDING_SLACK_M`] and missed if not.
+    fn polish(self, height_m: f64, elevation_rad: f64) -> Polish {
         let aim_m = if self.exit.up {
             self.exit.height_m - SHORT_OF_BREAK_M
         } else {
             self.exit.height_m + SHORT_OF_BREAK_M
         };
         let miss = height_m - aim_m;
-        let climb = elevation_rad.sin();
-        if miss.abs() <= LANDING_TOLERANCE_M || self.polished >= MAX_POLISH || climb.abs() < 1e-6 {
-            return None;
+        if miss.abs() <= LANDING_TOLERANCE_M {
+            return Polish::Landed;
         }
+        let climb = elevation_rad.sin();
         let step_m = self.step_m - miss / climb;
-        (step_m > MIN_LANDING_STEP_M && step_m < 2.0 * self.step_m).then_some(Aim {
-            step_m,
-            polished: self.polished + 1,
-            ..self
-        })
+        let correctable = self.polished < MAX_POLISH
+            && climb.abs() >= 1e-6
+            && step_m > MIN_LANDING_STEP_M
+            && step_m < 2.0 * self.step_m;
+        if correctable {
+            Polish::Retake(Aim {
+                step_m,
+                polished: self.polished + 1,
+                ..self
+            })
+        } else if miss.abs() <= LANDING_SLACK_M {
+            Polish::Landed
+        } else {
+            Polish::Missed
+        }
     }
 }
 

@@ -5,11 +5,15 @@
 //! ground distance from the observer, local elevation, Bouguer's invariant).
 //!
 //! * [`PlanarSystem`] — spherically symmetric fields ([`StratifiedIndex`]): the ray stays in the
-//!   vertical great-circle plane through the observer, so the state is 2-D (x, y, Tx, Ty) with the
-//!   origin at Earth's centre and the observer on the +y axis. Arc length handles rays that go
-//!   vertical or turn back, which θ- or x-parametrised forms cannot. Positions of 6.4e6 m carry
-//!   ~1e-9 m of f64 roundoff, far below any useful tolerance (1e-6 m and up), so the centre origin
-//!   costs no accuracy and keeps the geometry (h = |r| − R, θ = atan2) exact.
+//!   vertical great-circle plane through the observer, so the state is 2-D (x, v, Tx, Ty), the
+//!   position being the offset from the observer, who sits on the +y axis of Earth-centred
+//!   coordinates. Arc length handles rays that go vertical or turn back, which θ- or
+//!   x-parametrised forms cannot. Earth-centred positions of 6.4e6 m would carry ~1e-9 m of f64
+//!   rounding, which a layer with a large d²n/dh² turns into force noise; the offsets carry the
+//!   rounding of the distance travelled, and the height is summed from them without forming
+//!   |r| − R.
+//! * [`FieldSystem`] — any 3-D [`IndexField`], over a sphere or a flat Earth. Its positions are
+//!   Earth-centred (the field is asked at absolute positions), so it keeps the ~1e-9 m rounding.
 //! * [`FieldSystem`] — any 3-D [`IndexField`], over a sphere or a flat Earth.
 
 use glam::{DVec2, DVec3};
@@ -60,41 +64,77 @@ pub(crate) trait RaySystem<const N: usize> {
     fn radius_m(&self) -> Option<f64>;
 }
 
-/// Spherically symmetric field, 2-D state (x, y, Tx, Ty) about Earth's centre.
+/// Spherically symmetric field, 2-D state (x, v, Tx, Ty): the position r = (x, R + h₀ + v)
+/// about Earth's centre, stored as its offset (x, v) from the observer (at height h₀ on the
+/// +y axis). The offset keeps the stage positions of a step to the rounding of kilometres
+/// (a few 1e-12 m), not of the Earth's radius (~1e-9 m): in a layer whose d²n/dh² is large
+/// (0.02 m⁻² in a 0.1 m, 30 K jump) a 1e-9 m height error is a force error the error estimate
+/// sees as noise, which drove steps down to a millimetre.
 pub(crate) struct PlanarSystem<'a, S: StratifiedIndex + ?Sized> {
     pub field: &'a S,
     pub radius_m: f64,
+    /// The observer's height above the ground (m): the origin of the offsets.
+    pub observer_m: f64,
+    /// The breaks the ray loop ends its steps on (settled for the tracer's setting).
+    pub breaks: &'a [f64],
+}
+
+impl<S: StratifiedIndex + ?Sized> PlanarSystem<'_, S> {
+    /// The launch state at the observer with direction T (n times the unit direction).
+    pub fn launch_state(&self, t: DVec2) -> [f64; 4] {
+        [0.0, 0.0, t.x, t.y]
+    }
+    /// Earth-centred y coordinate of a state.
+    #[inline]
+    fn centre_y(&self, y: &[f64; 4]) -> f64 {
+        self.radius_m + self.observer_m + y[1]
+    }
+    /// Distance from Earth's centre and height above the ground, the height without the
+    /// rounding of |r| (≈ 6.4e6 m): h = (|r|² − R²)/(|r| + R) with |r|² − R² summed from the
+    /// offsets, h₀(2R + h₀) + v(2(R + h₀) + v) + x².
+    #[inline]
+    fn radius_and_height(&self, y: &[f64; 4]) -> (f64, f64) {
+        let (x, v) = (y[0], y[1]);
+        let (r_e, h0) = (self.radius_m, self.observer_m);
+        let r = x.hypot(self.centre_y(y));
+        let excess = h0 * (2.0 * r_e + h0) + v * (2.0 * (r_e + h0) + v) + x * x;
+        (r, excess / (r + r_e))
+    }
 }
 
 impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
     #[inline]
     fn derivative(&self, y: &[f64; 4]) -> [f64; 4] {
-        let r = DVec2::new(y[0], y[1]);
-        let len = r.length();
-        let (n, dn) = self.field.index_and_derivative(len - self.radius_m);
-        let g = r * (dn / len);
+        let (len, height) = self.radius_and_height(y);
+        let (n, dn) = self.field.index_and_derivative(height);
+        let scale = dn / len;
         let inv_n = 1.0 / n;
-        [y[2] * inv_n, y[3] * inv_n, g.x, g.y]
+        [
+            y[2] * inv_n,
+            y[3] * inv_n,
+            y[0] * scale,
+            self.centre_y(y) * scale,
+        ]
     }
     #[inline]
     fn height(&self, y: &[f64; 4]) -> f64 {
-        y[0].hypot(y[1]) - self.radius_m
+        self.radius_and_height(y).1
     }
     #[inline]
     fn climb(&self, y: &[f64; 4]) -> f64 {
-        y[0] * y[2] + y[1] * y[3]
+        y[0] * y[2] + self.centre_y(y) * y[3]
     }
     #[inline]
     fn distance(&self, y: &[f64; 4]) -> f64 {
-        self.radius_m * y[0].atan2(y[1])
+        self.radius_m * y[0].atan2(self.centre_y(y))
     }
     fn observe(&self, y: &[f64; 4]) -> Observables {
-        let r = y[0].hypot(y[1]);
-        let height_m = r - self.radius_m;
-        let angle = y[0].atan2(y[1]);
+        let (r, height_m) = self.radius_and_height(y);
+        let cy = self.centre_y(y);
+        let angle = y[0].atan2(cy);
         // Radial and tangential (towards increasing θ) components of T.
-        let radial = (y[0] * y[2] + y[1] * y[3]) / r;
-        let tangential = (y[1] * y[2] - y[0] * y[3]) / r;
+        let radial = (y[0] * y[2] + cy * y[3]) / r;
+        let tangential = (cy * y[2] - y[0] * y[3]) / r;
         let (n, _) = self.field.index_and_derivative(height_m);
         let t_len = radial.hypot(tangential);
         Observables {
@@ -107,12 +147,12 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
         }
     }
     fn invariant_scale(&self, y: &[f64; 4]) -> f64 {
-        let r = y[0].hypot(y[1]);
-        let (n, _) = self.field.index_and_derivative(r - self.radius_m);
+        let (r, height_m) = self.radius_and_height(y);
+        let (n, _) = self.field.index_and_derivative(height_m);
         n * r
     }
     fn breaks(&self) -> &[f64] {
-        self.field.breaks_m()
+        self.breaks
     }
     fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
         Some(self.field.index_and_derivative(height_m))
@@ -135,12 +175,27 @@ pub enum Ground {
     Flat,
 }
 
-/// Any 3-D field, state (r, T) as two `DVec3`s.
+/// The height above a sphere of radius `radius_m` of the point `origin_m + offset_m`, whose
+/// distance from the centre is `r` (m), without the rounding of r − R: the origin's own height
+/// plus (|r|² − |o|²)/(|r| + |o|), the numerator summed from the offset as 2 o·v + v·v.
+#[inline]
+pub(crate) fn height_near(origin_m: DVec3, offset_m: DVec3, radius_m: f64, r: f64) -> f64 {
+    let o = origin_m.length();
+    let rise = (2.0 * origin_m.dot(offset_m) + offset_m.length_squared()) / (r + o);
+    (o - radius_m) + rise
+}
+
+/// Any 3-D field, state (v, T) as two `DVec3`s: the position is `origin_m` + v, kept as the
+/// offset v from the observer for the reason given at [`PlanarSystem`].
 pub(crate) struct FieldSystem<'a, F: IndexField + ?Sized> {
     pub field: &'a F,
     pub ground: Ground,
+    /// The observer (Earth-centred on a sphere): the origin of the offsets.
+    pub origin_m: DVec3,
     /// The observer's ground direction (unit; sphere) — distances are measured from it.
     pub start_direction: DVec3,
+    /// The breaks the ray loop ends its steps on (settled for the setting).
+    pub breaks: &'a [f64],
 }
 
 impl<F: IndexField + ?Sized> FieldSystem<'_, F> {
@@ -151,31 +206,45 @@ impl<F: IndexField + ?Sized> FieldSystem<'_, F> {
             Ground::Flat => DVec3::Z,
         }
     }
+    /// The offset of a state from the observer.
+    #[inline]
+    fn offset(y: &[f64; 6]) -> DVec3 {
+        DVec3::new(y[0], y[1], y[2])
+    }
+    /// The position of a state (Earth-centred on a sphere).
+    #[inline]
+    fn position(&self, y: &[f64; 6]) -> DVec3 {
+        self.origin_m + Self::offset(y)
+    }
 }
 
 impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
     #[inline]
     fn derivative(&self, y: &[f64; 6]) -> [f64; 6] {
-        let (n, g) = self.field.index_and_gradient(DVec3::new(y[0], y[1], y[2]));
+        let (n, g) = self
+            .field
+            .index_and_gradient_near(self.origin_m, Self::offset(y));
         let inv_n = 1.0 / n;
         [y[3] * inv_n, y[4] * inv_n, y[5] * inv_n, g.x, g.y, g.z]
     }
     #[inline]
     fn height(&self, y: &[f64; 6]) -> f64 {
-        let r = DVec3::new(y[0], y[1], y[2]);
+        let r = self.position(y);
         match self.ground {
-            Ground::Sphere { radius_m } => r.length() - radius_m,
+            Ground::Sphere { radius_m } => {
+                height_near(self.origin_m, Self::offset(y), radius_m, r.length())
+            }
             Ground::Flat => r.z,
         }
     }
     #[inline]
     fn climb(&self, y: &[f64; 6]) -> f64 {
-        let r = DVec3::new(y[0], y[1], y[2]);
+        let r = self.position(y);
         self.up(r).dot(DVec3::new(y[3], y[4], y[5]))
     }
     #[inline]
     fn distance(&self, y: &[f64; 6]) -> f64 {
-        let r = DVec3::new(y[0], y[1], y[2]);
+        let r = self.position(y);
         match self.ground {
             Ground::Sphere { radius_m } => {
                 radius_m
@@ -189,12 +258,14 @@ impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
         }
     }
     fn observe(&self, y: &[f64; 6]) -> Observables {
-        let r = DVec3::new(y[0], y[1], y[2]);
+        let r = self.position(y);
         let t = DVec3::new(y[3], y[4], y[5]);
         let up = self.up(r);
         let radial = up.dot(t);
         let horizontal = (t - up * radial).length();
-        let (n, _) = self.field.index_and_gradient(r);
+        let (n, _) = self
+            .field
+            .index_and_gradient_near(self.origin_m, Self::offset(y));
         let distance_m = self.distance(y);
         let (angle_rad, invariant) = match self.ground {
             Ground::Sphere { radius_m } => (
@@ -213,15 +284,17 @@ impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
         }
     }
     fn invariant_scale(&self, y: &[f64; 6]) -> f64 {
-        let r = DVec3::new(y[0], y[1], y[2]);
-        let (n, _) = self.field.index_and_gradient(r);
+        let r = self.position(y);
+        let (n, _) = self
+            .field
+            .index_and_gradient_near(self.origin_m, Self::offset(y));
         match self.ground {
             Ground::Sphere { .. } => n * r.length(),
             Ground::Flat => n,
         }
     }
     fn breaks(&self) -> &[f64] {
-        self.field.breaks_m()
+        self.breaks
     }
     fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
         match self.ground {

@@ -118,13 +118,17 @@ pub fn tangent_elevation_rad<S: StratifiedIndex + ?Sized>(
 }
 
 /// The heights (m) to launch tangent rays to: every corner, the breaks of `index` next to it
-/// (below and above), and for the long set every twentieth break below 2 km.
+/// (below and above; breaks of either kind), and for the long set every twentieth break below
+/// 2 km.
 fn tangent_heights_m<S: StratifiedIndex + ?Sized>(
     index: &S,
     corner_heights_m: &[f64],
     set: LaunchSet,
 ) -> Vec<f64> {
-    let breaks = index.breaks_m();
+    let mut breaks: Vec<f64> = index.breaks_m().to_vec();
+    breaks.extend(index.minor_breaks().iter().map(|b| b.height_m));
+    breaks.sort_by(f64::total_cmp);
+    breaks.dedup();
     let mut heights = corner_heights_m.to_vec();
     for &c in corner_heights_m {
         let i = breaks.partition_point(|&b| b < c - 1e-6);

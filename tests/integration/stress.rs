@@ -442,28 +442,30 @@ struct SuiteRun {
     problems: Vec<(Kind, String)>,
 }
 
-/// The atmosphere whose rays the tracer is known to get wrong (issue 8 stays open on it): rays
-/// the 0.1 m, 30 K jumps should reflect sometimes tunnel through them at loose tolerances. The
-/// CI tests check every other atmosphere; `*_known_failure` tests (ignored, with the reason)
-/// check this one with the same bounds and fail until the tracer is fixed.
-const KNOWN_FAILING: &str = "thin_jumps_30k";
+/// The one atmosphere whose worst error is known not to shrink monotonically (issue 8 stays
+/// open on it): in the 0.1 m, 30 K jumps a ray tangent to a knot at 30.5 m is off by 6.8e-5 m at
+/// 1e-2 m and 7.0e-5 m at 1e-3 m, both well inside the tolerance but not decreasing — the straddled
+/// minor breaks dropped at both settings set it, not the step control. The CI monotonicity test
+/// checks every other atmosphere; the `*_known_failure` test (ignored) checks this one with the
+/// same bound and fails until the tracer is fixed. Every other property is checked for all
+/// fourteen atmospheres in CI.
+const KNOWN_NON_MONOTONE: &str = "thin_jumps_30k";
 
-/// Whether a problem text is about the known-failing atmosphere.
-fn in_known_failing(problem: &str) -> bool {
+/// Whether a problem text is about the known non-monotone atmosphere.
+fn in_known_non_monotone(problem: &str) -> bool {
     problem
         .split_whitespace()
         .take(2)
-        .any(|word| word.trim_end_matches(':') == KNOWN_FAILING)
+        .any(|word| word.trim_end_matches(':') == KNOWN_NON_MONOTONE)
 }
 
 impl SuiteRun {
-    /// Panic listing the problems of `kind`, if any, leaving out (`known: false`) or keeping only
-    /// (`known: true`) the known-failing atmosphere's.
-    fn assert_none(&self, kind: Kind, known: bool) {
+    /// Panic listing the problems of `kind` for which `selected` holds, if any.
+    fn assert_none_where(&self, kind: Kind, selected: impl Fn(&str) -> bool) {
         let found: Vec<&str> = self
             .problems
             .iter()
-            .filter(|(k, p)| *k == kind && in_known_failing(p) == known)
+            .filter(|(k, p)| *k == kind && selected(p))
             .map(|(_, p)| p.as_str())
             .collect();
         assert!(
@@ -472,6 +474,11 @@ impl SuiteRun {
             found.len(),
             found.join("\n")
         );
+    }
+
+    /// Panic listing every problem of `kind`, if any.
+    fn assert_none(&self, kind: Kind) {
+        self.assert_none_where(kind, |_| true);
     }
 }
 
@@ -572,35 +579,30 @@ fn fast_suite() -> &'static SuiteRun {
 
 #[test]
 fn stress_rays_end_with_a_typed_reason_and_finite_numbers() {
-    fast_suite().assert_none(Kind::Record, false);
-    fast_suite().assert_none(Kind::Record, true);
+    fast_suite().assert_none(Kind::Record);
 }
 
 #[test]
 fn stress_bouguer_drift_stays_within_its_bound() {
-    fast_suite().assert_none(Kind::Drift, false);
+    fast_suite().assert_none(Kind::Drift);
 }
 
 #[test]
 fn stress_error_is_within_the_tolerance_of_the_independent_reference() {
-    fast_suite().assert_none(Kind::Tolerance, false);
+    fast_suite().assert_none(Kind::Tolerance);
 }
 
 #[test]
-#[ignore = "known failure (issue 8 open): rays tunnel through the 0.1 m, 30 K jumps; \
-            cargo test --release --test integration known_failure -- --ignored"]
-fn stress_thin_jumps_drift_and_error_known_failure() {
-    fast_suite().assert_none(Kind::Drift, true);
-    fast_suite().assert_none(Kind::Tolerance, true);
+fn stress_error_does_not_grow_as_the_tolerance_shrinks() {
+    fast_suite().assert_none_where(Kind::Monotone, |p| !in_known_non_monotone(p));
 }
 
 #[test]
-#[ignore = "known failure (issue 8 open): below ≈ 4e-6 m the step caps, not the tolerance, set \
-            the error, which then does not shrink monotonically; \
+#[ignore = "known failure (issue 8 open): in the 0.1 m, 30 K jumps the worst error grows from \
+            6.8e-5 m at 1e-2 m to 7.0e-5 m at 1e-3 m; \
             cargo test --release --test integration known_failure -- --ignored"]
 fn stress_error_does_not_grow_as_the_tolerance_shrinks_known_failure() {
-    fast_suite().assert_none(Kind::Monotone, false);
-    fast_suite().assert_none(Kind::Monotone, true);
+    fast_suite().assert_none_where(Kind::Monotone, in_known_non_monotone);
 }
 
 /// Long mode: the dense launch set (≈ 150 elevations and tangent rays to every twentieth break
@@ -857,25 +859,8 @@ fn stress_3d_path_meets_the_same_bounds() {
             "near_critical_0115",
             "superadiabatic_desert",
             "surface_duct",
+            "thin_jumps_30k",
         ],
-        &[2.0, 100.0],
-        &[-1.0, -0.1, 0.0, 0.05, 0.2, 1.0, 10.0, 90.0],
-        &[1e-1, 1e-3, 1e-5],
-    );
-    assert!(
-        problems.is_empty(),
-        "{} problems:\n{}",
-        problems.len(),
-        problems.join("\n")
-    );
-}
-
-#[test]
-#[ignore = "known failure (issue 8 open): rays tunnel through the 0.1 m, 30 K jumps; \
-            cargo test --release --test integration known_failure -- --ignored"]
-fn stress_3d_path_thin_jumps_known_failure() {
-    let problems = three_d_path(
-        &[KNOWN_FAILING],
         &[2.0, 100.0],
         &[-1.0, -0.1, 0.0, 0.05, 0.2, 1.0, 10.0, 90.0],
         &[1e-1, 1e-3, 1e-5],
@@ -959,4 +944,39 @@ fn stress_render_has_no_non_finite_pixel() {
             assert_eq!(film.pixels.len(), 64 * 32);
         }
     }
+}
+
+/// A level ray from 0.1 m meets the +30 K, 0.1 m jump at 30 m near 21.9 km, grazing at 2.7 mrad,
+/// and must reflect (the layer turns rays up to 0.44°). Two faults once broke it: a step aimed at
+/// a break that went elsewhere was taken as landed, so at 1 cm the ray tunnelled through the
+/// jump (Bouguer drift 3.1e-5, the index step); and with Earth-centred positions their ~1e-9 m
+/// rounding, times d²n/dh² ≈ 0.02 m⁻² in the jump, was force noise that held steps near a
+/// millimetre at 1e-6 m (11 898 accepted steps). Both tolerances now reflect it with the drift
+/// of a smooth field, the tight one in a few hundred steps, and agree at 26 km.
+#[test]
+fn a_grazing_ray_reflects_off_a_thin_jump_at_loose_and_tight_tolerances() {
+    let dir = tempfile::tempdir().unwrap();
+    let stress = stress_suite()
+        .into_iter()
+        .find(|s| s.name == "thin_jumps_30k")
+        .unwrap();
+    let profile = csv_profile(dir.path(), stress.name, &stress.csv_text);
+    let atm = RefractiveAtmosphere::new(Arc::new(profile), 550.0).unwrap();
+    let records: Vec<RayRecord> = [1e-2, 1e-6]
+        .iter()
+        .map(|&tol| {
+            Tracer::new(&atm, config(tol))
+                .unwrap()
+                .trace(0.1, 0.0, &STRESS_DISTANCES_M)
+                .unwrap()
+        })
+        .collect();
+    for rec in &records {
+        assert!(rec.invariant_drift < 1e-10, "drift {:e}", rec.invariant_drift);
+        let h26 = rec.heights_m[3].unwrap();
+        assert!(h26 < 30.0, "not reflected: {h26} m at 26 km");
+    }
+    assert!(records[1].accepted_steps < 1_000, "{} steps", records[1].accepted_steps);
+    let (loose, tight) = (records[0].heights_m[3], records[1].heights_m[3]);
+    assert!((loose.unwrap() - tight.unwrap()).abs() < 1e-2);
 }
