@@ -283,11 +283,17 @@ mod tests {
                 .filter(|b| !kept.contains(&b.height_m))
                 .map(|b| worst(b, &config))
                 .sum();
-            assert!(dropped <= STRADDLE_SHARE * per_m, "{dropped:e} at {tolerance_m}");
+            assert!(
+                dropped <= STRADDLE_SHARE * per_m,
+                "{dropped:e} at {tolerance_m}"
+            );
         }
         let loose = settle(&major, &minor, &config, 1.0 / config.error_length_m);
         let tight = settle(&major, &minor, &config, 1e-7 / config.error_length_m);
-        assert!(loose.iter().all(|b| tight.contains(b)), "tighter keeps more");
+        assert!(
+            loose.iter().all(|b| tight.contains(b)),
+            "tighter keeps more"
+        );
         assert!(loose.len() < tight.len());
         assert!(!loose.contains(&10_500.0) && tight.contains(&10_500.0));
     }

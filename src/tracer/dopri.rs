@@ -8,7 +8,7 @@
 //!
 //! Written by hand rather than taken from a crate (see crates.md §2.1): the available ODE crates
 //! (`ode_solvers`, `diffsol`, `russell_ode`) have no event location inside a step, only scalar
-//! tolerances (our state mixes positions of 6.4e6 m with unit directions), and they allocate per
+//! tolerances (our state mixes positions in metres with unit directions), and they allocate per
 //! integration call; the tracer runs millions of short integrations in the renderer's hot loop.
 //! The state is a fixed-size array so that every stage lives on the stack.
 

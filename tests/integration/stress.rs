@@ -972,11 +972,19 @@ fn a_grazing_ray_reflects_off_a_thin_jump_at_loose_and_tight_tolerances() {
         })
         .collect();
     for rec in &records {
-        assert!(rec.invariant_drift < 1e-10, "drift {:e}", rec.invariant_drift);
+        assert!(
+            rec.invariant_drift < 1e-10,
+            "drift {:e}",
+            rec.invariant_drift
+        );
         let h26 = rec.heights_m[3].unwrap();
         assert!(h26 < 30.0, "not reflected: {h26} m at 26 km");
     }
-    assert!(records[1].accepted_steps < 1_000, "{} steps", records[1].accepted_steps);
+    assert!(
+        records[1].accepted_steps < 1_000,
+        "{} steps",
+        records[1].accepted_steps
+    );
     let (loose, tight) = (records[0].heights_m[3], records[1].heights_m[3]);
     assert!((loose.unwrap() - tight.unwrap()).abs() < 1e-2);
 }
