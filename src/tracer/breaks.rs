@@ -39,18 +39,19 @@ const STRADDLE_KERNEL: f64 = 0.03;
 const STRADDLE_SHARE: f64 = 0.1;
 
 /// The breaks a ray loop with `config` must end its steps on, ascending: every one of `major`,
-/// and the minor breaks whose straddling could matter. `tolerance_per_m` is the ray's error
-/// budget per metre of path (tolerance over error length): a direction error ε costs ε × the
-/// error length, so the dropped minor breaks' worst-case direction errors, summed, stay within
-/// [`STRADDLE_SHARE`] × `tolerance_per_m`. The worst case of one straddle takes the longest step
+/// and the minor breaks whose straddling could matter, for rays whose error budget
+/// `config.tolerance_m` is spread over `error_length_m`: a direction error ε costs ε × the error
+/// length, so the dropped minor breaks' worst-case direction errors, summed, stay within
+/// [`STRADDLE_SHARE`] × tolerance / error length. The worst case of one straddle takes the longest step
 /// (`max_step_m`) and the largest height change a step can have there (the vertical cap at the
 /// break, reached from a start up to one cap above it).
 pub(crate) fn settle(
     major: &[f64],
     minor: &[MinorBreak],
     config: &TracerConfig,
-    tolerance_per_m: f64,
+    error_length_m: f64,
 ) -> Vec<f64> {
+    let tolerance_per_m = config.tolerance_m / error_length_m;
     let k = config.vertical_step_per_height.min(0.5);
     let worst_rad = |b: &MinorBreak| {
         let cap = (config.vertical_step_base_m + k * b.height_m.max(0.0)) / (1.0 - k);
@@ -272,9 +273,13 @@ mod tests {
             .chain([minor(10_500.0, 3.5e-14), minor(30.0, 1e-2)])
             .collect();
         let major = [100.0, 11_000.0];
+        let at = |tolerance_m: f64| TracerConfig {
+            tolerance_m,
+            ..config.clone()
+        };
         for tolerance_m in [1.0, 1e-3, 1e-5, 1e-7] {
             let per_m = tolerance_m / config.error_length_m;
-            let kept = settle(&major, &minor, &config, per_m);
+            let kept = settle(&major, &minor, &at(tolerance_m), config.error_length_m);
             assert!(kept.windows(2).all(|w| w[0] < w[1]), "ascending, distinct");
             assert!(major.iter().all(|b| kept.contains(b)));
             assert!(kept.contains(&30.0), "a 30 K jump's knot is always kept");
@@ -288,8 +293,8 @@ mod tests {
                 "{dropped:e} at {tolerance_m}"
             );
         }
-        let loose = settle(&major, &minor, &config, 1.0 / config.error_length_m);
-        let tight = settle(&major, &minor, &config, 1e-7 / config.error_length_m);
+        let loose = settle(&major, &minor, &at(1.0), config.error_length_m);
+        let tight = settle(&major, &minor, &at(1e-7), config.error_length_m);
         assert!(
             loose.iter().all(|b| tight.contains(b)),
             "tighter keeps more"

@@ -135,12 +135,11 @@ pub struct Settled<F> {
 impl<F: IndexField> Settled<F> {
     /// `field` with its breaks settled for `config`.
     pub fn new(field: F, config: &TracerConfig) -> Self {
-        let tolerance_per_m = config.tolerance_m / config.error_length_m;
         let breaks_m = breaks::settle(
             field.breaks_m(),
             field.minor_breaks(),
             config,
-            tolerance_per_m,
+            config.error_length_m,
         );
         Settled { field, breaks_m }
     }
@@ -175,12 +174,11 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
     /// A tracer through `field` with `config` (validated).
     pub fn new(field: &'a S, config: TracerConfig) -> Result<Self, TracerError> {
         config.validate()?;
-        let tolerance_per_m = config.tolerance_m / config.error_length_m;
         let breaks_m = breaks::settle(
             field.breaks_m(),
             field.minor_breaks(),
             &config,
-            tolerance_per_m,
+            config.error_length_m,
         )
         .into();
         Ok(Tracer {
@@ -278,7 +276,7 @@ impl<'a, S: StratifiedIndex + ?Sized> Tracer<'a, S> {
                 self.field.breaks_m(),
                 self.field.minor_breaks(),
                 &self.config,
-                self.config.tolerance_m / error_length_m,
+                error_length_m,
             );
             &farther
         } else {
@@ -382,12 +380,12 @@ pub fn trace_field<F: IndexField + ?Sized>(
     let breaks: &[f64] = if field.minor_breaks().is_empty() {
         field.breaks_m()
     } else {
-        let tolerance_per_m = config.tolerance_m / ray::error_length_m(config, distances_m);
+        let error_length_m = ray::error_length_m(config, distances_m);
         settled = breaks::settle(
             field.breaks_m(),
             field.minor_breaks(),
             config,
-            tolerance_per_m,
+            error_length_m,
         );
         &settled
     };
