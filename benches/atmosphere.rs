@@ -1,5 +1,6 @@
 //! Whole-chain cost: building each paper atmosphere (synthetic TOML or fitted sounding → Ciddor
-//! n(h) table) and tracing a 400-ray fan (−0.5…+0.5°, observer at 10 m, 1 cm tolerance) through it
+//! n(h); once as construction alone, the table then built lazily, once with the whole table
+//! built) and tracing a 400-ray fan (−0.5…+0.5°, observer at 10 m, 1 cm tolerance) through it
 //! out to 30 km. Steps per ray and the rejected-step share are printed before each measurement.
 
 use std::hint::black_box;
@@ -76,6 +77,18 @@ fn bench_build(c: &mut Criterion) {
     for name in CASES {
         group.bench_with_input(BenchmarkId::from_parameter(name), name, |b, name| {
             b.iter(|| black_box(build(name)))
+        });
+    }
+    group.finish();
+    // The table is built lazily where lookups land; this is the cost of all of it (what a
+    // trace through every height, or `profile`'s table report, pays).
+    let mut group = c.benchmark_group("atmosphere_build_whole_table");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(3));
+    for name in CASES {
+        group.bench_with_input(BenchmarkId::from_parameter(name), name, |b, name| {
+            b.iter(|| black_box(build(name).table_max_error()))
         });
     }
     group.finish();

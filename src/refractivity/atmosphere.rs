@@ -8,12 +8,17 @@
 //! # Accuracy the table must reach, and why
 //! A ray's curvature is −(dn/dh)·cos(elevation)/n. An error δ in dn/dh bends a nearly horizontal
 //! ray off its path by about δ·L²/2 after a distance L. The tracer's goal is 1 cm over 30 km, so
-//! δ ≤ 2·0.01 m / (3·10⁴ m)² ≈ 2·10⁻¹¹ m⁻¹ for an error of one sign along the whole path. The
-//! table's default tolerance is therefore 1·10⁻¹¹ m⁻¹ for dn/dh (and 1·10⁻¹¹ for n, whose absolute
-//! value does not bend rays but enters the Bouguer invariant). Cells whose measured error exceeds
-//! it — cells containing a kink of the profile, which a cubic cannot follow — are evaluated exactly.
+//! δ ≤ 2·0.01 m / (3·10⁴ m)² ≈ 2·10⁻¹¹ m⁻¹ for an error of one sign along the whole path, and
+//! tighter tolerances scale it down: the table's default tolerance is 1·10⁻¹⁴ m⁻¹ for dn/dh and
+//! 1·10⁻¹⁴ for n (which does not bend rays but enters the Bouguer invariant; see [`TableSpec`]).
+//! Cells whose measured error exceeds it — cells containing a kink of the profile, which a
+//! polynomial cannot follow — are evaluated exactly.
+//!
+//! The table is built lazily, in chunks of cells, where the tracer's lookups land: a frame whose
+//! rays stay in the lowest few hundred metres does not pay for the 40 km above. Construction
+//! only checks that the air is valid on a 5 m grid over the table's range.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use super::RefractivityError;
 use super::ciddor::{CiddorDispersion, DEFAULT_CO2_PPM};
@@ -112,8 +117,8 @@ pub struct RefractiveSample {
 ///
 /// The table (see [`TableSpec`]): 0.25 m cells up to 4 km above the surface, 5 m cells up to
 /// 40 km, exact above; each cell a quintic Hermite through the exact (n − 1, dn/dh, d²n/dh²) at
-/// its ends (C², so the ray equation stays smooth across nodes). At construction every cell is
-/// checked against the exact formula at three points; cells off by more than the spec's
+/// its ends (C², so the ray equation stays smooth across nodes). When a cell is first built (on
+/// the first lookup in its chunk) it is checked against the exact formula at three points; cells off by more than the spec's
 /// tolerances (1e-14 in n and in dn/dh per metre) evaluate the exact formula instead. The
 /// measured errors are in [`table_max_error`](Self::table_max_error).
 ///
@@ -129,7 +134,8 @@ pub struct RefractiveAtmosphere {
     spec: TableSpec,
     fine: HermiteGrid,
     coarse: HermiteGrid,
-    error: TableError,
+    /// The table's measured error, found when first asked for (it builds every cell).
+    error: OnceLock<TableError>,
     /// The column's breaks where dn/dh jumps, as heights above the surface (m).
     breaks_agl_m: Vec<f64>,
     /// The column's breaks where only d²n/dh² jumps.
@@ -143,7 +149,7 @@ impl std::fmt::Debug for RefractiveAtmosphere {
             .field("wavelength_nm", &self.wavelength_nm)
             .field("co2_ppm", &self.dispersion.co2_ppm)
             .field("spec", &self.spec)
-            .field("error", &self.error)
+            .field("error", &self.error.get())
             .finish_non_exhaustive()
     }
 }
@@ -151,7 +157,8 @@ impl std::fmt::Debug for RefractiveAtmosphere {
 impl RefractiveAtmosphere {
     /// Build the atmosphere at `wavelength_nm` (300–1700 nm) with 450 ppm CO₂ and the default
     /// table; fails on a wavelength out of range or on air the formula cannot take (non-finite,
-    /// T ≤ 0, P ≤ 0, e < 0 or e ≥ P) anywhere in the table's range.
+    /// T ≤ 0, P ≤ 0, e < 0 or e ≥ P) at any point of a grid of the coarse table step
+    /// (5 m by default) over the table's range. The table itself is built lazily.
     pub fn new(column: Arc<dyn AirColumn>, wavelength_nm: f64) -> Result<Self, RefractivityError> {
         Self::build(column, wavelength_nm, DEFAULT_CO2_PPM, TableSpec::default())
     }
@@ -206,26 +213,25 @@ impl RefractiveAtmosphere {
             let s = checked_sample(&*column, &dispersion, surface_m + h_agl)?;
             Ok((s.n_minus_1, s.dn_dh_per_m))
         };
+        validate_column(&exact, spec.coarse_step_m, spec.coarse_top_agl_m)?;
         let fine_cells = (spec.fine_top_agl_m / spec.fine_step_m).round() as usize;
         let fine_top = fine_cells as f64 * spec.fine_step_m;
-        let (fine, fine_err) = HermiteGrid::build(
+        let fine = HermiteGrid::new(
             0.0,
             spec.fine_step_m,
             fine_cells,
             spec.tolerance_n,
             spec.tolerance_dndh_per_m,
-            &exact,
-        )?;
+        );
         let coarse_cells =
             ((spec.coarse_top_agl_m - fine_top) / spec.coarse_step_m).round() as usize;
-        let (coarse, coarse_err) = HermiteGrid::build(
+        let coarse = HermiteGrid::new(
             fine_top,
             spec.coarse_step_m,
             coarse_cells,
             spec.tolerance_n,
             spec.tolerance_dndh_per_m,
-            &exact,
-        )?;
+        );
         let (breaks_agl_m, minor_breaks) = split_breaks(column.breaks_m(), surface_m, &exact)?;
         Ok(Self {
             surface_m,
@@ -234,10 +240,7 @@ impl RefractiveAtmosphere {
             spec,
             fine,
             coarse,
-            error: TableError {
-                fine: fine_err,
-                coarse: coarse_err,
-            },
+            error: OnceLock::new(),
             breaks_agl_m,
             minor_breaks,
             column,
@@ -292,7 +295,8 @@ impl RefractiveAtmosphere {
     }
 
     /// The air, n − 1 and dn/dh (exact) at `height_m` above **mean sea level** (clamped to the
-    /// surface). Invalid air gives NaN values here; the constructor has checked the table's range.
+    /// surface). Invalid air gives NaN values here; the constructor has checked the table's range on its
+    /// coarse grid.
     /// A NaN or +∞ height gives a NaN sample without consulting the column.
     pub fn sample_at(&self, height_m: f64) -> RefractiveSample {
         if height_m.is_nan() || height_m == f64::INFINITY {
@@ -326,10 +330,36 @@ impl RefractiveAtmosphere {
         }
     }
 
-    /// The measured maximum error of the lookup table against [`exact`](Self::exact), found at
-    /// construction by sampling each cell at its quarter, mid and three-quarter points.
+    /// The measured maximum error of the lookup table against [`exact`](Self::exact), found by
+    /// sampling each cell at its quarter, mid and three-quarter points. The table is built
+    /// lazily, where lookups need it; this builds all of it (once).
     pub fn table_max_error(&self) -> TableError {
-        self.error
+        *self.error.get_or_init(|| {
+            let exact = |h| self.checked_refractivity(h);
+            TableError {
+                fine: self.fine.error(&exact),
+                coarse: self.coarse.error(&exact),
+            }
+        })
+    }
+
+    /// (table cells built so far, table cells in all): the table is built where lookups land,
+    /// so a frame whose rays stay low builds only the cells it passes through.
+    pub fn table_cells_built(&self) -> (usize, usize) {
+        let (fine, fine_all) = self.fine.built_cells();
+        let (coarse, coarse_all) = self.coarse.built_cells();
+        (fine + coarse, fine_all + coarse_all)
+    }
+
+    /// (n − 1, dn/dh) at `height_agl_m`, or why the air there is invalid: what builds a
+    /// table cell.
+    fn checked_refractivity(&self, height_agl_m: f64) -> Result<(f64, f64), RefractivityError> {
+        let s = checked_sample(
+            &*self.column,
+            &self.dispersion,
+            self.surface_m + height_agl_m,
+        )?;
+        Ok((s.n_minus_1, s.dn_dh_per_m))
     }
 
     /// n − 1 and dn/dh (m⁻¹) from the table (what [`StratifiedIndex`] returns, minus the 1).
@@ -344,7 +374,7 @@ impl RefractiveAtmosphere {
         } else {
             &self.coarse
         };
-        match grid.lookup(h) {
+        match grid.lookup(h, &|h| self.checked_refractivity(h)) {
             Lookup::Value(v, d) => (v, d),
             Lookup::Exact | Lookup::Outside => self.exact_refractivity(h),
         }
@@ -360,6 +390,12 @@ impl StratifiedIndex for RefractiveAtmosphere {
         (1.0 + nm1, d)
     }
 
+    /// n and dn/dh from the exact formula (no table cell is built; see
+    /// [`StratifiedIndex::survey_index_and_derivative`]).
+    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        self.exact(height_m)
+    }
+
     /// The air column's breaks (heights above the surface; see
     /// [`AirColumn::breaks_m`](crate::profile::AirColumn::breaks_m)).
     fn breaks_m(&self) -> &[f64] {
@@ -370,6 +406,19 @@ impl StratifiedIndex for RefractiveAtmosphere {
     fn minor_breaks(&self) -> &[MinorBreak] {
         &self.minor_breaks
     }
+}
+
+/// Check, before any table cell is built, that the air is valid every `step_m` from the
+/// surface to `top_m` (and at the top): a table cell built later over invalid air falls back
+/// to the exact formula, which then gives NaN, and the ray that meets it ends as non-finite.
+/// In height order, so the error names the lowest invalid height.
+fn validate_column(
+    exact: &dyn Fn(f64) -> Result<(f64, f64), RefractivityError>,
+    step_m: f64,
+    top_m: f64,
+) -> Result<(), RefractivityError> {
+    let steps = (top_m / step_m).ceil() as usize;
+    (0..=steps).try_for_each(|i| exact((i as f64 * step_m).min(top_m)).map(|_| ()))
 }
 
 /// Half-width (m) of the differences that measure a break's jumps.

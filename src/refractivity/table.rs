@@ -16,6 +16,8 @@
 //! Written by hand: `splines` has no derivative and does an O(log n) search per call, and the
 //! tracer's hot loop wants an O(1) index with a per-cell fallback, which no crate offers.
 
+use std::sync::OnceLock;
+
 use rayon::prelude::*;
 
 /// Measured accuracy of one uniform grid against the exact evaluation.
@@ -56,14 +58,31 @@ pub(crate) enum Lookup {
 }
 
 /// A uniform grid with a quintic Hermite per cell (stored as its six coefficients in the cell
-/// fraction t ∈ [0, 1]).
+/// fraction t ∈ [0, 1]), built lazily in chunks of [`CHUNK_CELLS`] cells: a chunk is computed
+/// (nodes, coefficients, the per-cell check) the first time a lookup lands in it, so a frame
+/// whose rays stay in the lowest few hundred metres pays for those metres only. A chunk is a
+/// pure function of its index, so the values do not depend on which thread built it or when.
 #[derive(Debug, Clone)]
 pub(crate) struct HermiteGrid {
     start_m: f64,
     step_m: f64,
     inv_step: f64,
+    cells: usize,
+    tolerance_n: f64,
+    tolerance_dndh: f64,
+    chunks: Vec<OnceLock<Chunk>>,
+}
+
+/// Cells per lazily built chunk of a [`HermiteGrid`].
+pub(crate) const CHUNK_CELLS: usize = 64;
+
+/// One built chunk: its cells' coefficients, which cells evaluate exactly, and the raw check
+/// errors (per cell: max |Δn|, max |Δ(dn/dh)|; NaN where a node could not be evaluated).
+#[derive(Debug, Clone)]
+struct Chunk {
     cells: Vec<[f64; 6]>,
     exact_cell: Vec<bool>,
+    raw_error: Vec<(f64, f64)>,
 }
 
 /// Half-width (m) of the central difference of dn/dh that gives d²n/dh² at a node.
@@ -91,11 +110,7 @@ pub(crate) type NodeResult<E> = Result<(f64, f64), E>;
 
 /// A node at `h`: (n − 1, slope, second derivative), the slope and second derivative scaled to
 /// a cell of `step_m`.
-fn node<E>(
-    exact: &(dyn Fn(f64) -> NodeResult<E> + Sync),
-    h: f64,
-    step_m: f64,
-) -> Result<[f64; 3], E> {
+fn node<E>(exact: &dyn Fn(f64) -> NodeResult<E>, h: f64, step_m: f64) -> Result<[f64; 3], E> {
     let (v, d) = exact(h)?;
     let (_, below) = exact(h - SECOND_DERIVATIVE_STEP_M)?;
     let (_, above) = exact(h + SECOND_DERIVATIVE_STEP_M)?;
@@ -104,85 +119,137 @@ fn node<E>(
 }
 
 impl HermiteGrid {
-    /// Build a grid of `cells` cells of `step_m` from `start_m`, evaluating `exact` at every node
-    /// (in parallel), then measure the interpolation error at three points per cell and mark the
-    /// cells that exceed the tolerances for exact evaluation.
-    pub(crate) fn build<E: Send>(
+    /// A grid of `cells` cells of `step_m` from `start_m`; nothing is evaluated until a lookup
+    /// (or [`error`](Self::error)) needs a chunk. A cell whose interpolation misses
+    /// `tolerance_n` or `tolerance_dndh` at its check points evaluates the exact formula.
+    pub(crate) fn new(
         start_m: f64,
         step_m: f64,
         cells: usize,
         tolerance_n: f64,
         tolerance_dndh: f64,
-        exact: &(dyn Fn(f64) -> NodeResult<E> + Sync),
-    ) -> Result<(Self, GridError), E> {
-        let nodes: Vec<[f64; 3]> = (0..=cells)
-            .into_par_iter()
-            .map(|i| node(exact, start_m + i as f64 * step_m, step_m))
-            .collect::<Result<_, E>>()?;
-        let mut grid = Self {
+    ) -> Self {
+        Self {
             start_m,
             step_m,
             inv_step: 1.0 / step_m,
-            cells: nodes.windows(2).map(|w| quintic(w[0], w[1])).collect(),
-            exact_cell: vec![false; cells],
-        };
-        // Per cell: (raw max dn, raw max d(dn/dh)).
-        let errors: Vec<(f64, f64)> = (0..cells)
-            .into_par_iter()
-            .map(|i| {
-                let mut worst = (0.0f64, 0.0f64);
-                for frac in [0.25, 0.5, 0.75] {
-                    let (n_ex, d_ex) = exact(start_m + (i as f64 + frac) * step_m)?;
-                    let (n_t, d_t) = grid.interpolate(i, frac);
-                    worst.0 = worst.0.max((n_t - n_ex).abs());
-                    worst.1 = worst.1.max((d_t - d_ex).abs());
-                }
-                Ok(worst)
-            })
-            .collect::<Result<_, E>>()?;
-        let mut report = GridError {
-            start_agl_m: start_m,
-            step_m,
             cells,
-            samples: 3 * cells,
+            tolerance_n,
+            tolerance_dndh,
+            chunks: (0..cells.div_ceil(CHUNK_CELLS))
+                .map(|_| OnceLock::new())
+                .collect(),
+        }
+    }
+
+    /// Build chunk `c`: the nodes from `exact`, the quintic of each cell, then the
+    /// interpolation error at three points per cell (quarter, mid, three-quarter); cells over
+    /// a tolerance, and every cell of a chunk where `exact` failed, evaluate exactly.
+    #[cold]
+    #[inline(never)]
+    fn build_chunk<E>(&self, c: usize, exact: &dyn Fn(f64) -> NodeResult<E>) -> Chunk {
+        let first = c * CHUNK_CELLS;
+        let count = CHUNK_CELLS.min(self.cells - first);
+        let height = |i: usize, frac: f64| self.start_m + (i as f64 + frac) * self.step_m;
+        let nodes: Result<Vec<[f64; 3]>, E> = (first..=first + count)
+            .map(|i| node(exact, height(i, 0.0), self.step_m))
+            .collect();
+        let Ok(nodes) = nodes else {
+            return Chunk {
+                cells: vec![[0.0; 6]; count],
+                exact_cell: vec![true; count],
+                raw_error: vec![(f64::NAN, f64::NAN); count],
+            };
+        };
+        let cells: Vec<[f64; 6]> = nodes.windows(2).map(|w| quintic(w[0], w[1])).collect();
+        let mut exact_cell = Vec::with_capacity(count);
+        let mut raw_error = Vec::with_capacity(count);
+        for (k, coefficients) in cells.iter().enumerate() {
+            let mut worst = (0.0f64, 0.0f64);
+            for frac in [0.25, 0.5, 0.75] {
+                let Ok((n_ex, d_ex)) = exact(height(first + k, frac)) else {
+                    worst = (f64::NAN, f64::NAN);
+                    break;
+                };
+                let (n_t, d_t) = evaluate(coefficients, frac, self.inv_step);
+                worst.0 = worst.0.max((n_t - n_ex).abs());
+                worst.1 = worst.1.max((d_t - d_ex).abs());
+            }
+            let (dn, dd) = worst;
+            exact_cell.push(
+                !(dn <= self.tolerance_n && dd <= self.tolerance_dndh)
+                    || !dn.is_finite()
+                    || !dd.is_finite(),
+            );
+            raw_error.push(worst);
+        }
+        Chunk {
+            cells,
+            exact_cell,
+            raw_error,
+        }
+    }
+
+    /// Chunk `c`, built now if no lookup has needed it yet.
+    #[inline]
+    fn chunk<E>(&self, c: usize, exact: &dyn Fn(f64) -> NodeResult<E>) -> &Chunk {
+        self.chunks[c].get_or_init(|| self.build_chunk(c, exact))
+    }
+
+    /// The measured accuracy of the whole grid: builds every chunk not yet built (in
+    /// parallel) and sums up their checks.
+    pub(crate) fn error<E>(&self, exact: &(dyn Fn(f64) -> NodeResult<E> + Sync)) -> GridError {
+        (0..self.chunks.len()).into_par_iter().for_each(|c| {
+            self.chunk(c, exact);
+        });
+        let mut report = GridError {
+            start_agl_m: self.start_m,
+            step_m: self.step_m,
+            cells: self.cells,
+            samples: 3 * self.cells,
             ..GridError::default()
         };
-        for (i, &(dn, dd)) in errors.iter().enumerate() {
-            report.raw_max_abs_dn = report.raw_max_abs_dn.max(dn);
-            report.raw_max_abs_ddndh_per_m = report.raw_max_abs_ddndh_per_m.max(dd);
-            if dn > tolerance_n || dd > tolerance_dndh || !dn.is_finite() || !dd.is_finite() {
-                grid.exact_cell[i] = true;
-                report.exact_cells += 1;
-            } else {
-                report.max_abs_dn = report.max_abs_dn.max(dn);
-                report.max_abs_ddndh_per_m = report.max_abs_ddndh_per_m.max(dd);
+        for c in 0..self.chunks.len() {
+            let chunk = self.chunk(c, exact);
+            for (&(dn, dd), &exact_cell) in chunk.raw_error.iter().zip(&chunk.exact_cell) {
+                report.raw_max_abs_dn = report.raw_max_abs_dn.max(dn);
+                report.raw_max_abs_ddndh_per_m = report.raw_max_abs_ddndh_per_m.max(dd);
+                if exact_cell {
+                    report.exact_cells += 1;
+                } else {
+                    report.max_abs_dn = report.max_abs_dn.max(dn);
+                    report.max_abs_ddndh_per_m = report.max_abs_ddndh_per_m.max(dd);
+                }
             }
         }
-        Ok((grid, report))
+        report
+    }
+
+    /// (cells built so far, cells in the grid).
+    pub(crate) fn built_cells(&self) -> (usize, usize) {
+        let built = self
+            .chunks
+            .iter()
+            .filter_map(|c| c.get())
+            .map(|c| c.cells.len())
+            .sum();
+        (built, self.cells)
     }
 
     /// Top of the grid (m).
     pub(crate) fn end_m(&self) -> f64 {
-        self.start_m + self.exact_cell.len() as f64 * self.step_m
+        self.start_m + self.cells as f64 * self.step_m
     }
 
-    /// Hermite value and derivative in cell `i` at fraction `t` ∈ [0, 1].
+    /// Look up `height_m` (which must not be NaN); `exact` builds the chunk it lands in if
+    /// none has yet.
     #[inline]
-    fn interpolate(&self, i: usize, t: f64) -> (f64, f64) {
-        let [c0, c1, c2, c3, c4, c5] = self.cells[i];
-        let value = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))));
-        let deriv = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)));
-        (value, deriv * self.inv_step)
-    }
-
-    /// Look up `height_m` (which must not be NaN).
-    #[inline]
-    pub(crate) fn lookup(&self, height_m: f64) -> Lookup {
+    pub(crate) fn lookup<E>(&self, height_m: f64, exact: &dyn Fn(f64) -> NodeResult<E>) -> Lookup {
         let u = (height_m - self.start_m) * self.inv_step;
         if u.is_nan() || u < 0.0 {
             return Lookup::Outside;
         }
-        let cells = self.exact_cell.len();
+        let cells = self.cells;
         let mut i = u as usize;
         if i >= cells {
             if u > cells as f64 {
@@ -190,12 +257,24 @@ impl HermiteGrid {
             }
             i = cells - 1;
         }
-        if self.exact_cell[i] {
+        let chunk = self.chunk(i / CHUNK_CELLS, exact);
+        let k = i % CHUNK_CELLS;
+        if chunk.exact_cell[k] {
             return Lookup::Exact;
         }
-        let (v, d) = self.interpolate(i, u - i as f64);
+        let (v, d) = evaluate(&chunk.cells[k], u - i as f64, self.inv_step);
         Lookup::Value(v, d)
     }
+}
+
+/// Hermite value and derivative of a cell's quintic at fraction `t` ∈ [0, 1]; `inv_step`
+/// turns the derivative into one per metre.
+#[inline]
+fn evaluate(coefficients: &[f64; 6], t: f64, inv_step: f64) -> (f64, f64) {
+    let [c0, c1, c2, c3, c4, c5] = *coefficients;
+    let value = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))));
+    let deriv = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)));
+    (value, deriv * inv_step)
 }
 
 #[cfg(test)]
@@ -211,21 +290,27 @@ mod tests {
                 2e-6 - 6e-8 * h + 3e-10 * h * h,
             ))
         };
-        let (grid, err) = HermiteGrid::build(0.0, 0.5, 100, 1e-15, 1e-15, &f).unwrap();
+        let grid = HermiteGrid::new(0.0, 0.5, 100, 1e-15, 1e-15);
+        assert!(grid.chunks.iter().all(|c| c.get().is_none()));
+        assert!(matches!(grid.lookup(13.37, &f), Lookup::Value(..)));
+        // 100 cells = two chunks; the lookup at 13.37 m (cell 26) built the first only.
+        assert!(grid.chunks[0].get().is_some() && grid.chunks[1].get().is_none());
+        let err = grid.error(&f);
         assert_eq!(err.exact_cells, 0);
+        assert_eq!(err.cells, 100);
         assert!(
             err.max_abs_dn < 1e-17 && err.max_abs_ddndh_per_m < 1e-17,
             "{err:?}"
         );
         for &h in &[0.0, 0.1, 13.37, 49.99, 50.0] {
-            let Lookup::Value(v, d) = grid.lookup(h) else {
+            let Lookup::Value(v, d) = grid.lookup(h, &f) else {
                 panic!("{h}")
             };
             let (ve, de) = f(h).unwrap();
             assert!((v - ve).abs() < 1e-17 && (d - de).abs() < 1e-17, "{h}");
         }
-        assert_eq!(grid.lookup(50.1), Lookup::Outside);
-        assert_eq!(grid.lookup(-0.1), Lookup::Outside);
+        assert_eq!(grid.lookup(50.1, &f), Lookup::Outside);
+        assert_eq!(grid.lookup(-0.1, &f), Lookup::Outside);
         assert_eq!(grid.end_m(), 50.0);
     }
 
@@ -239,10 +324,29 @@ mod tests {
                 Ok((1e-6 * (h - 10.3), 1e-6))
             }
         };
-        let (grid, err) = HermiteGrid::build(0.0, 1.0, 20, 1e-12, 1e-12, &f).unwrap();
+        let grid = HermiteGrid::new(0.0, 1.0, 20, 1e-12, 1e-12);
+        assert_eq!(grid.lookup(10.5, &f), Lookup::Exact);
+        assert!(matches!(grid.lookup(11.5, &f), Lookup::Value(..)));
+        let err = grid.error(&f);
         assert_eq!(err.exact_cells, 1, "{err:?}");
         assert!(err.raw_max_abs_ddndh_per_m > 1e-7);
-        assert_eq!(grid.lookup(10.5), Lookup::Exact);
-        assert!(matches!(grid.lookup(11.5), Lookup::Value(..)));
+    }
+
+    /// A chunk where the exact formula fails evaluates exactly (and reports NaN-free maxima).
+    #[test]
+    fn a_failing_chunk_falls_back_to_exact() {
+        let f = |h: f64| -> NodeResult<()> {
+            if h > 70.0 {
+                Err(())
+            } else {
+                Ok((1e-6 * h, 1e-6))
+            }
+        };
+        let grid = HermiteGrid::new(0.0, 1.0, 100, 1e-12, 1e-12);
+        assert!(matches!(grid.lookup(10.0, &f), Lookup::Value(..)));
+        assert_eq!(grid.lookup(80.0, &f), Lookup::Exact);
+        let err = grid.error(&f);
+        assert_eq!(err.exact_cells, 100 - CHUNK_CELLS);
+        assert!(err.raw_max_abs_dn.is_finite() && err.max_abs_dn < 1e-12);
     }
 }

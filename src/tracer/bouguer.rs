@@ -20,6 +20,8 @@
 //! its final direction, just ends. A ray whose fate stays undecided runs on to its natural end
 //! (ground, top) or the tracer's safety limits (`max_length_m`, `max_steps`).
 
+use rayon::prelude::*;
+
 use super::StratifiedIndex;
 use super::ray::{HookAction, RayHook, RayPoint};
 
@@ -73,9 +75,9 @@ impl BouguerEnvelope {
         }
         heights_m.push(top_m);
         let (g, slope): (Vec<f64>, Vec<f64>) = heights_m
-            .iter()
+            .par_iter()
             .map(|&h| {
-                let (n, dn) = index.index_and_derivative(h);
+                let (n, dn) = index.survey_index_and_derivative(h);
                 let r = earth_radius_m + h;
                 (n * r, n + r * dn)
             })

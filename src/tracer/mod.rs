@@ -63,6 +63,13 @@ pub trait IndexField: Send + Sync {
 pub trait StratifiedIndex: Send + Sync {
     /// n and dn/dh (m⁻¹) at height `height_m` above the surface.
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64);
+    /// n and dn/dh at `height_m` for a caller that samples the whole profile once (Bouguer's
+    /// envelope): the same field as [`index_and_derivative`](Self::index_and_derivative) to
+    /// within the error of any lookup table behind it, but evaluated without filling that table,
+    /// so a scene builds table cells only where its rays go. Default: `index_and_derivative`.
+    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        self.index_and_derivative(height_m)
+    }
     /// Heights above the surface (m, ascending, finite) where dn/dh or d²n/dh² may jump: the
     /// knots of a piecewise fit, the edges of constant-gradient layers, the standard
     /// atmosphere's layer bases. A Runge–Kutta step that straddles such a level drops to first
@@ -82,6 +89,9 @@ pub trait StratifiedIndex: Send + Sync {
 impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         (**self).index_and_derivative(height_m)
+    }
+    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        (**self).survey_index_and_derivative(height_m)
     }
     fn breaks_m(&self) -> &[f64] {
         (**self).breaks_m()

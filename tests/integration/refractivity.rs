@@ -187,6 +187,37 @@ fn table_agrees_with_exact_evaluation() {
     }
 }
 
+/// The table is built where lookups land, and a cell's values do not depend on when or by which
+/// thread it was built: lookups on a fresh atmosphere equal, bit for bit, those on one whose
+/// whole table was built in parallel first.
+#[test]
+fn the_table_is_built_lazily_and_the_same_whatever_the_order() {
+    let lazy = atmosphere(sharp_inversion());
+    let (built, all) = lazy.table_cells_built();
+    assert_eq!(built, 0, "nothing is built before a lookup");
+    let _ = lazy.table_refractivity(10.0);
+    let (built, _) = lazy.table_cells_built();
+    assert!(
+        built > 0 && built * 100 < all,
+        "{built} of {all} cells after one lookup"
+    );
+    let eager = atmosphere(sharp_inversion());
+    let _ = eager.table_max_error();
+    assert_eq!(eager.table_cells_built(), (all, all));
+    // Descending, so the lazy table meets its chunks in the opposite order to the eager build.
+    let mut heights = uniform(11, 20_000);
+    heights.iter_mut().for_each(|x| *x *= 40_000.0);
+    heights.sort_by(|a, b| b.total_cmp(a));
+    for &h in &heights {
+        let (a, b) = (lazy.table_refractivity(h), eager.table_refractivity(h));
+        assert!(
+            a.0.to_bits() == b.0.to_bits() && a.1.to_bits() == b.1.to_bits(),
+            "{h} m: {a:?} vs {b:?}"
+        );
+    }
+    assert_eq!(lazy.table_max_error(), eager.table_max_error());
+}
+
 /// US1976 has six lapse-rate changes below 80 km where dn/dh jumps; only the cells holding them
 /// (one, or two where a kink falls on a node) fall back to the exact formula, and every kink is
 /// in one.
