@@ -177,9 +177,10 @@ impl HermiteGrid {
             }
             let (dn, dd) = worst;
             exact_cell.push(
-                !(dn <= self.tolerance_n && dd <= self.tolerance_dndh)
-                    || !dn.is_finite()
-                    || !dd.is_finite(),
+                !(dn <= self.tolerance_n
+                    && dd <= self.tolerance_dndh
+                    && dn.is_finite()
+                    && dd.is_finite()),
             );
             raw_error.push(worst);
         }
