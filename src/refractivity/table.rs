@@ -76,14 +76,18 @@ pub(crate) struct HermiteGrid {
 /// Cells per lazily built chunk of a [`HermiteGrid`].
 pub(crate) const CHUNK_CELLS: usize = 64;
 
-/// One built chunk: its cells' coefficients, which cells evaluate exactly, and the raw check
-/// errors (per cell: max |Δn|, max |Δ(dn/dh)|; NaN where a node could not be evaluated).
+/// One built chunk: its cells' coefficients (a fixed array, so the hot lookup needs no bounds
+/// check; a cell that evaluates the exact formula has NaN coefficients, which is also what a
+/// padding cell past the grid's end holds) and the raw check errors (per cell: max |Δn|,
+/// max |Δ(dn/dh)|; NaN where a node could not be evaluated).
 #[derive(Debug, Clone)]
 struct Chunk {
-    cells: Vec<[f64; 6]>,
-    exact_cell: Vec<bool>,
+    cells: [[f64; 6]; CHUNK_CELLS],
     raw_error: Vec<(f64, f64)>,
 }
+
+/// The coefficients of a cell that evaluates the exact formula.
+const EXACT_CELL: [f64; 6] = [f64::NAN; 6];
 
 /// Half-width (m) of the central difference of dn/dh that gives d²n/dh² at a node.
 const SECOND_DERIVATIVE_STEP_M: f64 = 1e-3;
@@ -154,41 +158,37 @@ impl HermiteGrid {
         let nodes: Result<Vec<[f64; 3]>, E> = (first..=first + count)
             .map(|i| node(exact, height(i, 0.0), self.step_m))
             .collect();
-        let Ok(nodes) = nodes else {
-            return Chunk {
-                cells: vec![[0.0; 6]; count],
-                exact_cell: vec![true; count],
-                raw_error: vec![(f64::NAN, f64::NAN); count],
-            };
+        let mut chunk = Chunk {
+            cells: [EXACT_CELL; CHUNK_CELLS],
+            raw_error: vec![(f64::NAN, f64::NAN); count],
         };
-        let cells: Vec<[f64; 6]> = nodes.windows(2).map(|w| quintic(w[0], w[1])).collect();
-        let mut exact_cell = Vec::with_capacity(count);
-        let mut raw_error = Vec::with_capacity(count);
-        for (k, coefficients) in cells.iter().enumerate() {
+        let Ok(nodes) = nodes else {
+            return chunk;
+        };
+        for (k, w) in nodes.windows(2).enumerate() {
+            let coefficients = quintic(w[0], w[1]);
             let mut worst = (0.0f64, 0.0f64);
             for frac in [0.25, 0.5, 0.75] {
                 let Ok((n_ex, d_ex)) = exact(height(first + k, frac)) else {
                     worst = (f64::NAN, f64::NAN);
                     break;
                 };
-                let (n_t, d_t) = evaluate(coefficients, frac, self.inv_step);
+                let (n_t, d_t) = evaluate(&coefficients, frac, self.inv_step);
                 worst.0 = worst.0.max((n_t - n_ex).abs());
                 worst.1 = worst.1.max((d_t - d_ex).abs());
             }
             let (dn, dd) = worst;
-            exact_cell.push(
-                !(dn <= self.tolerance_n
-                    && dd <= self.tolerance_dndh
-                    && dn.is_finite()
-                    && dd.is_finite()),
-            );
-            raw_error.push(worst);
+            let interpolated = dn <= self.tolerance_n
+                && dd <= self.tolerance_dndh
+                && dn.is_finite()
+                && dd.is_finite()
+                && coefficients.iter().all(|c| c.is_finite());
+            if interpolated {
+                chunk.cells[k] = coefficients;
+            }
+            chunk.raw_error[k] = worst;
         }
-        Chunk {
-            cells,
-            exact_cell,
-            raw_error,
-        }
+        chunk
     }
 
     /// Chunk `c`, built now if no lookup has needed it yet.
@@ -212,10 +212,10 @@ impl HermiteGrid {
         };
         for c in 0..self.chunks.len() {
             let chunk = self.chunk(c, exact);
-            for (&(dn, dd), &exact_cell) in chunk.raw_error.iter().zip(&chunk.exact_cell) {
+            for (&(dn, dd), cell) in chunk.raw_error.iter().zip(&chunk.cells) {
                 report.raw_max_abs_dn = report.raw_max_abs_dn.max(dn);
                 report.raw_max_abs_ddndh_per_m = report.raw_max_abs_ddndh_per_m.max(dd);
-                if exact_cell {
+                if cell[0].is_nan() {
                     report.exact_cells += 1;
                 } else {
                     report.max_abs_dn = report.max_abs_dn.max(dn);
@@ -232,7 +232,7 @@ impl HermiteGrid {
             .chunks
             .iter()
             .filter_map(|c| c.get())
-            .map(|c| c.cells.len())
+            .map(|c| c.raw_error.len())
             .sum();
         (built, self.cells)
     }
@@ -258,12 +258,11 @@ impl HermiteGrid {
             }
             i = cells - 1;
         }
-        let chunk = self.chunk(i / CHUNK_CELLS, exact);
-        let k = i % CHUNK_CELLS;
-        if chunk.exact_cell[k] {
+        let cell = &self.chunk(i / CHUNK_CELLS, exact).cells[i % CHUNK_CELLS];
+        if cell[0].is_nan() {
             return Lookup::Exact;
         }
-        let (v, d) = evaluate(&chunk.cells[k], u - i as f64, self.inv_step);
+        let (v, d) = evaluate(cell, u - i as f64, self.inv_step);
         Lookup::Value(v, d)
     }
 }
