@@ -118,9 +118,10 @@ pub struct RefractiveSample {
 /// The table (see [`TableSpec`]): 0.25 m cells up to 4 km above the surface, 5 m cells up to
 /// 40 km, exact above; each cell a quintic Hermite through the exact (n − 1, dn/dh, d²n/dh²) at
 /// its ends (C², so the ray equation stays smooth across nodes). When a cell is first built (on
-/// the first lookup in its chunk) it is checked against the exact formula at three points; cells off by more than the spec's
-/// tolerances (1e-14 in n and in dn/dh per metre) evaluate the exact formula instead. The
-/// measured errors are in [`table_max_error`](Self::table_max_error).
+/// the first lookup in its chunk) it is checked against the exact formula at three points;
+/// cells off by more than the spec's tolerances (1e-14 in n and in dn/dh per metre) evaluate
+/// the exact formula instead. The measured errors are in
+/// [`table_max_error`](Self::table_max_error).
 ///
 /// The column's breaks are split into those where dn/dh jumps (see
 /// [`breaks_m`](StratifiedIndex::breaks_m)) and the minor ones where only d²n/dh² does, with
@@ -295,8 +296,8 @@ impl RefractiveAtmosphere {
     }
 
     /// The air, n − 1 and dn/dh (exact) at `height_m` above **mean sea level** (clamped to the
-    /// surface). Invalid air gives NaN values here; the constructor has checked the table's range on its
-    /// coarse grid.
+    /// surface). Invalid air is not checked here; the constructor has checked the table's range
+    /// on its coarse grid.
     /// A NaN or +∞ height gives a NaN sample without consulting the column.
     pub fn sample_at(&self, height_m: f64) -> RefractiveSample {
         if height_m.is_nan() || height_m == f64::INFINITY {
@@ -409,9 +410,10 @@ impl StratifiedIndex for RefractiveAtmosphere {
 }
 
 /// Check, before any table cell is built, that the air is valid every `step_m` from the
-/// surface to `top_m` (and at the top): a table cell built later over invalid air falls back
-/// to the exact formula, which then gives NaN, and the ray that meets it ends as non-finite.
-/// In height order, so the error names the lowest invalid height.
+/// surface to `top_m` (and at the top). Air that is invalid only between two of these points is
+/// met later, when a table cell over it is built: that cell falls back to the exact formula,
+/// and a ray that meets a non-finite value there ends as non-finite. In height order, so the
+/// error names the lowest invalid height.
 fn validate_column(
     exact: &dyn Fn(f64) -> Result<(f64, f64), RefractivityError>,
     step_m: f64,
