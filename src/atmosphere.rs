@@ -80,7 +80,11 @@ pub struct AtmosphereOptions {
     /// Vacuum wavelength the refractive index is computed for (nm, 300–1700).
     pub wavelength_nm: f64,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
-    pub igra2_time: Option<String>,
+    pub sounding_time: Option<String>,
+    /// Refuse a sounding whose levels contradict each other in the lowest kilometres instead of
+    /// dropping the offending levels (see [`ReadOptions::strict`]).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub strict: bool,
 }
 
 impl AtmosphereOptions {
@@ -109,7 +113,8 @@ impl Default for AtmosphereOptions {
         AtmosphereOptions {
             smooth_m: FitOptions::default().smooth_m,
             wavelength_nm: DEFAULT_WAVELENGTH_NM,
-            igra2_time: None,
+            sounding_time: None,
+            strict: false,
         }
     }
 }
@@ -193,7 +198,8 @@ pub fn load_atmosphere(
     ) = match source {
         AtmosphereSource::Sounding(path) => {
             let read = ReadOptions {
-                igra2_time: options.igra2_time.clone(),
+                sounding_time: options.sounding_time.clone(),
+                strict: options.strict,
             };
             let sounding =
                 read_sounding(path, &read).map_err(|source| AtmosphereError::Sounding {

@@ -2,6 +2,8 @@
 //! bytes, or an `std::io::Error` saying why not. Only regular files are read (a FIFO, a device
 //! such as `/dev/zero` or a folder is refused before it is opened), and never more than the
 //! limit, so a mistyped path cannot block the program or read until memory runs out.
+//! [`unpack`] opens gzip files and one-member zip archives (IGRA2 ships as `.txt.zip`, archives
+//! as `.gz`), again never inflating past the limit.
 
 use std::io::Read;
 use std::path::Path;
@@ -49,6 +51,101 @@ pub fn read_limited_text(path: &Path, limit_bytes: u64) -> std::io::Result<Strin
     })
 }
 
+/// How a file's bytes were stored.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Packing {
+    /// As they are.
+    Plain,
+    /// A gzip stream (`.gz`).
+    Gzip,
+    /// A zip archive holding one file, this member.
+    Zip {
+        /// The member's name inside the archive.
+        member: String,
+    },
+}
+
+impl Packing {
+    /// A short description for metadata (`gzip`, `zip member X`); `None` for plain bytes.
+    pub fn describe(&self) -> Option<String> {
+        match self {
+            Packing::Plain => None,
+            Packing::Gzip => Some("gzip".to_string()),
+            Packing::Zip { member } => Some(format!("zip member {member}")),
+        }
+    }
+}
+
+const GZIP_MAGIC: &[u8] = &[0x1f, 0x8b];
+const ZIP_MAGIC: &[u8] = b"PK\x03\x04";
+
+/// The content of `bytes`: inflated if they are a gzip stream or a zip archive of exactly one
+/// file, as they are otherwise. The inflated content may not exceed `limit_bytes` (a small
+/// archive can inflate to far more than it holds).
+pub fn unpack(bytes: Vec<u8>, limit_bytes: u64) -> std::io::Result<(Vec<u8>, Packing)> {
+    if bytes.starts_with(GZIP_MAGIC) {
+        let decoder = flate2::read::MultiGzDecoder::new(bytes.as_slice());
+        let inflated = read_capped(decoder, limit_bytes, "gzip stream")?;
+        return Ok((inflated, Packing::Gzip));
+    }
+    if bytes.starts_with(ZIP_MAGIC) {
+        return unzip_one(&bytes, limit_bytes);
+    }
+    Ok((bytes, Packing::Plain))
+}
+
+/// The one file of a zip archive.
+fn unzip_one(bytes: &[u8], limit_bytes: u64) -> std::io::Result<(Vec<u8>, Packing)> {
+    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| invalid(format!("a zip archive that cannot be opened: {e}")))?;
+    let members: Vec<String> = (0..archive.len())
+        .filter_map(|i| {
+            let file = archive.by_index(i).ok().filter(|f| f.is_file())?;
+            file.name().ok().map(|name| name.to_string())
+        })
+        .collect();
+    let [member] = members.as_slice() else {
+        return Err(invalid(format!(
+            "a zip archive of {} files ({}); ghostship reads an archive of exactly one: unpack it \
+             and name the file you want",
+            members.len(),
+            members.join(", ")
+        )));
+    };
+    let file = archive
+        .by_name(member)
+        .map_err(|e| invalid(format!("zip member {member}: {e}")))?;
+    let inflated = read_capped(file, limit_bytes, "zip member")?;
+    Ok((
+        inflated,
+        Packing::Zip {
+            member: member.clone(),
+        },
+    ))
+}
+
+/// Everything `reader` yields, refusing more than `limit_bytes`.
+fn read_capped(reader: impl Read, limit_bytes: u64, what: &str) -> std::io::Result<Vec<u8>> {
+    let mut out = Vec::new();
+    reader
+        .take(limit_bytes + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| {
+            std::io::Error::new(e.kind(), format!("a {what} that cannot be inflated: {e}"))
+        })?;
+    if out.len() as u64 > limit_bytes {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::FileTooLarge,
+            format!(
+                "the {what} inflates to more than the limit of {limit_bytes} bytes ({} MiB)",
+                limit_bytes / (1024 * 1024)
+            ),
+        ));
+    }
+    Ok(out)
+}
+
 fn too_large(len_bytes: u64, limit_bytes: u64) -> std::io::Error {
     std::io::Error::new(
         std::io::ErrorKind::FileTooLarge,
@@ -83,5 +180,44 @@ mod tests {
         std::fs::write(&small, b"abc").unwrap();
         assert_eq!(read_limited(&small, 3).unwrap(), b"abc");
         assert!(read_limited(&small, 2).is_err());
+    }
+
+    fn gzip(data: &[u8]) -> Vec<u8> {
+        use std::io::Write;
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(data).unwrap();
+        e.finish().unwrap()
+    }
+
+    fn zip_of(members: &[(&str, &[u8])]) -> Vec<u8> {
+        use std::io::Write;
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        for (name, data) in members {
+            w.start_file(*name, zip::write::SimpleFileOptions::default())
+                .unwrap();
+            w.write_all(data).unwrap();
+        }
+        w.finish().unwrap().into_inner()
+    }
+
+    #[test]
+    fn unpacks_gzip_and_one_member_zips_within_the_limit() {
+        let text = b"# header\n1,2,3\n".repeat(100);
+        let (plain, how) = unpack(text.clone(), 1 << 20).unwrap();
+        assert_eq!((plain, how), (text.clone(), Packing::Plain));
+        let (got, how) = unpack(gzip(&text), 1 << 20).unwrap();
+        assert_eq!((got, how), (text.clone(), Packing::Gzip));
+        let (got, how) = unpack(zip_of(&[("a-data.txt", &text)]), 1 << 20).unwrap();
+        assert_eq!(got, text);
+        assert_eq!(how.describe().unwrap(), "zip member a-data.txt");
+        // A bomb: small packed, large inflated.
+        let err = unpack(gzip(&vec![b'x'; 1 << 20]), 1000).unwrap_err();
+        assert!(err.to_string().contains("inflates to more than"), "{err}");
+        let err = unpack(zip_of(&[("a", b"1"), ("b", b"2")]), 1000).unwrap_err();
+        assert!(err.to_string().contains("2 files (a, b)"), "{err}");
+        let mut broken = gzip(&text);
+        broken.truncate(broken.len() / 2);
+        let err = unpack(broken, 1 << 20).unwrap_err();
+        assert!(err.to_string().contains("cannot be inflated"), "{err}");
     }
 }

@@ -29,10 +29,14 @@ pub struct AtmosphereArgs {
     /// applied to temperature and humidity; 0 = none). Ignored for .toml and us1976.
     #[arg(long, value_name = "M", default_value_t = 20.0)]
     pub smooth_m: f64,
-    /// Which sounding of a multi-sounding IGRA2 file to read: nominal date and hour (UTC),
-    /// "YYYY-MM-DD HH". Default: the first in the file.
-    #[arg(long, value_name = "YYYY-MM-DD HH")]
-    pub igra2_time: Option<String>,
+    /// Which sounding of a file holding several (IGRA2, a Wyoming TEXT:LIST page) to read:
+    /// nominal date and hour (UTC), "YYYY-MM-DD HH" or "YYYY-MM-DDTHH:00Z". Default: the first.
+    #[arg(long = "time", visible_aliases = ["sounding-time"], alias = "igra2-time", value_name = "YYYY-MM-DD HH")]
+    pub sounding_time: Option<String>,
+    /// Refuse a sounding whose levels contradict each other (height not increasing, pressure
+    /// increasing) within 3 km of its lowest level, instead of dropping those levels with a note.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 impl AtmosphereArgs {
@@ -43,7 +47,8 @@ impl AtmosphereArgs {
             options: AtmosphereOptions {
                 smooth_m: self.smooth_m,
                 wavelength_nm: self.wavelength_nm,
-                igra2_time: self.igra2_time.clone(),
+                sounding_time: self.sounding_time.clone(),
+                strict: self.strict,
             },
         }
     }

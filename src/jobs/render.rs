@@ -34,7 +34,7 @@ pub struct RenderSettings {
     /// Another atmosphere than the scene's (a pipeline matrix over atmospheres).
     pub atmosphere: Option<AtmosphereSource>,
     /// With `atmosphere`: which sounding of a multi-sounding IGRA2 file.
-    pub igra2_time: Option<String>,
+    pub sounding_time: Option<String>,
     /// Another camera height (m above the surface) than the scene's.
     pub observer_height_m: Option<f64>,
 }
@@ -50,7 +50,7 @@ impl Default for RenderSettings {
             exact: false,
             straight: false,
             atmosphere: None,
-            igra2_time: None,
+            sounding_time: None,
             observer_height_m: None,
         }
     }
@@ -196,7 +196,7 @@ fn apply_overrides(scene: &mut Scene, settings: &RenderSettings) -> Result<(), J
     }
     if let Some(source) = &settings.atmosphere {
         scene.atmosphere.source = source.clone();
-        scene.atmosphere.igra2_time = settings.igra2_time.clone();
+        scene.atmosphere.sounding_time = settings.sounding_time.clone();
     }
     if let Some(h) = settings.observer_height_m {
         if !(h.is_finite() && h >= 0.0) {
@@ -218,7 +218,7 @@ fn apply_overrides(scene: &mut Scene, settings: &RenderSettings) -> Result<(), J
                     .atmosphere
                     .as_ref()
                     .map(|s| s.path().map(file_name)),
-                settings.igra2_time,
+                settings.sounding_time,
                 scene.atmosphere.straight,
                 scene.camera.height_m
             )

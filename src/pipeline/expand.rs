@@ -13,7 +13,7 @@ pub struct AtmosphereChoice {
     /// What to load.
     pub source: AtmosphereSource,
     /// Which IGRA2 sounding (`"YYYY-MM-DD HH"`), if one was chosen.
-    pub igra2_time: Option<String>,
+    pub sounding_time: Option<String>,
     /// `{stem}` in job names: the file stem, with `_YYYYMMDDHH` for one of several IGRA2
     /// soundings.
     pub stem: String,
@@ -79,11 +79,11 @@ pub fn glob_files(pattern: &Path) -> Result<Vec<PathBuf>, String> {
     Ok(files)
 }
 
-/// Which IGRA2 soundings a job's `igra2_time` selects: one `"YYYY-MM-DD HH"`, `"all"`, or an
+/// Which IGRA2 soundings a job's `sounding_time` selects: one `"YYYY-MM-DD HH"`, `"all"`, or an
 /// inclusive range `"FROM..TO"` (either end may be left out).
 #[derive(Debug, Clone, PartialEq)]
 pub enum TimeSelection {
-    /// The file's first sounding (no `igra2_time`).
+    /// The file's first sounding (no `sounding_time`).
     First,
     /// One sounding.
     One(String),
@@ -92,7 +92,7 @@ pub enum TimeSelection {
 }
 
 impl TimeSelection {
-    /// Parse an `igra2_time` value.
+    /// Parse an `sounding_time` value.
     pub fn parse(text: Option<&str>) -> Result<Self, String> {
         let Some(text) = text.map(str::trim) else {
             return Ok(TimeSelection::First);
@@ -105,20 +105,9 @@ impl TimeSelection {
             if t.is_empty() {
                 return Ok(None);
             }
-            let b = t.as_bytes();
-            let ok = b.len() == 13
-                && [4, 7].iter().all(|&i| b[i] == b'-')
-                && b[10] == b' '
-                && b.iter()
-                    .enumerate()
-                    .all(|(i, c)| [4, 7, 10].contains(&i) || c.is_ascii_digit());
-            if ok {
-                Ok(Some(t.to_string()))
-            } else {
-                Err(format!(
-                    "igra2_time {text:?}: expected \"YYYY-MM-DD HH\", \"all\" or \"FROM..TO\""
-                ))
-            }
+            crate::sounding::time::canonical_time(t)
+                .map(Some)
+                .map_err(|e| format!("sounding_time: {e}, \"all\" or \"FROM..TO\""))
         };
         match text.split_once("..") {
             Some((from, to)) => Ok(TimeSelection::Range(check(from)?, check(to)?)),
@@ -140,7 +129,7 @@ pub fn atmospheres(
         let Some(path) = source.path() else {
             out.push(AtmosphereChoice {
                 source,
-                igra2_time: None,
+                sounding_time: None,
                 stem: "us1976".into(),
             });
             continue;
@@ -180,18 +169,19 @@ fn with_times(
         TimeSelection::First => (None, None),
         TimeSelection::One(t) => {
             if let Some(path) = source.path()
-                && let Some(all) = crate::sounding::igra2_times(path).map_err(|e| e.to_string())?
+                && let Some(all) =
+                    crate::sounding::sounding_times(path).map_err(|e| e.to_string())?
                 && !all.contains(t)
             {
                 return Err(format!(
-                    "{}: no IGRA2 sounding at {t:?} (the file holds: {})",
+                    "{}: {}",
                     path.display(),
-                    all.join(", ")
+                    crate::sounding::time::no_such_time(t, &all)
                 ));
             }
             return Ok(vec![AtmosphereChoice {
                 source,
-                igra2_time: Some(t.clone()),
+                sounding_time: Some(t.clone()),
                 stem,
             }]);
         }
@@ -200,22 +190,25 @@ fn with_times(
     let Some(path) = source.path().filter(|_| *times != TimeSelection::First) else {
         return Ok(vec![AtmosphereChoice {
             source,
-            igra2_time: None,
+            sounding_time: None,
             stem,
         }]);
     };
-    let Some(all) = crate::sounding::igra2_times(path).map_err(|e| e.to_string())? else {
+    let Some(all) = crate::sounding::sounding_times(path).map_err(|e| e.to_string())? else {
         // Not IGRA2: the file's one sounding is all of them.
         return Ok(vec![AtmosphereChoice {
             source,
-            igra2_time: None,
+            sounding_time: None,
             stem,
         }]);
     };
-    let chosen: Vec<String> = all
+    let mut chosen: Vec<String> = all
         .into_iter()
         .filter(|t| from.as_ref().is_none_or(|f| t >= f) && to.as_ref().is_none_or(|e| t <= e))
         .collect();
+    // A time the file holds twice is one job (the reader takes the first and says so).
+    let mut seen = std::collections::HashSet::new();
+    chosen.retain(|t| seen.insert(t.clone()));
     if chosen.is_empty() {
         return Err(format!(
             "{}: no IGRA2 sounding in the time range",
@@ -227,7 +220,7 @@ fn with_times(
         .map(|t| AtmosphereChoice {
             stem: format!("{stem}_{}", t.replace(['-', ' '], "")),
             source: source.clone(),
-            igra2_time: Some(t),
+            sounding_time: Some(t),
         })
         .collect())
 }

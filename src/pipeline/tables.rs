@@ -23,9 +23,11 @@ use crate::tracer::TracerConfig;
 pub const PROFILE_KEYS: &[&str] = &[
     "name",
     "atmosphere",
+    "sounding_time",
     "igra2_time",
     "wavelength_nm",
     "smooth_m",
+    "strict",
     "plot_top_m",
     "layers_top_m",
 ];
@@ -33,9 +35,11 @@ pub const PROFILE_KEYS: &[&str] = &[
 pub const TRACE_KEYS: &[&str] = &[
     "name",
     "atmosphere",
+    "sounding_time",
     "igra2_time",
     "wavelength_nm",
     "smooth_m",
+    "strict",
     "observer_height_m",
     "elevation_deg",
     "distances_m",
@@ -50,6 +54,7 @@ pub const RENDER_KEYS: &[&str] = &[
     "name",
     "scene",
     "atmosphere",
+    "sounding_time",
     "igra2_time",
     "observer_height_m",
     "sizes",
@@ -91,9 +96,11 @@ impl<T: Clone> OneOrMany<T> {
 struct RawProfile {
     name: Option<String>,
     atmosphere: OneOrMany<String>,
-    igra2_time: Option<String>,
+    #[serde(alias = "igra2_time")]
+    sounding_time: Option<String>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    strict: Option<bool>,
     plot_top_m: Option<f64>,
     layers_top_m: Option<f64>,
 }
@@ -103,9 +110,11 @@ struct RawProfile {
 struct RawTrace {
     name: Option<String>,
     atmosphere: OneOrMany<String>,
-    igra2_time: Option<String>,
+    #[serde(alias = "igra2_time")]
+    sounding_time: Option<String>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    strict: Option<bool>,
     observer_height_m: OneOrMany<f64>,
     elevation_deg: String,
     distances_m: Vec<f64>,
@@ -122,7 +131,8 @@ struct RawRender {
     name: Option<String>,
     scene: OneOrMany<String>,
     atmosphere: Option<OneOrMany<String>>,
-    igra2_time: Option<String>,
+    #[serde(alias = "igra2_time")]
+    sounding_time: Option<String>,
     observer_height_m: Option<OneOrMany<f64>>,
     sizes: Option<Vec<String>>,
     formats: Option<Vec<ImageFormat>>,
@@ -185,11 +195,15 @@ impl Table<'_, '_> {
         }
     }
 
-    fn atmospheres(&mut self, names: &[String], igra2_time: Option<&str>) -> Vec<AtmosphereChoice> {
-        let times = match TimeSelection::parse(igra2_time) {
+    fn atmospheres(
+        &mut self,
+        names: &[String],
+        sounding_time: Option<&str>,
+    ) -> Vec<AtmosphereChoice> {
+        let times = match TimeSelection::parse(sounding_time) {
             Ok(t) => t,
             Err(e) => {
-                self.problem("igra2_time", e);
+                self.problem("sounding_time", e);
                 return Vec::new();
             }
         };
@@ -217,6 +231,7 @@ fn atmosphere_request(
     choice: &AtmosphereChoice,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    strict: Option<bool>,
 ) -> AtmosphereRequest {
     let d = AtmosphereOptions::default();
     AtmosphereRequest {
@@ -224,7 +239,8 @@ fn atmosphere_request(
         options: AtmosphereOptions {
             smooth_m: smooth_m.unwrap_or(d.smooth_m),
             wavelength_nm: wavelength_nm.unwrap_or(d.wavelength_nm),
-            igra2_time: choice.igra2_time.clone(),
+            sounding_time: choice.sounding_time.clone(),
+            strict: strict.unwrap_or(false),
         },
     }
 }
@@ -236,10 +252,10 @@ pub fn profile_jobs(t: &mut Table) -> Vec<NamedJob> {
     };
     let template = raw.name.clone().unwrap_or_else(|| "{stem}".into());
     let mut jobs = Vec::new();
-    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.igra2_time.as_deref()) {
+    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {
         let name = t.name(&template, &choice.stem, "", None);
         let request = ProfileRequest::new(
-            atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m),
+            atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m, raw.strict),
             raw.plot_top_m
                 .unwrap_or(crate::jobs::profile::DEFAULT_PLOT_TOP_M),
             raw.layers_top_m
@@ -281,11 +297,11 @@ pub fn trace_jobs(t: &mut Table) -> Vec<NamedJob> {
         ..d
     };
     let mut jobs = Vec::new();
-    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.igra2_time.as_deref()) {
+    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {
         for &height in &heights {
             let name = t.name(&template, &choice.stem, "", Some(height));
             let request = TraceJobRequest::new(
-                atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m),
+                atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m, raw.strict),
                 height,
                 &spec,
                 raw.distances_m.clone(),
@@ -310,16 +326,20 @@ pub fn render_jobs(t: &mut Table, own_keys: &[String]) -> Vec<NamedJob> {
     let Some(settings) = render_settings(t, &raw) else {
         return Vec::new();
     };
-    if raw.atmosphere.is_none() && own_keys.iter().any(|k| k == "igra2_time") {
+    if raw.atmosphere.is_none()
+        && own_keys
+            .iter()
+            .any(|k| k == "sounding_time" || k == "igra2_time")
+    {
         t.problem(
-            "igra2_time",
-            "igra2_time needs an `atmosphere` in this table",
+            "sounding_time",
+            "sounding_time needs an `atmosphere` in this table",
         );
     }
     let choices: Vec<Option<AtmosphereChoice>> = match &raw.atmosphere {
         None => vec![None],
         Some(names) => t
-            .atmospheres(&names.to_vec(), raw.igra2_time.as_deref())
+            .atmospheres(&names.to_vec(), raw.sounding_time.as_deref())
             .into_iter()
             .map(Some)
             .collect(),
@@ -354,7 +374,7 @@ pub fn render_jobs(t: &mut Table, own_keys: &[String]) -> Vec<NamedJob> {
                 let name = t.name(&template, stem, &scene_stem, height);
                 let settings = RenderSettings {
                     atmosphere: choice.as_ref().map(|c| c.source.clone()),
-                    igra2_time: choice.as_ref().and_then(|c| c.igra2_time.clone()),
+                    sounding_time: choice.as_ref().and_then(|c| c.sounding_time.clone()),
                     observer_height_m: height,
                     ..settings.clone()
                 };

@@ -69,9 +69,9 @@ distances_m = [1000.0]
 }
 
 #[test]
-fn globs_and_igra2_time_ranges_expand() {
+fn globs_and_sounding_time_ranges_expand() {
     let p = parse(
-        "[[profile]]\natmosphere = \"../tests/data/soundings/raw/USM00070026-data_*.txt\"\nigra2_time = \"all\"\n",
+        "[[profile]]\natmosphere = \"../tests/data/soundings/raw/USM00070026-data_*.txt\"\nsounding_time = \"all\"\n",
     )
     .unwrap();
     assert_eq!(p.jobs.len(), 3, "three soundings in the excerpt");
@@ -81,7 +81,7 @@ fn globs_and_igra2_time_ranges_expand() {
             .starts_with("USM00070026-data_2010-06-01_excerpt_2010060")
     );
     let p = parse(
-        "[[profile]]\natmosphere = \"../tests/data/soundings/raw/USM00070026-data_*.txt\"\nigra2_time = \"..2010-06-01 00\"\n",
+        "[[profile]]\natmosphere = \"../tests/data/soundings/raw/USM00070026-data_*.txt\"\nsounding_time = \"..2010-06-01 00\"\n",
     )
     .unwrap();
     assert_eq!(p.jobs.len(), 1);
@@ -121,7 +121,7 @@ fn rejects_bad_values() {
         ),
         ("[[render]]\nscene = \"missing.toml\"\n", "missing.toml"),
         (
-            "[[render]]\nscene = \"../data/scenes/fig04_superior_mirage.toml\"\nigra2_time = \"2010-06-01 00\"\n",
+            "[[render]]\nscene = \"../data/scenes/fig04_superior_mirage.toml\"\nsounding_time = \"2010-06-01 00\"\n",
             "needs an `atmosphere`",
         ),
         (
@@ -146,8 +146,8 @@ fn rejects_bad_values() {
             "two jobs",
         ),
         (
-            "[[profile]]\natmosphere = \"us1976\"\nigra2_time = \"tuesday\"\n",
-            "igra2_time",
+            "[[profile]]\natmosphere = \"us1976\"\nsounding_time = \"tuesday\"\n",
+            "sounding_time",
         ),
         (
             "[[trace]]\natmosphere = \"us1976\"\nobserver_height_m = 1\nelevation_deg = \"0:1:0.1\"\ndistances_m = [1.0]\ntarget_heights_m = [0.0]\n",

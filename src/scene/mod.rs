@@ -19,7 +19,8 @@
 //! wavelength_nm = 550.0
 //! straight = false           # true: n ≡ 1 (straight rays)
 //! smooth_m = 0.0             # optional smoothing length for soundings
-//! igra2_time = "2024-01-15 12"   # optional: which sounding of a multi-sounding IGRA2 file
+//! sounding_time = "2024-01-15 12"   # optional: which sounding of a multi-sounding IGRA2 file
+//! strict = false                 # optional: refuse levels that contradict those below them
 //!
 //! [earth]
 //! radius_m = 6371000.0
@@ -132,7 +133,10 @@ pub struct AtmosphereSettings {
     /// Optional smoothing length for soundings (m).
     pub smooth_m: Option<f64>,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`, UTC); `None`: the first.
-    pub igra2_time: Option<String>,
+    pub sounding_time: Option<String>,
+    /// Refuse a sounding whose levels contradict each other in the lowest kilometres (see
+    /// [`crate::sounding::ReadOptions::strict`]).
+    pub strict: bool,
 }
 
 impl AtmosphereSettings {
@@ -148,7 +152,8 @@ impl AtmosphereSettings {
                 .smooth_m
                 .unwrap_or(AtmosphereOptions::default().smooth_m),
             wavelength_nm: self.wavelength_nm,
-            igra2_time: self.igra2_time.clone(),
+            sounding_time: self.sounding_time.clone(),
+            strict: self.strict,
         };
         Some((self.source.clone(), options))
     }
@@ -232,7 +237,10 @@ struct RawAtmosphere {
     #[serde(default)]
     straight: bool,
     smooth_m: Option<f64>,
-    igra2_time: Option<String>,
+    #[serde(alias = "igra2_time")]
+    sounding_time: Option<String>,
+    #[serde(default)]
+    strict: bool,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -433,12 +441,12 @@ impl Scene {
                 ));
             }
         };
-        let igra2_time = match (&ra.igra2_time, &source) {
+        let sounding_time = match (&ra.sounding_time, &source) {
             (None, _) => None,
             (Some(t), AtmosphereSource::Sounding(_)) => Some(t.clone()),
             (Some(_), _) => {
                 return Err(c.invalid(
-                    "atmosphere.igra2_time",
+                    "atmosphere.sounding_time",
                     "only applies to a `sounding` (an IGRA2 file)".into(),
                 ));
             }
@@ -461,7 +469,8 @@ impl Scene {
                 .smooth_m
                 .map(|s| c.range("atmosphere.smooth_m", s, 0.0, 10_000.0, "0…10000 m"))
                 .transpose()?,
-            igra2_time,
+            sounding_time,
+            strict: ra.strict,
         };
 
         let earth_radius_m = c.positive(
@@ -834,17 +843,17 @@ mod tests {
     }
 
     #[test]
-    fn igra2_time_only_for_soundings() {
+    fn sounding_time_only_for_soundings() {
         let text = format!(
-            "{MINIMAL}[atmosphere]\nsounding = \"a.txt\"\nigra2_time = \"2010-06-01 12\"\n"
+            "{MINIMAL}[atmosphere]\nsounding = \"a.txt\"\nsounding_time = \"2010-06-01 12\"\n"
         );
         let s = parse(&text).unwrap();
-        assert_eq!(s.atmosphere.igra2_time.as_deref(), Some("2010-06-01 12"));
+        assert_eq!(s.atmosphere.sounding_time.as_deref(), Some("2010-06-01 12"));
         let text = format!(
-            "{MINIMAL}[atmosphere]\nsynthetic = \"a.toml\"\nigra2_time = \"2010-06-01 12\"\n"
+            "{MINIMAL}[atmosphere]\nsynthetic = \"a.toml\"\nsounding_time = \"2010-06-01 12\"\n"
         );
         let err = parse(&text).unwrap_err().to_string();
-        assert!(err.contains("atmosphere.igra2_time"), "{err}");
+        assert!(err.contains("atmosphere.sounding_time"), "{err}");
     }
 
     #[test]

@@ -78,6 +78,24 @@ impl SoundingError {
         }
     }
 
+    /// The message without the file name: `line 17, column temperature_c: cannot parse …`.
+    pub fn detail(&self) -> String {
+        match self {
+            SoundingError::Io { source, .. } => format!("cannot read the file: {source}"),
+            SoundingError::NotUtf8 {
+                line, byte_offset, ..
+            } => format!("line {line}: not UTF-8 text (invalid byte at offset {byte_offset})"),
+            SoundingError::File { message, .. } => message.clone(),
+            SoundingError::Line { line, message, .. } => format!("line {line}: {message}"),
+            SoundingError::Field {
+                line,
+                column,
+                message,
+                ..
+            } => format!("line {line}, column {column}: {message}"),
+        }
+    }
+
     pub(crate) fn file(path: &Path, message: impl Into<String>) -> Self {
         SoundingError::File {
             path: path.to_path_buf(),

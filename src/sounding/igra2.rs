@@ -1,7 +1,7 @@
 //! Stage 1 — ingest: IGRA version 2 readers (NOAA NCEI Integrated Global Radiosonde Archive).
 //! In: the text of an IGRA2 sounding-data file (`*-data.txt`) or derived-parameter file
 //! (`*-drvd.txt`), which may hold many soundings. Out: the metadata and raw rows of one sounding
-//! (the first, or the one chosen by [`ReadOptions::igra2_time`](super::ReadOptions)).
+//! (the first, or the one chosen by [`ReadOptions::sounding_time`](super::ReadOptions)).
 //!
 //! Fixed-width layouts (1-based columns, from the IGRA 2 format descriptions; checked against
 //! the siphon reader and against the normalised CSVs converted from the same files):
@@ -158,6 +158,7 @@ pub(crate) fn read(
     format: SoundingFormat,
     wanted_time: Option<&str>,
     metadata: &mut BTreeMap<String, String>,
+    notes: &mut Vec<String>,
 ) -> Result<(Vec<RawRow>, ColumnNames), SoundingError> {
     let lines: Vec<&str> = text.lines().collect();
     let mut headers = Vec::new();
@@ -173,21 +174,38 @@ pub(crate) fn read(
             headers.push(parse_header(path, i + 1, line, format)?);
         }
     }
-    let chosen = match wanted_time {
+    let available: Vec<String> = headers.iter().map(|h| h.time.clone()).collect();
+    let wanted = wanted_time
+        .map(|t| super::time::canonical_time(t).map_err(|m| SoundingError::file(path, m)))
+        .transpose()?;
+    let chosen = match &wanted {
         None => headers.first(),
-        Some(t) => headers.iter().find(|h| h.time == t.trim()),
+        Some(t) => headers.iter().find(|h| &h.time == t),
     };
     let Some(header) = chosen else {
-        let available: Vec<&str> = headers.iter().map(|h| h.time.as_str()).collect();
-        return Err(SoundingError::file(
-            path,
-            format!(
-                "no IGRA2 sounding at {:?} (the file holds: {})",
-                wanted_time.unwrap_or(""),
-                available.join(", ")
-            ),
-        ));
+        let message = match &wanted {
+            Some(t) => super::time::no_such_time(t, &available),
+            None => "the file holds no IGRA2 sounding".to_string(),
+        };
+        return Err(SoundingError::file(path, message));
     };
+    let twins: Vec<String> = headers
+        .iter()
+        .filter(|h| h.time == header.time && h.line != header.line)
+        .map(|h| h.line.to_string())
+        .collect();
+    if !twins.is_empty() {
+        notes.push(format!(
+            "the file holds {} soundings at {}: read the first (header line {}), ignored the \
+             one{} at line{} {}",
+            twins.len() + 1,
+            header.time,
+            header.line,
+            if twins.len() == 1 { "" } else { "s" },
+            if twins.len() == 1 { "" } else { "s" },
+            twins.join(", ")
+        ));
+    }
     let header_text = lines[header.line - 1];
     metadata.insert(
         "station".into(),
@@ -197,14 +215,7 @@ pub(crate) fn read(
     if let Some(rel) = cols(header_text, 28, 31) {
         metadata.insert("release_time_utc_hhmm".into(), rel.trim().to_string());
     }
-    metadata.insert(
-        "igra2_soundings_in_file".into(),
-        headers
-            .iter()
-            .map(|h| h.time.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
-    );
+    metadata.insert("soundings_in_file".into(), summary_of_times(&available));
     if format == SoundingFormat::Igra2Data {
         for (key, a, b) in [("latitude", 56, 62), ("longitude", 64, 71)] {
             if let Some(v) = int_field(path, header.line, header_text, key, (a, b), &[-99999])? {
@@ -254,6 +265,14 @@ pub(crate) fn read(
         },
     };
     Ok((rows, names))
+}
+
+/// The soundings of a file for its metadata: the count, and the times when there are few.
+fn summary_of_times(times: &[String]) -> String {
+    match times {
+        [first, .., last] if times.len() > 6 => format!("{} ({first} … {last})", times.len()),
+        _ => format!("{} ({})", times.len(), times.join(", ")),
+    }
 }
 
 fn too_short(path: &Path, line_no: usize, what: &str, need: usize) -> SoundingError {
@@ -403,6 +422,7 @@ mod tests {
             SoundingFormat::Igra2Data,
             None,
             &mut meta,
+            &mut Vec::new(),
         )
         .unwrap();
         assert_eq!(rows.len(), 3);
@@ -424,6 +444,7 @@ mod tests {
             SoundingFormat::Igra2Data,
             Some("2010-06-01 12"),
             &mut meta,
+            &mut Vec::new(),
         )
         .unwrap();
         assert_eq!(rows.len(), 1);
@@ -434,6 +455,7 @@ mod tests {
             SoundingFormat::Igra2Data,
             Some("2010-06-02 00"),
             &mut meta,
+            &mut Vec::new(),
         )
         .unwrap_err();
         assert!(
@@ -469,6 +491,7 @@ mod tests {
             SoundingFormat::Igra2Data,
             None,
             &mut BTreeMap::new(),
+            &mut Vec::new(),
         )
         .unwrap_err();
         assert_eq!(e.line(), Some(1));
@@ -479,6 +502,7 @@ mod tests {
             SoundingFormat::Igra2Data,
             None,
             &mut BTreeMap::new(),
+            &mut Vec::new(),
         )
         .unwrap_err();
         assert_eq!((e.line(), e.column()), (Some(3), Some("GPH")));

@@ -2,7 +2,9 @@
 //! TEXT:CSV, IGRA2 data or derived). Out: a validated [`Sounding`]: levels sorted by height, in SI
 //! units, with every level carrying a height (measured or hypsometric) and its source line.
 //!
-//! Entry points: [`read_sounding`] (a file) and [`parse_sounding`] (text already in memory). The
+//! Entry points: [`read_sounding`] (a file, plain, gzip or a one-file zip) and [`parse_sounding`]
+//! (text already in memory). Files holding several soundings (IGRA2, Wyoming pages) give the one
+//! chosen by [`ReadOptions::sounding_time`] (canonical form in [`time`]). The
 //! format is detected from the content, never from the extension: IGRA2 header record first →
 //! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
@@ -13,6 +15,7 @@ pub mod csv;
 pub mod error;
 pub mod hypsometric;
 pub mod igra2;
+pub mod time;
 pub mod validate;
 pub mod wyoming;
 
@@ -64,6 +67,19 @@ pub enum SoundingFormat {
     Igra2Derived,
 }
 
+impl SoundingFormat {
+    /// The format's name for messages, e.g. "a University of Wyoming TEXT:LIST page".
+    pub fn description(self) -> &'static str {
+        match self {
+            SoundingFormat::NormalizedCsv => "a normalised CSV",
+            SoundingFormat::WyomingTextList => "a University of Wyoming TEXT:LIST page",
+            SoundingFormat::WyomingTextCsv => "a University of Wyoming TEXT:CSV file",
+            SoundingFormat::Igra2Data => "an IGRA2 data file",
+            SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
+        }
+    }
+}
+
 /// A validated sounding.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Sounding {
@@ -87,35 +103,47 @@ pub struct Sounding {
 /// Options for reading a sounding.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ReadOptions {
-    /// Which sounding of a multi-sounding IGRA2 file to read, as `"YYYY-MM-DD HH"` (nominal date
-    /// and hour, UTC). `None`: the first in the file. Ignored by the other formats.
-    pub igra2_time: Option<String>,
+    /// Which sounding of a file holding several (IGRA2, a Wyoming TEXT:LIST page) to read: its
+    /// nominal date and hour (UTC),
+    /// in a form [`time::canonical_time`] accepts (`"YYYY-MM-DD HH"`, `"YYYY-MM-DDTHH:00Z"`…).
+    /// `None`: the first in the file. Given for a file of one sounding, it is an error.
+    pub sounding_time: Option<String>,
+    /// Refuse the sounding when two levels within [`validate::STRICT_ZONE_M`] of the lowest
+    /// contradict each other (height not increasing, pressure increasing, a duplicate with other
+    /// values). Default (`false`): such a level is dropped with a note naming its line, wherever
+    /// it is; the sounding is refused only when fewer than 3 usable levels remain.
+    pub strict: bool,
 }
 
 impl ReadOptions {
-    /// Options choosing the IGRA2 sounding at `time` (`"YYYY-MM-DD HH"`).
-    pub fn with_igra2_time(time: impl Into<String>) -> Self {
+    /// Options choosing the sounding at `time` (`"YYYY-MM-DD HH"`) of an IGRA2 file or a
+    /// Wyoming page.
+    pub fn with_time(time: impl Into<String>) -> Self {
         ReadOptions {
-            igra2_time: Some(time.into()),
+            sounding_time: Some(time.into()),
+            ..ReadOptions::default()
         }
     }
 }
 
-/// The bytes of the sounding file at `path`, read with the input size limit.
-fn read_bytes(path: &Path) -> Result<Vec<u8>, SoundingError> {
-    crate::input::read_limited(path, crate::input::MAX_SOUNDING_BYTES).map_err(|source| {
-        SoundingError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
-    })
+/// The bytes of the sounding file at `path`, read with the input size limit and inflated if the
+/// file is gzip or a one-file zip archive (see [`crate::input::unpack`]).
+fn read_bytes(path: &Path) -> Result<(Vec<u8>, crate::input::Packing), SoundingError> {
+    let io = |source| SoundingError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let limit = crate::input::MAX_SOUNDING_BYTES;
+    let bytes = crate::input::read_limited(path, limit).map_err(io)?;
+    crate::input::unpack(bytes, limit).map_err(io)
 }
 
 /// Reads and validates the sounding in the file at `path` (any supported format, detected from
 /// the content). Never panics, whatever the bytes; non-UTF-8 input is a
-/// [`SoundingError::NotUtf8`] naming the line.
+/// [`SoundingError::NotUtf8`] naming the line. Gzip files and one-file zip archives are read
+/// inflated (metadata `packed_as`); line numbers count lines of the inflated text.
 pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, SoundingError> {
-    let bytes = read_bytes(path)?;
+    let (bytes, packing) = read_bytes(path)?;
     let text = match std::str::from_utf8(&bytes) {
         Ok(text) => text,
         Err(e) => {
@@ -128,16 +156,27 @@ pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, Sou
             });
         }
     };
-    parse_sounding(text, path, options)
+    let mut sounding = parse_sounding(text, path, options)?;
+    if let Some(how) = packing.describe() {
+        // Line numbers in messages count lines of the inflated text.
+        sounding.metadata.insert("packed_as".into(), how);
+    }
+    Ok(sounding)
 }
 
-/// The nominal times (`"YYYY-MM-DD HH"`, UTC) of every sounding in the IGRA2 file at `path`, in
-/// file order (the values [`ReadOptions::igra2_time`] accepts); `None` for a file in another
+/// The nominal times (`"YYYY-MM-DD HH"`, UTC) of every sounding in the IGRA2 file or Wyoming
+/// TEXT:LIST page at `path`, in file order (the values [`ReadOptions::sounding_time`] accepts); `None` for a file in another
 /// format (which holds one sounding).
-pub fn igra2_times(path: &Path) -> Result<Option<Vec<String>>, SoundingError> {
-    let bytes = read_bytes(path)?;
+pub fn sounding_times(path: &Path) -> Result<Option<Vec<String>>, SoundingError> {
+    let (bytes, _) = read_bytes(path)?;
     let text = String::from_utf8_lossy(&bytes);
-    igra2::times(path, &text)
+    if let Some(times) = igra2::times(path, &text)? {
+        return Ok(Some(times));
+    }
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    Ok(wyoming::detect(text)
+        .then(|| wyoming::times(text))
+        .filter(|t| !t.is_empty()))
 }
 
 /// Parses and validates a sounding from `text`; `source` names it in errors and in
@@ -158,21 +197,38 @@ pub fn parse_sounding(
         )
     })?;
     let mut metadata = BTreeMap::new();
+    let mut warnings = Vec::new();
+    let time = options.sounding_time.as_deref();
+    let time = time
+        .map(|t| time::canonical_time(t).map_err(|m| SoundingError::file(source, m)))
+        .transpose()?;
+    let time = time.as_deref();
+    let selectable = matches!(
+        format,
+        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived | SoundingFormat::WyomingTextList
+    );
+    if let (Some(t), false) = (time, selectable) {
+        return Err(SoundingError::file(
+            source,
+            format!(
+                "a sounding time ({t:?}) was given, but the file is {} and holds one sounding; \
+                 leave the time out",
+                format.description()
+            ),
+        ));
+    }
     let (rows, names) = match format {
         SoundingFormat::NormalizedCsv | SoundingFormat::WyomingTextCsv => {
             csv::read(source, text, format, &mut metadata)?
         }
-        SoundingFormat::WyomingTextList => wyoming::read(source, text, &mut metadata)?,
-        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived => igra2::read(
-            source,
-            text,
-            format,
-            options.igra2_time.as_deref(),
-            &mut metadata,
-        )?,
+        SoundingFormat::WyomingTextList => {
+            wyoming::read(source, text, time, &mut metadata, &mut warnings)?
+        }
+        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived => {
+            igra2::read(source, text, format, time, &mut metadata, &mut warnings)?
+        }
     };
-    let mut warnings = Vec::new();
-    let levels = validate::build_levels(source, rows, &names, &mut warnings)?;
+    let levels = validate::build_levels(source, rows, &names, options.strict, &mut warnings)?;
     Ok(Sounding {
         source: source.to_path_buf(),
         format,

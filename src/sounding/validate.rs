@@ -268,6 +268,56 @@ pub fn is_high_resolution(heights_m: &[f64]) -> bool {
     steps[steps.len() / 2] <= HIGH_RESOLUTION_MAX_MEDIAN_STEP_M
 }
 
+/// In strict mode ([`crate::sounding::ReadOptions::strict`]) a conflict between levels this close
+/// above the lowest level (m) refuses the sounding instead of dropping the level: the lowest
+/// kilometres are where mirages form.
+pub const STRICT_ZONE_M: f64 = 3000.0;
+
+/// Levels that contradict the levels below them (height not increasing, pressure increasing, a
+/// duplicate with other values): each is dropped with a note naming its line, or — in strict
+/// mode, inside [`STRICT_ZONE_M`] — refuses the sounding.
+struct Conflicts {
+    strict: bool,
+    notes: Vec<String>,
+}
+
+impl Conflicts {
+    /// Drop the row `error` is about (at `height_m`, if known, above the lowest level's
+    /// `surface_m`), or refuse the sounding with `error`.
+    fn drop_or_refuse(
+        &mut self,
+        error: SoundingError,
+        height_m: Option<f64>,
+        surface_m: Option<f64>,
+    ) -> Result<(), SoundingError> {
+        let in_zone = match (height_m, surface_m) {
+            (Some(h), Some(s)) => h - s <= STRICT_ZONE_M,
+            _ => true,
+        };
+        if self.strict && in_zone {
+            return Err(error);
+        }
+        self.notes.push(error.detail());
+        Ok(())
+    }
+
+    fn report(self, warnings: &mut Vec<String>) {
+        const SHOWN: usize = 5;
+        if self.notes.is_empty() {
+            return;
+        }
+        let mut text = format!(
+            "dropped {} level(s) that contradict the levels below them: {}",
+            self.notes.len(),
+            self.notes[..self.notes.len().min(SHOWN)].join("; ")
+        );
+        if self.notes.len() > SHOWN {
+            text.push_str(&format!("; … ({} more)", self.notes.len() - SHOWN));
+        }
+        warnings.push(text);
+    }
+}
+
 fn describe_lines(lines: &[usize]) -> String {
     const SHOWN: usize = 10;
     let mut s: Vec<String> = lines.iter().take(SHOWN).map(usize::to_string).collect();
@@ -278,11 +328,13 @@ fn describe_lines(lines: &[usize]) -> String {
 }
 
 /// Applies every rule of this module to the rows of one sounding. `warnings` receives one line
-/// per kind of skipped or dropped row.
+/// per kind of skipped or dropped row. `strict`: a conflict between levels inside
+/// [`STRICT_ZONE_M`] refuses the sounding instead of dropping the level.
 pub(crate) fn build_levels(
     path: &Path,
     rows: Vec<RawRow>,
     names: &ColumnNames,
+    strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Level>, SoundingError> {
     // Rules 2–4: per-row checks.
@@ -331,7 +383,14 @@ pub(crate) fn build_levels(
     let mut lowest_pressure: Option<usize> = None; // index into accepted
     let mut merged = Vec::new();
     let mut dropped = Vec::new();
+    let mut conflicts = Conflicts {
+        strict,
+        notes: Vec::new(),
+    };
     for row in checked {
+        let surface_m = accepted.first().and_then(|r: &Row| r.height_m);
+        let top_m = highest.and_then(|i| accepted[i].height_m);
+        let at_m = row.height_m.or(top_m);
         // Exact duplicates and conflicts, keyed on the height (or on the pressure for rows
         // without height).
         let twin = match row.height_m {
@@ -366,14 +425,16 @@ pub(crate) fn build_levels(
                     units::pa_to_hpa(row.pressure_pa.unwrap_or(f64::NAN))
                 ),
             };
-            return Err(SoundingError::line_error(
+            let error = SoundingError::line_error(
                 path,
                 row.line,
                 format!(
                     "conflicting duplicate: {key} is also at line {} with different values",
                     other.line
                 ),
-            ));
+            );
+            conflicts.drop_or_refuse(error, at_m, surface_m)?;
+            continue;
         }
         if let (Some(h), Some(hi)) = (row.height_m, highest)
             && let Some(top) = accepted[hi].height_m
@@ -383,7 +444,7 @@ pub(crate) fn build_levels(
                 dropped.push(row.line);
                 continue;
             }
-            return Err(SoundingError::field(
+            let error = SoundingError::field(
                 path,
                 row.line,
                 names.height.clone(),
@@ -391,7 +452,9 @@ pub(crate) fn build_levels(
                     "height {h} m is not above {top} m at line {}: heights must increase up the file",
                     accepted[hi].line
                 ),
-            ));
+            );
+            conflicts.drop_or_refuse(error, at_m, surface_m)?;
+            continue;
         }
         if let (Some(p), Some(lo)) = (row.pressure_pa, lowest_pressure)
             && let Some(p_low) = accepted[lo].pressure_pa
@@ -402,7 +465,7 @@ pub(crate) fn build_levels(
                 continue;
             }
             if p > p_low {
-                return Err(SoundingError::field(
+                let error = SoundingError::field(
                     path,
                     row.line,
                     names.pressure.clone(),
@@ -412,10 +475,12 @@ pub(crate) fn build_levels(
                         units::pa_to_hpa(p_low),
                         other.line
                     ),
-                ));
+                );
+                conflicts.drop_or_refuse(error, at_m, surface_m)?;
+                continue;
             }
             if p == p_low && (row.height_m.is_none() || other.height_m.is_none()) {
-                return Err(SoundingError::field(
+                let error = SoundingError::field(
                     path,
                     row.line,
                     names.pressure.clone(),
@@ -424,7 +489,9 @@ pub(crate) fn build_levels(
                         units::pa_to_hpa(p),
                         other.line
                     ),
-                ));
+                );
+                conflicts.drop_or_refuse(error, at_m, surface_m)?;
+                continue;
             }
         }
         let index = accepted.len();
@@ -445,6 +512,7 @@ pub(crate) fn build_levels(
             describe_lines(&merged)
         ));
     }
+    conflicts.report(warnings);
     if !dropped.is_empty() {
         warnings.push(format!(
             "dropped {} row(s) of a continuous high-resolution ascent whose height does not increase or whose pressure increases (the sonde briefly descended or its height/pressure jumped back): lines {}",
@@ -649,7 +717,7 @@ mod tests {
 
     fn build(rows: Vec<RawRow>) -> Result<(Vec<Level>, Vec<String>), SoundingError> {
         let mut w = Vec::new();
-        build_levels(Path::new("t.csv"), rows, &names(), &mut w).map(|l| (l, w))
+        build_levels(Path::new("t.csv"), rows, &names(), true, &mut w).map(|l| (l, w))
     }
 
     #[test]
@@ -806,6 +874,42 @@ mod tests {
         .unwrap_err();
         assert_eq!((e.line(), e.column()), (Some(4), Some("pressure_hpa")));
         assert!(e.to_string().contains("pressure must decrease"), "{e}");
+    }
+
+    #[test]
+    fn contradicting_levels_are_dropped_with_a_note_unless_strict_and_low() {
+        let rows = |h_bad: f64| {
+            vec![
+                row(2, Some(0.0), Some(1000.0), Some(10.0)),
+                row(3, Some(h_bad), Some(500.0), Some(-20.0)),
+                row(4, Some(h_bad - 6.0), Some(499.0), Some(-20.1)),
+                row(5, Some(h_bad + 100.0), Some(490.0), Some(-21.0)),
+                row(6, Some(h_bad + 200.0), Some(491.0), Some(-21.5)),
+            ]
+        };
+        let lenient = |rows| {
+            let mut w = Vec::new();
+            build_levels(Path::new("t.csv"), rows, &names(), false, &mut w).map(|l| (l, w))
+        };
+        // Lenient: the two contradicting levels go, each named in one note.
+        let (levels, w) = lenient(rows(500.0)).unwrap();
+        assert_eq!(levels.iter().map(|l| l.line).collect::<Vec<_>>(), [2, 3, 5]);
+        let note = w.iter().find(|n| n.contains("contradict")).unwrap();
+        assert!(note.starts_with("dropped 2 level(s)"), "{note}");
+        assert!(
+            note.contains("line 4, column height_m: height 494 m is not above 500 m at line 3"),
+            "{note}"
+        );
+        assert!(note.contains("line 6, column pressure_hpa"), "{note}");
+        // Strict: refused inside the lowest 3 km, dropped above it.
+        let e = build(rows(500.0)).unwrap_err();
+        assert_eq!((e.line(), e.column()), (Some(4), Some("height_m")));
+        let (levels, w) = build(rows(STRICT_ZONE_M + 10.0)).unwrap();
+        assert_eq!(levels.len(), 3);
+        assert!(w.iter().any(|n| n.contains("dropped 2 level(s)")), "{w:?}");
+        // Fewer than three usable levels left: refused whatever the mode.
+        let e = lenient(rows(500.0)[..3].to_vec()).unwrap_err();
+        assert!(e.to_string().contains("at least 3"), "{e}");
     }
 
     #[test]

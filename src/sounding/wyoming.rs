@@ -6,8 +6,12 @@
 //! 7-character column), a units line, another rule, then one level per line in the same fixed
 //! 7-character columns, blank where a value is missing. The table ends at `</PRE>` or a blank
 //! line; the block "Station information and sounding indices" that follows holds
-//! `name: value` lines (station, latitude, longitude, elevation, indices), kept as metadata. Only
-//! the first table of a page is read.
+//! `name: value` lines (station, latitude, longitude, elevation, indices), kept as metadata.
+//!
+//! A page may hold several soundings (a request over several times): each starts at its title
+//! line. One is read: the one whose observation time (`12Z 09 Dec 2010` → `2010-12-09 12`)
+//! matches the requested time, else the first, with a note saying how many were ignored. A page
+//! without any table ("Can't get … Observations at …") is an error that quotes the server.
 //!
 //! Column positions are taken from the header line itself (the 7 characters ending at each
 //! name), so variants with extra columns (`FRPT`, `RELI`) read too. Units: PRES hPa, HGHT m
@@ -33,7 +37,14 @@ pub(crate) fn is_header(line: &str) -> bool {
 
 /// Whether the text holds a TEXT:LIST table.
 pub(crate) fn detect(text: &str) -> bool {
-    text.lines().any(is_header)
+    text.lines().any(is_header) || is_empty_page(text)
+}
+
+/// Whether the text is the archive's page for a sounding it does not have ("Can't get 72681
+/// BOI Boise Observations at 01Z 09 Dec 2010.").
+fn is_empty_page(text: &str) -> bool {
+    text.lines()
+        .any(|l| l.contains("Can't get") && l.contains(" Observations at "))
 }
 
 /// Removes HTML tags from a line.
@@ -67,28 +78,153 @@ fn metadata_key(name: &str) -> String {
     }
 }
 
-/// Reads the first table and the station block.
+/// One sounding of a page: its title line (0-based index), observation time and the line range
+/// (0-based, end exclusive) it spans.
+struct Section {
+    title_index: usize,
+    station: String,
+    time_text: String,
+    time: Option<String>,
+    lines: std::ops::Range<usize>,
+}
+
+/// The observation time of a title (`12Z 09 Dec 2010`) as `"YYYY-MM-DD HH"`.
+fn canonical_observation_time(text: &str) -> Option<String> {
+    const MONTHS: [&str; 12] = [
+        "jan", "feb", "mar", "apr", "may", "jun", "jul", "aug", "sep", "oct", "nov", "dec",
+    ];
+    let mut words = text.split_whitespace();
+    let hour: u32 = words.next()?.strip_suffix(['Z', 'z'])?.parse().ok()?;
+    let day: u32 = words.next()?.parse().ok()?;
+    let month_word = words.next()?.to_ascii_lowercase();
+    let month = 1 + MONTHS.iter().position(|m| month_word.starts_with(m))?;
+    let year: u32 = words.next()?.parse().ok()?;
+    (hour < 24 && (1..=31).contains(&day))
+        .then(|| format!("{year:04}-{month:02}-{day:02} {hour:02}"))
+}
+
+/// The soundings of a page, in page order.
+fn sections(lines: &[&str]) -> Vec<Section> {
+    let mut found: Vec<Section> = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let plain = strip_tags(line);
+        if let Some((station, time)) = plain.split_once(" Observations at ") {
+            if let Some(last) = found.last_mut() {
+                last.lines.end = i;
+            }
+            let time_text = time.trim().trim_end_matches('.').to_string();
+            found.push(Section {
+                title_index: i,
+                station: station.trim().to_string(),
+                time: canonical_observation_time(&time_text),
+                time_text,
+                lines: i..lines.len(),
+            });
+        }
+    }
+    found
+}
+
+/// The observation times (`"YYYY-MM-DD HH"`) of every sounding on a TEXT:LIST page, in page
+/// order (titles whose time cannot be read are left out).
+pub(crate) fn times(text: &str) -> Vec<String> {
+    let lines: Vec<&str> = text.lines().collect();
+    sections(&lines)
+        .into_iter()
+        .filter_map(|s| s.time)
+        .collect()
+}
+
+/// The section to read: the one at `wanted` (canonical), else the first; notes on the others.
+fn choose(
+    path: &Path,
+    all: Vec<Section>,
+    wanted: Option<&str>,
+    notes: &mut Vec<String>,
+) -> Result<Option<Section>, SoundingError> {
+    let times: Vec<String> = all.iter().filter_map(|s| s.time.clone()).collect();
+    let count = all.len();
+    let index = match wanted {
+        None => 0,
+        Some(t) => all
+            .iter()
+            .position(|s| s.time.as_deref() == Some(t))
+            .ok_or_else(|| SoundingError::file(path, super::time::no_such_time(t, &times)))?,
+    };
+    let Some(chosen) = all.into_iter().nth(index) else {
+        return Ok(None);
+    };
+    if count > 1 {
+        let how = if wanted.is_some() {
+            "the one asked for"
+        } else {
+            "the first; choose another with --time (sounding_time in scene and pipeline files)"
+        };
+        notes.push(format!(
+            "the page holds {count} soundings ({}); read {} at {} (line {}), {how}",
+            summary(&times),
+            chosen.station,
+            chosen.time_text,
+            chosen.title_index + 1
+        ));
+    }
+    Ok(Some(chosen))
+}
+
+fn summary(times: &[String]) -> String {
+    match times {
+        [first, .., last] if times.len() > 4 => format!("{first} … {last}"),
+        _ => times.join(", "),
+    }
+}
+
+/// Reads one sounding's table and station block: the one at `wanted_time` (canonical
+/// `"YYYY-MM-DD HH"`), else the first; `notes` says what else the page held.
 pub(crate) fn read(
     path: &Path,
     text: &str,
+    wanted_time: Option<&str>,
     metadata: &mut BTreeMap<String, String>,
+    notes: &mut Vec<String>,
 ) -> Result<(Vec<RawRow>, ColumnNames), SoundingError> {
-    let lines: Vec<&str> = text.lines().collect();
+    let all_lines: Vec<&str> = text.lines().collect();
+    let all = sections(&all_lines);
+    let range = match choose(path, all, wanted_time, notes)? {
+        Some(section) => {
+            metadata.insert("station".into(), section.station.clone());
+            metadata.insert("observation_time".into(), section.time_text.clone());
+            if let Some(t) = &section.time {
+                metadata.insert("nominal_time_utc".into(), t.clone());
+            }
+            section.lines
+        }
+        None if wanted_time.is_some() => {
+            return Err(SoundingError::file(
+                path,
+                "a sounding time was given, but the page has no \"Observations at\" title to \
+                 match it with",
+            ));
+        }
+        None => 0..all_lines.len(),
+    };
+    let offset = range.start;
+    let lines = &all_lines[range];
     let Some(header_index) = lines.iter().position(|l| is_header(l)) else {
+        let server = lines
+            .iter()
+            .map(|l| strip_tags(l))
+            .find(|l| l.contains("Can't get"));
         return Err(SoundingError::file(
             path,
-            "no TEXT:LIST header (PRES HGHT TEMP …)",
+            match server {
+                Some(said) => format!(
+                    "the page holds no sounding: the server says {:?}",
+                    said.trim()
+                ),
+                None => "no TEXT:LIST header (PRES HGHT TEMP …)".to_string(),
+            },
         ));
     };
-    // Title: the last non-rule, non-empty line before the header that says "Observations at".
-    for line in lines[..header_index].iter().rev() {
-        let plain = strip_tags(line);
-        if let Some((station, time)) = plain.split_once(" Observations at ") {
-            metadata.insert("station".into(), station.trim().to_string());
-            metadata.insert("observation_time".into(), time.trim().to_string());
-            break;
-        }
-    }
     // Column ranges from the header.
     let header = lines[header_index];
     let mut columns: Vec<(String, usize, usize)> = Vec::new();
@@ -105,7 +241,7 @@ pub(crate) fn read(
     let (Some(pres), Some(hght), Some(temp)) = (find("PRES"), find("HGHT"), find("TEMP")) else {
         return Err(SoundingError::line_error(
             path,
-            header_index + 1,
+            offset + header_index + 1,
             "header lacks PRES, HGHT or TEMP",
         ));
     };
@@ -125,7 +261,7 @@ pub(crate) fn read(
     }
     while index < lines.len() {
         let line = lines[index];
-        let number = index + 1;
+        let number = offset + index + 1;
         index += 1;
         let t = line.trim();
         if t.is_empty() || t.starts_with('<') {
@@ -172,19 +308,33 @@ pub(crate) fn read(
             humidity,
         });
     }
-    // Station information block.
+    // Station information block (a browser-saved page may put its first entry on the line of
+    // the block's heading).
     if let Some(start) = lines[index.saturating_sub(1)..]
         .iter()
         .position(|l| l.contains("Station information"))
     {
-        for line in &lines[index.saturating_sub(1) + start + 1..] {
-            let plain = strip_tags(line);
-            if plain.trim().is_empty() && line.contains("</PRE>") {
+        let first = index.saturating_sub(1) + start;
+        let heading = strip_tags(lines[first]);
+        let after_heading = heading
+            .split_once("sounding indices")
+            .map_or(String::new(), |(_, rest)| rest.to_string());
+        let block = std::iter::once((after_heading, false)).chain(
+            lines[first + 1..]
+                .iter()
+                .map(|l| (strip_tags(l), l.contains("</PRE>") || l.contains("</pre>"))),
+        );
+        for (plain, closes) in block {
+            if plain.trim().is_empty() && closes {
                 break;
             }
             if let Some((k, v)) = plain.split_once(':') {
-                let key = metadata_key(k);
-                if !key.is_empty() {
+                let mut key = metadata_key(k);
+                // The block's "Observation time: 130517/0000" must not replace the title's.
+                if metadata.contains_key(&key) {
+                    key = format!("station_block_{key}");
+                }
+                if !key.ends_with('_') && !key.is_empty() {
                     metadata.insert(key, v.trim().to_string());
                 }
             }
@@ -224,7 +374,7 @@ mod tests {
     #[test]
     fn reads_fixed_columns_blank_cells_and_station_block() {
         let mut meta = BTreeMap::new();
-        let (rows, _) = read(Path::new("w.txt"), TABLE, &mut meta).unwrap();
+        let (rows, _) = read(Path::new("w.txt"), TABLE, None, &mut meta, &mut Vec::new()).unwrap();
         assert_eq!(rows.len(), 3);
         assert_eq!(rows[0].temperature_k, None);
         assert_eq!(rows[0].height_m, Some(112.0));
@@ -242,7 +392,14 @@ mod tests {
     #[test]
     fn bad_cell_names_line_and_column() {
         let text = TABLE.replace("  919.0    874   -0.1", "  919.0    874   -x.1");
-        let e = read(Path::new("w.txt"), &text, &mut BTreeMap::new()).unwrap_err();
+        let e = read(
+            Path::new("w.txt"),
+            &text,
+            None,
+            &mut BTreeMap::new(),
+            &mut Vec::new(),
+        )
+        .unwrap_err();
         assert_eq!((e.line(), e.column()), (Some(8), Some("TEMP")));
     }
 }

@@ -535,7 +535,7 @@ fn profile_writes_to_out_profile_stem_by_default() {
 }
 
 #[test]
-fn igra2_time_chooses_the_sounding() {
+fn sounding_time_chooses_the_sounding() {
     let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let dir = tempfile::tempdir().unwrap();
     let surface_hpa = |time: Option<&str>| {
@@ -549,7 +549,7 @@ fn igra2_time_chooses_the_sounding() {
             dir.path().to_str().unwrap(),
         ];
         if let Some(t) = time {
-            args.extend(["--igra2-time", t]);
+            args.extend(["--sounding-time", t]);
         }
         let v: serde_json::Value = serde_json::from_str(&ok(&args).stdout).unwrap();
         v["surface"]["pressure_hpa"].as_f64().unwrap()
@@ -560,7 +560,7 @@ fn igra2_time_chooses_the_sounding() {
     let r = fails(&[
         "profile",
         raw.to_str().unwrap(),
-        "--igra2-time",
+        "--sounding-time",
         "2010-06-03 00",
         "--out",
         dir.path().to_str().unwrap(),
@@ -731,7 +731,7 @@ fn render_scene_chooses_the_igra2_sounding_and_refuses_a_camera_above_the_atmosp
     let dir = tempfile::tempdir().unwrap();
     let scene = |name: &str, camera_height_m: f64, time: Option<&str>| {
         let path = dir.path().join(name);
-        let time_line = time.map_or(String::new(), |t| format!("igra2_time = \"{t}\"\n"));
+        let time_line = time.map_or(String::new(), |t| format!("sounding_time = \"{t}\"\n"));
         std::fs::write(
             &path,
             format!(
@@ -767,8 +767,8 @@ fn pipeline_profile_and_trace_jobs_choose_the_igra2_sounding() {
         std::fs::write(
             &path,
             format!(
-                "[[profile]]\natmosphere = {raw:?}\nname = \"p\"\nigra2_time = \"{time}\"\n\
-                 [[trace]]\natmosphere = {raw:?}\nname = \"t\"\nigra2_time = \"{time}\"\n\
+                "[[profile]]\natmosphere = {raw:?}\nname = \"p\"\nsounding_time = \"{time}\"\n\
+                 [[trace]]\natmosphere = {raw:?}\nname = \"t\"\nsounding_time = \"{time}\"\n\
                  observer_height_m = 10.0\nelevation_deg = \"-0.2:0.2:0.1\"\n\
                  distances_m = [1000.0]\n"
             ),

@@ -268,11 +268,11 @@ fn igra2_data_reproduces_the_normalised_csv() {
     assert_eq!(s.levels[0].line, 2);
     assert_eq!(s.levels[0].pressure_pa, Some(100_980.0));
 
-    let noon = read_sounding(&raw, &ReadOptions::with_igra2_time("2010-06-01 12")).unwrap();
+    let noon = read_sounding(&raw, &ReadOptions::with_time("2010-06-01 12")).unwrap();
     assert_eq!(noon.metadata["nominal_time_utc"], "2010-06-01 12");
     assert_eq!(noon.levels[0].line, 161);
     assert_eq!(noon.levels[0].pressure_pa, Some(100_840.0));
-    let e = read_sounding(&raw, &ReadOptions::with_igra2_time("2010-06-03 00")).unwrap_err();
+    let e = read_sounding(&raw, &ReadOptions::with_time("2010-06-03 00")).unwrap_err();
     assert!(
         e.to_string()
             .contains("2010-06-01 00, 2010-06-01 12, 2010-06-02 00"),
@@ -286,7 +286,7 @@ fn igra2_derived_reproduces_the_normalised_csv() {
     let first = read(&raw);
     assert_eq!(first.format, SoundingFormat::Igra2Derived);
     assert_eq!(first.metadata["nominal_time_utc"], "2014-09-10 00");
-    let s = read_sounding(&raw, &ReadOptions::with_igra2_time("2014-09-10 12")).unwrap();
+    let s = read_sounding(&raw, &ReadOptions::with_time("2014-09-10 12")).unwrap();
     let rows = csv_rows(&sounding("Utqiagvik-70026_2014091012.csv"));
     assert_eq!(s.levels.len(), rows.len());
     for (l, (_, p, h, t, _)) in s.levels.iter().zip(rows) {
@@ -534,6 +534,14 @@ fn parse(text: &str) -> Result<Sounding, SoundingError> {
     parse_sounding(text, Path::new("data/x.csv"), &ReadOptions::default())
 }
 
+fn parse_strict(text: &str) -> Result<Sounding, SoundingError> {
+    let options = ReadOptions {
+        strict: true,
+        ..ReadOptions::default()
+    };
+    parse_sounding(text, Path::new("data/x.csv"), &options)
+}
+
 fn with_row(line_index: usize, row: &str) -> String {
     let mut lines: Vec<&str> = GOOD.lines().collect();
     lines[line_index] = row;
@@ -625,13 +633,28 @@ fn crafted_errors_name_file_line_and_column() {
         (3, ",,4.5,0.5", 4, None, "cannot be placed"),
         (3, "990,95,4.5,0.5,7", 4, None, "fields but the header has"),
     ];
+    // Levels that contradict those below them are errors in strict mode (these are all in the
+    // lowest 3 km); otherwise they are dropped with a note naming the same line and column.
+    let contradictions = [
+        "heights must increase",
+        "pressure must decrease",
+        "conflicting duplicate",
+    ];
     for &(index, row, line, column, phrase) in cases {
-        let e = parse(&with_row(index, row)).expect_err(row);
+        let e = parse_strict(&with_row(index, row)).expect_err(row);
         let msg = e.to_string();
         assert!(msg.starts_with("data/x.csv: line "), "{msg}");
         assert_eq!(e.line(), Some(line), "{row}: {msg}");
         assert_eq!(e.column(), column, "{row}: {msg}");
         assert!(msg.contains(phrase), "{row}: {msg}");
+        if contradictions.contains(&phrase) {
+            let s = parse(&with_row(index, row)).expect(row);
+            assert!(s.levels.iter().all(|l| l.line != line), "{row}");
+            let note = s.warnings.iter().find(|w| w.contains(phrase)).expect(row);
+            assert!(note.contains(&e.detail()), "{note} / {}", e.detail());
+        } else {
+            parse(&with_row(index, row)).expect_err(row);
+        }
     }
 }
 

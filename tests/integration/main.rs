@@ -8,6 +8,7 @@ mod docs;
 mod end_to_end;
 mod images;
 mod ingest;
+mod ingest_archives;
 mod pipeline;
 mod profile;
 mod readme;

@@ -3,7 +3,8 @@
 //!
 //! * `tests/data/soundings/` — real radiosonde soundings (14 normalised CSVs, `pressure_levels/`,
 //!   `raw/`), copied from the project's shared sounding collection with their provenance lines
-//!   (see its README.md);
+//!   (see its README.md), and in `public/` real archive files from public projects' test suites
+//!   (siphon, SHARPpy, sounding-wyoming-text-list), with their provenance and licences;
 //! * `data/` — the soundings, paper atmospheres and scenes shipped with the program;
 //! * `tests/fixtures/` — other crafted or captured inputs.
 //!
@@ -33,6 +34,11 @@ pub fn repo_file(rel: &str) -> PathBuf {
 /// `tests/data/soundings/REL`, e.g. `sounding("raw/USM00070026-data_2010-06-01_excerpt.txt")`.
 pub fn sounding(rel: &str) -> PathBuf {
     existing(Path::new(SOUNDINGS_DIR).join(rel))
+}
+
+/// `tests/data/soundings/public/NAME`: a real archive file from a public project's tests.
+pub fn public_sounding(name: &str) -> PathBuf {
+    existing(Path::new(SOUNDINGS_DIR).join("public").join(name))
 }
 
 /// `data/REL`, a file shipped with the program.
