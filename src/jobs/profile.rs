@@ -8,7 +8,8 @@ use crate::atmosphere::LoadedAtmosphere;
 use crate::profile::{InversionOptions, detect_inversions};
 use crate::refractivity::{RegimeOptions, detect_regimes};
 use crate::report::{
-    LayersReport, PlotOptions, ProfileGrid, ProfilePlot, layers_json, profile_csv, profile_png,
+    InputReport, LayersReport, PlotOptions, ProfileGrid, ProfilePlot, layers_json, profile_csv,
+    profile_png,
 };
 
 /// Default top of profile.png's height axis (m above the surface): where mirage layers live.
@@ -59,7 +60,17 @@ impl ProfileRequest {
         let inversions =
             detect_inversions(atm.column.as_ref(), top_m, &InversionOptions::default());
         let regimes = detect_regimes(&atm.refractive, top_m, &RegimeOptions::default());
-        let report = LayersReport::new(&atm.refractive, &inversions, &regimes);
+        let mut report = LayersReport::new(&atm.refractive, &inversions, &regimes);
+        report.input = match &atm.sounding {
+            Some(sounding) => {
+                InputReport::of_sounding(&atm.source.to_string(), &atm.description, sounding)
+            }
+            None => InputReport {
+                source: atm.source.to_string(),
+                description: atm.description.clone(),
+                ..InputReport::default()
+            },
+        };
         let levels = atm
             .sounding
             .as_ref()

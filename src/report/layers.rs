@@ -72,6 +72,8 @@ pub struct Thresholds {
 /// Everything `layers.json` and the summary hold.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LayersReport {
+    /// What the report was made from (source, station, time, levels read, ingest notes).
+    pub input: InputReport,
     /// Surface air.
     pub surface: SurfaceReport,
     /// Vacuum wavelength (nm).
@@ -88,6 +90,50 @@ pub struct LayersReport {
     pub thresholds: Thresholds,
     /// Measured accuracy of the refractive-index table.
     pub table_error: TableError,
+}
+
+/// What a report was made from. For a sounding: its file, format, station, nominal time, the
+/// number of levels read and every ingest note; for a model atmosphere only the source and its
+/// description.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct InputReport {
+    /// The source as given (a file path, a `.toml`, `us1976`).
+    pub source: String,
+    /// One line saying what it is (station and time, the TOML's description, …).
+    pub description: String,
+    /// The sounding's file format, for soundings.
+    pub format: Option<crate::sounding::SoundingFormat>,
+    /// Station, as the file names it.
+    pub station: Option<String>,
+    /// Nominal time (`"YYYY-MM-DD HH"`, UTC), when the file gives one.
+    pub nominal_time_utc: Option<String>,
+    /// Levels read from the file (after ingest dropped or merged what it had to).
+    pub levels_read: Option<usize>,
+    /// What ingest skipped, merged or dropped, one line per kind.
+    pub notes: Vec<String>,
+}
+
+impl InputReport {
+    /// The input report of a sounding read from `source`, described as `description`.
+    pub fn of_sounding(
+        source: &str,
+        description: &str,
+        sounding: &crate::sounding::Sounding,
+    ) -> Self {
+        InputReport {
+            source: source.to_string(),
+            description: description.to_string(),
+            format: Some(sounding.format),
+            station: sounding.metadata.get("station").cloned(),
+            nominal_time_utc: sounding
+                .metadata
+                .get("nominal_time_utc")
+                .or_else(|| sounding.metadata.get("launch_time_utc"))
+                .cloned(),
+            levels_read: Some(sounding.levels.len()),
+            notes: sounding.warnings.clone(),
+        }
+    }
 }
 
 impl LayersReport {
@@ -130,6 +176,7 @@ impl LayersReport {
             })
             .collect();
         Self {
+            input: InputReport::default(),
             surface,
             wavelength_nm: atm.wavelength_nm(),
             co2_ppm: atm.co2_ppm(),
@@ -151,11 +198,35 @@ impl LayersReport {
 /// documented shape, plus `wavelength_nm`, `co2_ppm`, `regimes`, `thresholds`, `table_error`).
 /// Non-finite numbers become `null`.
 pub fn layers_json(report: &LayersReport) -> Vec<u8> {
-    let mut bytes = serde_json::to_vec_pretty(report)
-        // The report is plain structs of numbers, strings and enums: serialising cannot fail.
-        .expect("LayersReport serialises");
+    // The report is plain structs of numbers, strings and enums: serialising cannot fail.
+    let mut value = serde_json::to_value(report).expect("LayersReport serialises");
+    tidy_numbers(&mut value);
+    let mut bytes = serde_json::to_vec_pretty(&value).expect("a JSON value serialises");
     bytes.push(b'\n');
     bytes
+}
+
+/// Significant digits every number of the JSON report keeps: far more than any of them is known
+/// to, and few enough that rounding noise (`966.0000000000001` hPa) is not printed.
+const JSON_SIGNIFICANT_DIGITS: usize = 10;
+
+/// Round every float in `value` to [`JSON_SIGNIFICANT_DIGITS`].
+fn tidy_numbers(value: &mut serde_json::Value) {
+    match value {
+        serde_json::Value::Number(n) if n.is_f64() => {
+            if let Some(x) = n.as_f64() {
+                let rounded: f64 = format!("{x:.*e}", JSON_SIGNIFICANT_DIGITS - 1)
+                    .parse()
+                    .unwrap_or(x);
+                if let Some(tidy) = serde_json::Number::from_f64(rounded) {
+                    *n = tidy;
+                }
+            }
+        }
+        serde_json::Value::Array(items) => items.iter_mut().for_each(tidy_numbers),
+        serde_json::Value::Object(map) => map.values_mut().for_each(tidy_numbers),
+        _ => {}
+    }
 }
 
 /// The summary for `--format json`: the same content as [`layers_json`].
@@ -174,6 +245,17 @@ fn kind_name(kind: RegimeKind) -> &'static str {
 /// A readable summary: surface air, critical gradient, inversions, ducts and regimes.
 pub fn summary_text(report: &LayersReport) -> String {
     let mut o = String::new();
+    let input = &report.input;
+    if let (Some(levels), Some(format)) = (input.levels_read, input.format) {
+        let _ = writeln!(
+            o,
+            "Read {levels} levels from {} ({}), {} ingest note{}",
+            input.source,
+            format.description(),
+            input.notes.len(),
+            if input.notes.len() == 1 { "" } else { "s" }
+        );
+    }
     let s = &report.surface;
     // Writing to a String cannot fail; results are ignored.
     let _ = writeln!(

@@ -10,7 +10,8 @@ mod plot;
 
 pub use csv::{CSV_HEADER, GridSegment, ProfileGrid, profile_csv};
 pub use layers::{
-    DuctReport, LayersReport, SurfaceReport, Thresholds, layers_json, summary_json, summary_text,
+    DuctReport, InputReport, LayersReport, SurfaceReport, Thresholds, layers_json, summary_json,
+    summary_text,
 };
 pub use plot::{PlotOptions, ProfilePlot, profile_png};
 

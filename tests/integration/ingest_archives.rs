@@ -350,3 +350,74 @@ fn sounding_times_are_checked_and_duplicates_flagged() {
         "{note}"
     );
 }
+
+/// The number tokens of a JSON text, as printed (not re-parsed: parsing and printing again could
+/// itself add digits).
+fn number_tokens(json: &str) -> Vec<&str> {
+    json.split(|c: char| !(c.is_ascii_digit() || "eE.+-".contains(c)))
+        .filter(|t| {
+            t.chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_digit() || c == '-')
+        })
+        .filter(|t| t.chars().any(|c| c.is_ascii_digit()))
+        .collect()
+}
+
+#[test]
+fn the_profile_json_says_what_was_read_and_what_ingest_did() {
+    let path = public_sounding("wyoming_OUN_2018122212_sharppy.html");
+    let dir = tempfile::tempdir().unwrap();
+    let r = crate::support::cli::ok(&[
+        "profile",
+        path.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--format",
+        "json",
+        "--quiet",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    let input = &v["input"];
+    let s = read(&path);
+    assert_eq!(input["source"], path.to_str().unwrap());
+    assert_eq!(input["format"], "wyoming_text_list");
+    assert_eq!(input["station"], "72357 OUN Norman");
+    assert_eq!(input["nominal_time_utc"], "2018-12-22 12");
+    assert_eq!(input["levels_read"], s.levels.len());
+    let notes: Vec<&str> = input["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert_eq!(notes, s.warnings);
+    assert!(notes.iter().any(|n| n.contains("line 84")));
+    // No rounding noise: every number is printed with at most 10 significant digits. (Numbers
+    // inside the notes' text are integers and line numbers.)
+    let numbers = number_tokens(&r.stdout);
+    assert!(numbers.len() > 30, "{numbers:?}");
+    for text in numbers {
+        let mantissa = text.split(['e', 'E']).next().unwrap();
+        let digits: String = mantissa.chars().filter(char::is_ascii_digit).collect();
+        let significant = digits.trim_start_matches('0').trim_end_matches('0').len();
+        assert!(significant <= 10, "{text}");
+    }
+    assert_eq!(v["surface"]["pressure_hpa"], 966.0);
+    // The table says how many levels were read and from where.
+    let text = crate::support::cli::ok(&[
+        "profile",
+        path.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        text.stdout.contains(&format!(
+            "Read {} levels from {} (a University of Wyoming TEXT:LIST page), 2 ingest notes",
+            s.levels.len(),
+            path.display()
+        )),
+        "{}",
+        text.stdout
+    );
+}
