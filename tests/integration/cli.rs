@@ -538,7 +538,7 @@ fn profile_writes_to_out_profile_stem_by_default() {
 fn sounding_time_chooses_the_sounding() {
     let raw = sounding("raw/USM00070026-data_2010-06-01_excerpt.txt");
     let dir = tempfile::tempdir().unwrap();
-    let surface_hpa = |time: Option<&str>| {
+    let surface_hpa = |time: Option<(&str, &str)>| {
         let mut args = vec![
             "profile",
             raw.to_str().unwrap(),
@@ -548,19 +548,30 @@ fn sounding_time_chooses_the_sounding() {
             "--out",
             dir.path().to_str().unwrap(),
         ];
-        if let Some(t) = time {
-            args.extend(["--sounding-time", t]);
+        if let Some((flag, t)) = time {
+            args.extend([flag, t]);
         }
         let v: serde_json::Value = serde_json::from_str(&ok(&args).stdout).unwrap();
         v["surface"]["pressure_hpa"].as_f64().unwrap()
     };
     // The raw file's surface records: PRESS 100980 Pa at 00 UTC, 100840 Pa at 12 UTC.
     assert!((surface_hpa(None) - 1009.80).abs() < 1e-6);
-    assert!((surface_hpa(Some("2010-06-01 12")) - 1008.40).abs() < 1e-6);
+    // `--time`, its visible alias and the former name, in either spelling of the time.
+    for (flag, t) in [
+        ("--time", "2010-06-01 12"),
+        ("--time", "2010-06-01T12:00Z"),
+        ("--sounding-time", "2010-06-01 12"),
+        ("--igra2-time", "2010-06-01 12"),
+    ] {
+        assert!(
+            (surface_hpa(Some((flag, t))) - 1008.40).abs() < 1e-6,
+            "{flag} {t}"
+        );
+    }
     let r = fails(&[
         "profile",
         raw.to_str().unwrap(),
-        "--sounding-time",
+        "--time",
         "2010-06-03 00",
         "--out",
         dir.path().to_str().unwrap(),
