@@ -215,7 +215,10 @@ pub(crate) fn read(
     if let Some(rel) = cols(header_text, 28, 31) {
         metadata.insert("release_time_utc_hhmm".into(), rel.trim().to_string());
     }
-    metadata.insert("soundings_in_file".into(), summary_of_times(&available));
+    metadata.insert(
+        "soundings_in_file".into(),
+        format!("{} ({})", available.len(), super::time::span(&available)),
+    );
     if format == SoundingFormat::Igra2Data {
         for (key, a, b) in [("latitude", 56, 62), ("longitude", 64, 71)] {
             if let Some(v) = int_field(path, header.line, header_text, key, (a, b), &[-99999])? {
@@ -265,14 +268,6 @@ pub(crate) fn read(
         },
     };
     Ok((rows, names))
-}
-
-/// The soundings of a file for its metadata: the count, and the times when there are few.
-fn summary_of_times(times: &[String]) -> String {
-    match times {
-        [first, .., last] if times.len() > 6 => format!("{} ({first} … {last})", times.len()),
-        _ => format!("{} ({})", times.len(), times.join(", ")),
-    }
 }
 
 fn too_short(path: &Path, line_no: usize, what: &str, need: usize) -> SoundingError {

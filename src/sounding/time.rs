@@ -59,6 +59,15 @@ fn hours(canonical: &str) -> Option<i64> {
     Some((era * 146_097 + doe) * 24 + h)
 }
 
+/// The times of a file in short: all of them when there are at most four, else the first and
+/// the last (`"2013-05-17 00 … 2013-05-22 00"`).
+pub fn span(times: &[String]) -> String {
+    match times {
+        [first, .., last] if times.len() > 4 => format!("{first} … {last}"),
+        _ => times.join(", "),
+    }
+}
+
 /// How many entries the message shows at each end of the list and nearest to the time.
 const SHOWN: usize = 3;
 

@@ -162,20 +162,13 @@ fn choose(
         };
         notes.push(format!(
             "the page holds {count} soundings ({}); read {} at {} (line {}), {how}",
-            summary(&times),
+            super::time::span(&times),
             chosen.station,
             chosen.time_text,
             chosen.title_index + 1
         ));
     }
     Ok(Some(chosen))
-}
-
-fn summary(times: &[String]) -> String {
-    match times {
-        [first, .., last] if times.len() > 4 => format!("{first} … {last}"),
-        _ => times.join(", "),
-    }
 }
 
 /// Reads one sounding's table and station block: the one at `wanted_time` (canonical
