@@ -2,10 +2,13 @@
 //! temperature-inversion layers ([`InversionLayer`]) in it, lowest first.
 //!
 //! Method: sample T on a uniform grid (step [`InversionOptions::grid_step_m`]) from the surface to
-//! `top_m`. Every maximal run of grid intervals over which T rises is a candidate layer (its base
-//! is a local minimum of T, its top a local maximum). Neighbouring candidates are merged when the
-//! non-inversion gap between them is thin (≤ `max_gap_m`) and cools little (≤ `max_gap_cooling_k`
-//! and by no more than either layer warms, so that a merge never weakens a layer). Finally
+//! `top_m`. Every maximal run of grid intervals over which T rises (by more than
+//! [`FLAT_TOLERANCE_K`], so that float noise on an isothermal stretch is not warming) is a
+//! candidate layer (its base is a local minimum of T, its top a local maximum). Neighbouring
+//! candidates are merged when the non-inversion gap between them is thin (≤ `max_gap_m`) and
+//! cools little (≤ `max_gap_cooling_k` and by no more than either layer warms, so that a merge
+//! never weakens a layer), or when it is isothermal and thinner than both layers (a pause inside
+//! one inversion). Finally
 //! layers that warm by less than `min_delta_t_k` are dropped: with smoothed sounding data these
 //! are sensor noise and 0.1 K reporting steps, not structure.
 
@@ -51,11 +54,38 @@ impl Default for InversionOptions {
 /// Most grid intervals sampled (bounds memory and time for tiny steps or huge spans).
 const MAX_INTERVALS: usize = 1_000_000;
 
+/// A grid interval warms only if T rises by more than this (K). Evaluating a cubic segment at
+/// the edges of two knots, or the same flat segment at two heights, differs in the last bits
+/// (≈6·10⁻¹⁴ K at 280 K), and such rises on an isothermal stretch used to extend a layer's base
+/// far into it (Norman 2018-12-22 12 UTC: 7.2 °C from 701 to 1320 m, base reported at 1277 m).
+/// 10⁻⁹ K is 10⁴ times that noise and 10⁹ times less than the smallest layer reported.
+pub const FLAT_TOLERANCE_K: f64 = 1e-9;
+
 /// A candidate layer: grid indices of base and top.
 #[derive(Debug, Clone, Copy)]
 struct Run {
     base: usize,
     top: usize,
+}
+
+/// Whether the non-warming gap between the warming stretches `below` and `above` is part of one
+/// layer: it is thin (≤ `max_gap_m`) and cools little (≤ `max_gap_cooling_k`, and no more than
+/// either stretch warms), or it is isothermal (cools by no more than float noise) and thinner
+/// than both stretches — a pause in one inversion, as in the Utqiagvik 2026-02-06 00 UTC surface
+/// inversion, which holds −14.9 °C over 27 m (912–909 hPa) and then warms 0.8 K more.
+fn bridges(heights: &[f64], t: &[f64], below: Run, above: Run, options: &InversionOptions) -> bool {
+    let gap_m = heights[above.base] - heights[below.top];
+    let cooling_k = t[below.top] - t[above.base];
+    let warm_below_k = t[below.top] - t[below.base];
+    let warm_above_k = t[above.top] - t[above.base];
+    let thin_and_mild = gap_m <= options.max_gap_m
+        && cooling_k <= options.max_gap_cooling_k
+        && cooling_k <= warm_below_k.min(warm_above_k);
+    let intervals = (above.base - below.top) as f64;
+    let isothermal_pause = cooling_k <= FLAT_TOLERANCE_K * intervals
+        && gap_m < heights[below.top] - heights[below.base]
+        && gap_m < heights[above.top] - heights[above.base];
+    thin_and_mild || isothermal_pause
 }
 
 /// The inversion layers of `column` between its surface and `top_m` (m above mean sea level),
@@ -92,10 +122,11 @@ pub fn detect_inversions(
     // Candidate runs of rising temperature.
     let mut runs: Vec<Run> = Vec::new();
     let mut i = 0;
+    let warms = |i: usize| t[i + 1] - t[i] > FLAT_TOLERANCE_K;
     while i < intervals {
-        if t[i + 1] > t[i] {
+        if warms(i) {
             let base = i;
-            while i < intervals && t[i + 1] > t[i] {
+            while i < intervals && warms(i) {
                 i += 1;
             }
             runs.push(Run { base, top: i });
@@ -104,18 +135,11 @@ pub fn detect_inversions(
         }
     }
 
-    // Merge across thin, weakly cooling gaps.
+    // Merge across thin, weakly cooling gaps, and across isothermal pauses.
     let mut merged: Vec<Run> = Vec::new();
     for run in runs {
         if let Some(last) = merged.last_mut() {
-            let gap = heights[run.base] - heights[last.top];
-            let cooling = t[last.top] - t[run.base];
-            let warm_last = t[last.top] - t[last.base];
-            let warm_next = t[run.top] - t[run.base];
-            if gap <= options.max_gap_m
-                && cooling <= options.max_gap_cooling_k
-                && cooling <= warm_last.min(warm_next)
-            {
+            if bridges(&heights, &t, *last, run, options) {
                 last.top = run.top;
                 continue;
             }
@@ -242,6 +266,60 @@ mod tests {
             ..InversionOptions::default()
         };
         assert_eq!(detect_inversions(&c, 600.0, &strict).len(), 4);
+    }
+
+    /// `piecewise` plus last-bit noise (±6·10⁻¹⁴ K, as cubic evaluation leaves on a flat stretch).
+    fn noisy(corners: &'static [(f64, f64)]) -> impl Fn(f64) -> (f64, f64) + Send + Sync {
+        let clean = piecewise(corners);
+        move |h| {
+            let (t, g) = clean(h);
+            (t + 6e-14 * (h * 7.3).sin(), g)
+        }
+    }
+
+    #[test]
+    fn float_noise_on_an_isothermal_stretch_is_not_warming() {
+        // Warming 0–100 m, isothermal 100–700 m, warming 700–800 m (the Norman 2018-12-22 shape):
+        // two layers whose bounds are the corners, not points inside the flat stretch.
+        let c = Column(noisy(&[
+            (0.0, 260.0),
+            (100.0, 263.0),
+            (700.0, 263.0),
+            (800.0, 266.0),
+            (900.0, 265.0),
+        ]));
+        let layers = detect_inversions(&c, 900.0, &InversionOptions::default());
+        assert_eq!(layers.len(), 2, "{layers:?}");
+        assert_eq!((layers[0].base_m, layers[0].top_m), (0.0, 100.0));
+        assert_eq!((layers[1].base_m, layers[1].top_m), (700.0, 800.0));
+    }
+
+    #[test]
+    fn an_isothermal_pause_thinner_than_both_stretches_does_not_end_the_layer() {
+        // The Utqiagvik 2026-02-06 shape: +5 K over 300 m, 27 m isothermal, +1 K over 73 m.
+        let c = Column(noisy(&[
+            (0.0, 260.0),
+            (300.0, 265.0),
+            (327.0, 265.0),
+            (400.0, 266.0),
+            (500.0, 265.0),
+        ]));
+        let layers = detect_inversions(&c, 500.0, &InversionOptions::default());
+        assert_eq!(layers.len(), 1, "{layers:?}");
+        assert_eq!((layers[0].base_m, layers[0].top_m), (0.0, 400.0));
+        assert!((layers[0].delta_t_k - 6.0).abs() < 1e-9);
+        // A pause thicker than the stretch above it ends the layer (the +0.8 K above is too weak
+        // to be reported on its own).
+        let c = Column(noisy(&[
+            (0.0, 260.0),
+            (300.0, 265.0),
+            (400.0, 265.0),
+            (473.0, 265.8),
+            (500.0, 265.0),
+        ]));
+        let layers = detect_inversions(&c, 500.0, &InversionOptions::default());
+        assert_eq!(layers.len(), 1, "{layers:?}");
+        assert_eq!((layers[0].base_m, layers[0].top_m), (0.0, 300.0));
     }
 
     #[test]

@@ -117,6 +117,21 @@ mod tests {
     }
 
     #[test]
+    fn geopotential_and_geometric_heights_differ_as_readme_says() {
+        // README (profile.csv): about h²/6357 km, 0.16 m at 1 km, 0.63 m at 2 km; 11.019 / 20.063 /
+        // 32.162 km geometric for the table's 11 / 20 / 32 km geopotential.
+        let d = geopotential_to_geometric_m(1000.0) - 1000.0;
+        assert!((d - 0.16).abs() < 0.005, "{d}");
+        let d = geopotential_to_geometric_m(2000.0) - 2000.0;
+        assert!((d - 0.63).abs() < 0.005, "{d}");
+        for (geo, geometric) in [(11_000.0, 11_019.0), (20_000.0, 20_063.0), (32_000.0, 32_162.0)] {
+            let h = geopotential_to_geometric_m(geo);
+            assert!((h - geometric).abs() < 0.5, "{geo}: {h}");
+            assert!((geometric_to_geopotential_m(h) - geo).abs() < 1e-6);
+        }
+    }
+
+    #[test]
     fn matches_the_published_table() {
         // COESA 1976 table values at geopotential heights.
         let s0 = standard(0.0);

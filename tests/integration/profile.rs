@@ -191,6 +191,47 @@ fn trois_rivieres_warm_nose() {
     assert_eq!(l.kind, InversionKind::Elevated);
 }
 
+/// The layers (base, top, ΔT) found in the sounding at `path`, default fit.
+fn layers_of(path: &std::path::Path, top_agl_m: f64) -> (Sounding, Vec<InversionLayer>) {
+    let s = read_sounding(path, &ReadOptions::default())
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let profile = fit(&s);
+    let layers = layers_below(&profile, s.surface().height_m + top_agl_m);
+    (s, layers)
+}
+
+#[test]
+fn inversion_bounds_do_not_spill_into_isothermal_stretches() {
+    // Norman 2018-12-22 12 UTC (SHARPpy's Wyoming page): 3.6 °C at 345 m warming to 7.2 °C at
+    // 701 m, 7.2 °C flat up to 1320 m, then warming to 10.6 °C at 1756 m (lines 15–26 of the
+    // page). Float noise on the flat stretch used to put the second base at 1277 m.
+    let path = paths::public_sounding("wyoming_OUN_2018122212_sharppy.html");
+    let (_, layers) = layers_of(&path, 2000.0);
+    let bounds: Vec<(f64, f64)> = layers.iter().map(|l| (l.base_m, l.top_m)).collect();
+    assert_eq!(bounds, vec![(345.0, 701.0), (1320.0, 1756.0)], "{layers:?}");
+    assert!((layers[0].delta_t_k - 3.6).abs() < 1e-9, "{layers:?}");
+    assert!((layers[1].delta_t_k - 3.4).abs() < 1e-9, "{layers:?}");
+}
+
+#[test]
+fn an_isothermal_pause_does_not_end_the_utqiagvik_surface_inversion() {
+    // Utqiagvik 2026-02-06 00 UTC, all TEMP levels: −23.7 °C at the surface warming to
+    // −14.9 °C at 912 hPa, the same at 909 hPa, then on to −14.1 °C at 893 hPa; −14.5 °C above.
+    let path = paths::repo_file("data/Utqiagvik-70026_2026020600_all-levels.csv");
+    let (s, layers) = layers_of(&path, 2000.0);
+    let top_level = s
+        .levels
+        .iter()
+        .find(|l| l.pressure_pa == Some(89_300.0))
+        .expect("the 893 hPa level");
+    let l = &layers[0];
+    assert_eq!(l.kind, InversionKind::Surface, "{layers:?}");
+    assert_eq!(l.base_m, s.surface().height_m, "{layers:?}");
+    // The detection grid is 1 m: the top is the grid point at or just below the level.
+    assert!((l.top_m - top_level.height_m).abs() <= 1.0, "{l:?} vs {top_level:?}");
+    assert!((l.delta_t_k - 9.6).abs() < 0.01, "{l:?}");
+}
+
 #[test]
 fn sparse_soundings_are_not_smoothed_and_extrema_sit_on_levels() {
     // IGRA2 Utqiagvik 2010-06-01: no two levels closer than 20 m, so the default fit passes
