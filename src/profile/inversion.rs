@@ -138,11 +138,11 @@ pub fn detect_inversions(
     // Merge across thin, weakly cooling gaps, and across isothermal pauses.
     let mut merged: Vec<Run> = Vec::new();
     for run in runs {
-        if let Some(last) = merged.last_mut() {
-            if bridges(&heights, &t, *last, run, options) {
-                last.top = run.top;
-                continue;
-            }
+        if let Some(last) = merged.last_mut()
+            && bridges(&heights, &t, *last, run, options)
+        {
+            last.top = run.top;
+            continue;
         }
         merged.push(run);
     }

@@ -124,7 +124,11 @@ mod tests {
         assert!((d - 0.16).abs() < 0.005, "{d}");
         let d = geopotential_to_geometric_m(2000.0) - 2000.0;
         assert!((d - 0.63).abs() < 0.005, "{d}");
-        for (geo, geometric) in [(11_000.0, 11_019.0), (20_000.0, 20_063.0), (32_000.0, 32_162.0)] {
+        for (geo, geometric) in [
+            (11_000.0, 11_019.0),
+            (20_000.0, 20_063.0),
+            (32_000.0, 32_162.0),
+        ] {
             let h = geopotential_to_geometric_m(geo);
             assert!((h - geometric).abs() < 0.5, "{geo}: {h}");
             assert!((geometric_to_geopotential_m(h) - geo).abs() < 1e-6);

@@ -1,20 +1,22 @@
 //! Stage 1 — ingest. In: a sounding file (normalised CSV, University of Wyoming TEXT:LIST or
-//! TEXT:CSV, IGRA2 data or derived). Out: a validated [`Sounding`]: levels sorted by height, in SI
+//! TEXT:CSV, IGRA2 data or derived, SPC / SHARPpy `%RAW%`). Out: a validated [`Sounding`]: levels sorted by height, in SI
 //! units, with every level carrying a height (measured or hypsometric) and its source line.
 //!
 //! Entry points: [`read_sounding`] (a file, plain, gzip or a one-file zip) and [`parse_sounding`]
 //! (text already in memory). Files holding several soundings (IGRA2, Wyoming pages) give the one
 //! chosen by [`ReadOptions::sounding_time`] (canonical form in [`time`]). The
 //! format is detected from the content, never from the extension: IGRA2 header record first →
-//! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; a CSV header with a
+//! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; `%TITLE%` then
+//! `%RAW%` lines → SPC / SHARPpy; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
-//! CSV. Readers live in [`csv`], [`wyoming`] and [`igra2`]; the rules every sounding must pass
+//! CSV. Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
 //! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
 
 pub mod csv;
 pub mod error;
 pub mod hypsometric;
 pub mod igra2;
+pub mod spc;
 pub mod time;
 pub mod validate;
 pub mod wyoming;
@@ -65,6 +67,8 @@ pub enum SoundingFormat {
     Igra2Data,
     /// IGRA version 2 derived-parameter file.
     Igra2Derived,
+    /// SPC / SHARPpy `%TITLE%` / `%RAW%` text.
+    SpcRaw,
 }
 
 impl SoundingFormat {
@@ -76,6 +80,7 @@ impl SoundingFormat {
             SoundingFormat::WyomingTextCsv => "a University of Wyoming TEXT:CSV file",
             SoundingFormat::Igra2Data => "an IGRA2 data file",
             SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
+            SoundingFormat::SpcRaw => "an SPC / SHARPpy %RAW% file",
         }
     }
 }
@@ -193,7 +198,7 @@ pub fn parse_sounding(
             source,
             "cannot recognise the format: expected a normalised CSV (header such as \
              pressure_hpa,height_m,temperature_c,dewpoint_c), a University of Wyoming TEXT:LIST \
-             or TEXT:CSV page, or an IGRA2 data or derived file",
+             or TEXT:CSV page, an IGRA2 data or derived file, or an SPC / SHARPpy %RAW% file",
         )
     })?;
     let mut metadata = BTreeMap::new();
@@ -227,6 +232,7 @@ pub fn parse_sounding(
         SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived => {
             igra2::read(source, text, format, time, &mut metadata, &mut warnings)?
         }
+        SoundingFormat::SpcRaw => spc::read(source, text, &mut metadata)?,
     };
     let levels = validate::build_levels(source, rows, &names, options.strict, &mut warnings)?;
     Ok(Sounding {
@@ -242,6 +248,7 @@ pub fn parse_sounding(
 pub fn detect_format(text: &str) -> Option<SoundingFormat> {
     igra2::detect(text)
         .or_else(|| wyoming::detect(text).then_some(SoundingFormat::WyomingTextList))
+        .or_else(|| spc::detect(text).then_some(SoundingFormat::SpcRaw))
         .or_else(|| csv::detect(text))
 }
 

@@ -401,6 +401,7 @@ fn atmosphere_page_examples_parse() {
         "wyoming_text_csv",
         "igra2_data",
         "igra2_derived",
+        "spc_raw",
     ]
     .map(String::from)
     .into();

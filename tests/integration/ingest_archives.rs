@@ -1,7 +1,7 @@
 //! Stage 1 — ingest of archive files as users get them: real pages and files from public
 //! projects' test suites (`tests/data/soundings/public/`, provenance in its README): levels that
 //! contradict those below them, pages holding several soundings, a page without data, gzip and
-//! zip archives, and the choice of one sounding by its time.
+//! zip archives, the choice of one sounding by its time, and SPC / SHARPpy `%RAW%` files.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -420,4 +420,67 @@ fn the_profile_json_says_what_was_read_and_what_ingest_did() {
         "{}",
         text.stdout
     );
+}
+
+/// The `%RAW%` rows of an SPC / SHARPpy file that have a temperature, split independently of the
+/// library: (line, pressure hPa, height m, temperature °C, dewpoint °C or None).
+fn spc_rows_with_temperature(path: &Path) -> Vec<(usize, f64, f64, f64, Option<f64>)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let start = lines.iter().position(|l| l.trim() == "%RAW%").unwrap() + 1;
+    let end = lines.iter().position(|l| l.trim() == "%END%").unwrap();
+    (start..end)
+        .filter_map(|i| {
+            let v: Vec<f64> = lines[i]
+                .split(',')
+                .map(|c| c.trim().parse().unwrap())
+                .collect();
+            (v[2] != -9999.0).then(|| (i + 1, v[0], v[1], v[2], (v[3] != -9999.0).then_some(v[3])))
+        })
+        .collect()
+}
+
+#[test]
+fn spc_sharppy_raw_files_read_every_level_with_a_temperature() {
+    for (name, station, time, levels) in [
+        ("sharppy_14061619.OAX", "OAX", "2014-06-16 19", 150),
+        ("sharppy_14072800.BNA", "BNA", "2014-07-28 00", 86),
+        ("sharppy_sars_hail_00033000.SHV", "SHV", "2000-03-30 00", 92),
+        ("sharppy_sars_hail_01040400.LZK", "LZK", "2001-04-04 00", 83),
+    ] {
+        let path = public_sounding(name);
+        let s = read(&path);
+        let expected = spc_rows_with_temperature(&path);
+        assert_eq!(
+            s.format,
+            ghostship::sounding::SoundingFormat::SpcRaw,
+            "{name}"
+        );
+        assert_eq!(s.metadata["station"], station, "{name}");
+        assert_eq!(s.metadata["nominal_time_utc"], time, "{name}");
+        assert_eq!(expected.len(), levels, "{name}: rows with temperature");
+        assert_eq!(s.levels.len(), levels, "{name}: {:?}", s.warnings);
+        for (level, &(line, p, h, t, td)) in s.levels.iter().zip(&expected) {
+            assert_eq!(level.line, line, "{name}");
+            assert_eq!(level.pressure_pa, Some(p * 100.0), "{name} line {line}");
+            assert_eq!(level.height_m, h, "{name} line {line}");
+            assert!(
+                (level.temperature_k - (t + 273.15)).abs() < 1e-9,
+                "{name} line {line}"
+            );
+            assert_eq!(
+                level.vapour_pressure_pa.is_some(),
+                td.is_some(),
+                "{name} line {line}"
+            );
+            assert_eq!(level.height_source, HeightSource::Measured);
+        }
+    }
+    // A BNA title carries the position; the SARS surface (994 hPa, 79 m) precedes the
+    // below-ground 1000 hPa row, which has no temperature and is skipped.
+    let bna = read(&public_sounding("sharppy_14072800.BNA"));
+    assert_eq!(bna.metadata["latitude"], "36.25");
+    assert_eq!(bna.metadata["longitude"], "-86.56");
+    let shv = read(&public_sounding("sharppy_sars_hail_00033000.SHV"));
+    assert_eq!((shv.surface().line, shv.surface().height_m), (7, 79.0));
 }

@@ -228,7 +228,10 @@ fn an_isothermal_pause_does_not_end_the_utqiagvik_surface_inversion() {
     assert_eq!(l.kind, InversionKind::Surface, "{layers:?}");
     assert_eq!(l.base_m, s.surface().height_m, "{layers:?}");
     // The detection grid is 1 m: the top is the grid point at or just below the level.
-    assert!((l.top_m - top_level.height_m).abs() <= 1.0, "{l:?} vs {top_level:?}");
+    assert!(
+        (l.top_m - top_level.height_m).abs() <= 1.0,
+        "{l:?} vs {top_level:?}"
+    );
     assert!((l.delta_t_k - 9.6).abs() < 0.01, "{l:?}");
 }
 
