@@ -108,14 +108,25 @@ pub struct LayerFit {
 }
 
 /// Fit a stack of linear layers to `sounding` in the options' height range.
-pub fn fit_layers(sounding: &Sounding, options: &LayerFitOptions) -> Result<LayerFit, ProfileError> {
+pub fn fit_layers(
+    sounding: &Sounding,
+    options: &LayerFitOptions,
+) -> Result<LayerFit, ProfileError> {
     check_options(options)?;
     let data = select_levels(sounding, options)?;
     let lo = data.h[0];
     let hi = data.h[data.h.len() - 1];
-    let n_inner = options.max_layers.saturating_sub(1).min(data.h.len().saturating_sub(2));
+    let n_inner = options
+        .max_layers
+        .saturating_sub(1)
+        .min(data.h.len().saturating_sub(2));
     let init = initial_breakpoints(&data, n_inner, options.min_thickness_m);
-    let problem = Reduced { data: &data, lo, hi, min_gap_m: options.min_thickness_m };
+    let problem = Reduced {
+        data: &data,
+        lo,
+        hi,
+        min_gap_m: options.min_thickness_m,
+    };
     let (breaks, termination) = if init.is_empty() {
         (Vec::new(), TerminationStatus::NotTerminated)
     } else {
@@ -127,11 +138,19 @@ pub fn fit_layers(sounding: &Sounding, options: &LayerFitOptions) -> Result<Laye
 }
 
 fn check_options(o: &LayerFitOptions) -> Result<(), ProfileError> {
-    let bad = |name, message: &str| Err(ProfileError::BadOption { name, message: message.into() });
+    let bad = |name, message: &str| {
+        Err(ProfileError::BadOption {
+            name,
+            message: message.into(),
+        })
+    };
     if !(o.range_bottom_above_surface_m.is_finite() && o.range_top_above_surface_m.is_finite())
         || o.range_top_above_surface_m <= o.range_bottom_above_surface_m
     {
-        return bad("range_top_above_surface_m", "range must be finite with top above bottom");
+        return bad(
+            "range_top_above_surface_m",
+            "range must be finite with top above bottom",
+        );
     }
     if o.max_layers == 0 {
         return bad("max_layers", "must be at least 1");
@@ -148,12 +167,14 @@ struct Data {
     h: Vec<f64>,
     t: Vec<f64>,
     w: Vec<f64>,
-    range: (f64, f64),
 }
 
 fn select_levels(s: &Sounding, o: &LayerFitOptions) -> Result<Data, ProfileError> {
     let surface = s.levels.first().map_or(f64::NAN, |l| l.height_m);
-    let range = (surface + o.range_bottom_above_surface_m, surface + o.range_top_above_surface_m);
+    let range = (
+        surface + o.range_bottom_above_surface_m,
+        surface + o.range_top_above_surface_m,
+    );
     if let Some(w) = &o.level_weights
         && w.len() != s.levels.len()
     {
@@ -162,7 +183,11 @@ fn select_levels(s: &Sounding, o: &LayerFitOptions) -> Result<Data, ProfileError
             message: format!("{} weights for {} levels", w.len(), s.levels.len()),
         });
     }
-    let mut d = Data { h: vec![], t: vec![], w: vec![], range };
+    let mut d = Data {
+        h: vec![],
+        t: vec![],
+        w: vec![],
+    };
     for (i, l) in s.levels.iter().enumerate() {
         let w = o.level_weights.as_ref().map_or(1.0, |w| w[i]);
         let ok = l.height_m.is_finite() && l.temperature_k.is_finite() && w.is_finite() && w > 0.0;
@@ -225,7 +250,10 @@ struct Reduced<'a> {
 impl Reduced<'_> {
     /// All knots (bottom, projected breakpoints, top), ascending and `min_gap_m` apart.
     fn knots(&self, breaks: &[f64]) -> Vec<f64> {
-        let mut b: Vec<f64> = breaks.iter().map(|x| if x.is_finite() { *x } else { self.lo }).collect();
+        let mut b: Vec<f64> = breaks
+            .iter()
+            .map(|x| if x.is_finite() { *x } else { self.lo })
+            .collect();
         b.sort_by(f64::total_cmp);
         let n = b.len();
         let mut knots = vec![self.lo];
@@ -274,14 +302,21 @@ fn optimise(
 }
 
 fn optimiser_error(e: &argmin::core::Error) -> ProfileError {
-    ProfileError::BadOption { name: "layer_fit", message: format!("optimiser failed: {e}") }
+    ProfileError::BadOption {
+        name: "layer_fit",
+        message: format!("optimiser failed: {e}"),
+    }
 }
 
 /// Linear interpolation weights of `h` on `knots`: (interval index, weight of its upper knot).
 fn locate(knots: &[f64], h: f64) -> (usize, f64) {
     let k = knots.partition_point(|x| *x <= h).clamp(1, knots.len() - 1) - 1;
     let span = knots[k + 1] - knots[k];
-    let u = if span > 0.0 { ((h - knots[k]) / span).clamp(0.0, 1.0) } else { 0.0 };
+    let u = if span > 0.0 {
+        ((h - knots[k]) / span).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     (k, u)
 }
 
@@ -291,7 +326,9 @@ fn evaluate(knots: &[f64], temps: &[f64], h: f64) -> f64 {
 }
 
 fn weighted_sse(d: &Data, knots: &[f64], temps: &[f64]) -> f64 {
-    (0..d.h.len()).map(|i| d.w[i] * (evaluate(knots, temps, d.h[i]) - d.t[i]).powi(2)).sum()
+    (0..d.h.len())
+        .map(|i| d.w[i] * (evaluate(knots, temps, d.h[i]) - d.t[i]).powi(2))
+        .sum()
 }
 
 /// Knot temperatures minimising the weighted squared residual; the normal equations of the hat
@@ -372,7 +409,10 @@ fn assemble(
         surface_temperature_k: temps[0] - BACKGROUND_LAPSE_K_PER_M * below_m,
         surface_pressure_pa: surface.pressure_pa.unwrap_or(101_325.0),
         rms_k: (weighted_sse(d, knots, temps) / d.w.iter().sum::<f64>()).sqrt(),
-        max_abs_k: residuals.iter().map(|r| (r.fitted_k - r.measured_k).abs()).fold(0.0, f64::max),
+        max_abs_k: residuals
+            .iter()
+            .map(|r| (r.fitted_k - r.measured_k).abs())
+            .fold(0.0, f64::max),
         residuals,
         lapse_only_rms_k: lapse_only_rms_k(d),
         termination,
