@@ -53,7 +53,7 @@ fn opts(top_m: f64, layers: usize) -> LayerFitOptions {
 #[test]
 fn recovers_piecewise_linear_truth_at_10_m_spacing() {
     let heights: Vec<f64> = (0..=50).map(|i| i as f64 * 10.0).collect();
-    let fit = fit_layers(&sampled(&truth(), &heights, |_| 0.0), &opts(500.0, 3)).unwrap();
+    let fit = fit_layers(&sampled(&truth(), &heights, |_| 0.0), &opts(500.0, 4)).unwrap();
     let tops: Vec<f64> = fit.layers.iter().map(|l| l.top_m).collect();
     eprintln!("tops {tops:?} rms {} term {:?}", fit.rms_k, fit.termination);
     assert!(
