@@ -7,6 +7,7 @@ mod error;
 mod fit;
 mod hydrostatic;
 mod inversion;
+pub mod layer_fit;
 mod monotone;
 mod smooth;
 mod standard;

@@ -1,0 +1,129 @@
+//! Layer fit (ghostship::profile::layer_fit): truth from a piecewise-linear synthetic TOML, the
+//! TOML round trip, real soundings against the straight-line baseline, and typed errors.
+
+use std::path::Path;
+
+use ghostship::profile::layer_fit::{LayerFitOptions, fit_layers};
+use ghostship::profile::{AirColumn, SyntheticAtmosphere};
+use ghostship::sounding::{
+    HeightSource, Level, ReadOptions, Sounding, SoundingFormat, read_sounding,
+};
+
+use crate::support::data::{data_file, sounding};
+
+/// Truth: standard lapse plus a 0–40 m inversion (+0.1 K/m extra) and a 200–260 m one.
+const TRUTH: &str = "surface_temperature_c = -10.0\nsurface_pressure_hpa = 1013.25\n\
+background = -0.0065\n\n[[layers]]\nfrom_m = 0.0\nto_m = 40.0\ngradient_k_per_m = 0.1\n\n\
+[[layers]]\nfrom_m = 200.0\nto_m = 260.0\ngradient_k_per_m = 0.05\n";
+
+fn sampled(column: &dyn AirColumn, heights_m: &[f64], noise_k: impl Fn(usize) -> f64) -> Sounding {
+    let levels = heights_m
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| Level {
+            height_m: h,
+            pressure_pa: Some(column.air_at(h).pressure_pa),
+            temperature_k: column.air_at(h).temperature_k + noise_k(i),
+            vapour_pressure_pa: None,
+            height_source: HeightSource::Measured,
+            line: i + 1,
+        })
+        .collect();
+    Sounding {
+        source: "synthetic".into(),
+        format: SoundingFormat::NormalizedCsv,
+        metadata: Default::default(),
+        levels,
+        warnings: vec![],
+    }
+}
+
+fn truth() -> SyntheticAtmosphere {
+    SyntheticAtmosphere::from_toml_str(TRUTH, Path::new("truth")).unwrap()
+}
+
+fn opts(top_m: f64, layers: usize) -> LayerFitOptions {
+    LayerFitOptions {
+        range_top_above_surface_m: top_m,
+        max_layers: layers,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn recovers_piecewise_linear_truth_at_10_m_spacing() {
+    let heights: Vec<f64> = (0..=50).map(|i| i as f64 * 10.0).collect();
+    let fit = fit_layers(&sampled(&truth(), &heights, |_| 0.0), &opts(500.0, 4)).unwrap();
+    let tops: Vec<f64> = fit.layers.iter().map(|l| l.top_m).collect();
+    eprintln!("tops {tops:?} rms {} term {:?}", fit.rms_k, fit.termination);
+    assert!(
+        (tops[0] - 40.0).abs() < 3.0 && (tops[1] - 200.0).abs() < 3.0,
+        "{tops:?}"
+    );
+    assert!(fit.rms_k < 0.05 && fit.lapse_only_rms_k > 1.0, "{fit:?}");
+}
+
+#[test]
+fn noise_of_0_1_k_gives_rms_near_0_1_k() {
+    let heights: Vec<f64> = (0..=300).map(|i| i as f64 * 10.0).collect();
+    // Deterministic ±0.1 K (RMS exactly 0.1 K): a fixed sign pattern from an LCG.
+    let sign = |i: usize| {
+        if (i.wrapping_mul(1_103_515_245).wrapping_add(12_345) >> 16) & 1 == 0 {
+            0.1
+        } else {
+            -0.1
+        }
+    };
+    let fit = fit_layers(&sampled(&truth(), &heights, sign), &opts(3000.0, 5)).unwrap();
+    eprintln!(
+        "noisy rms {} lapse-only {}",
+        fit.rms_k, fit.lapse_only_rms_k
+    );
+    assert!(fit.rms_k > 0.07 && fit.rms_k < 0.11, "rms {}", fit.rms_k);
+}
+
+#[test]
+fn toml_round_trip_reproduces_fitted_temperatures() {
+    let heights: Vec<f64> = (0..=50).map(|i| i as f64 * 10.0).collect();
+    let fit = fit_layers(&sampled(&truth(), &heights, |_| 0.0), &opts(500.0, 3)).unwrap();
+    let back = fit.to_synthetic().unwrap();
+    for r in &fit.residuals {
+        let t = back.air_at(r.height_m).temperature_k;
+        assert!(
+            (t - r.fitted_k).abs() < 1e-6,
+            "{} m: {t} vs {}",
+            r.height_m,
+            r.fitted_k
+        );
+    }
+}
+
+#[test]
+fn real_soundings_beat_the_straight_lapse_line() {
+    for path in [
+        sounding("Utqiagvik-70026_2010060100.csv"),
+        sounding("Bjornoya-01028_2024022611.csv"),
+        sounding("TroisRivieres-UQAM_2022022222.csv"),
+        data_file("Danmarkshavn-04320_2026020523_all-levels.csv"),
+    ] {
+        let s = read_sounding(&path, &ReadOptions::default()).unwrap();
+        let fit = fit_layers(&s, &LayerFitOptions::default()).unwrap();
+        eprintln!(
+            "{}: {} levels, rms {:.3} K, max {:.3} K, lapse-only {:.3} K, {:?}",
+            path.display(),
+            fit.residuals.len(),
+            fit.rms_k,
+            fit.max_abs_k,
+            fit.lapse_only_rms_k,
+            fit.termination
+        );
+        assert!(fit.rms_k < 0.5 * fit.lapse_only_rms_k, "{}", path.display());
+    }
+}
+
+#[test]
+fn fewer_than_three_levels_is_a_typed_error() {
+    let s = sampled(&truth(), &[0.0, 10.0, 5000.0], |_| 0.0);
+    let err = fit_layers(&s, &LayerFitOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("at least 3"), "{err}");
+}
