@@ -1,5 +1,6 @@
 //! `ghostship profile`: arguments → [`ProfileRequest`] → its products (through the jobs layer)
-//! → the summary on stdout and `profile.csv`, `layers.json`, `profile.png` in the output folder.
+//! → the summary on stdout and `profile.csv`, `layers.json`, `profile.png` (and, for a sounding,
+//! `fitted_layers.toml`) in the output folder.
 
 use std::path::{Path, PathBuf};
 
@@ -98,6 +99,9 @@ pub fn run(args: ProfileArgs, quiet: bool) -> anyhow::Result<()> {
         SummaryFormat::Table => {
             let summary = summary_text(&products.report);
             let mut text = format!("{}\n{}\n", atm.description, summary.trim_end());
+            if let Some(line) = products.layer_fit_line() {
+                text.push_str(&format!("{line}\n"));
+            }
             for w in atm.sounding.iter().flat_map(|s| &s.warnings) {
                 text.push_str(&format!("Ingest note: {w}\n"));
             }

@@ -1,11 +1,14 @@
 //! Jobs — profile. In: a [`ProfileRequest`] and its loaded atmosphere. Out: the layers report and
 //! the products `profile.csv` (n(h) on a grid), `layers.json` (inversions, ducts, refractive
-//! layers) and `profile.png` (the profile plot).
+//! layers) and `profile.png` (the profile plot); for a measured sounding also
+//! `fitted_layers.toml`, the paper-style synthetic layers fitted to it
+//! ([`crate::profile::layer_fit`]), an atmosphere every command accepts.
 
 use super::cache::AtmosphereRequest;
 use super::{JobError, Product};
 use crate::atmosphere::LoadedAtmosphere;
-use crate::profile::{InversionOptions, detect_inversions};
+use crate::profile::layer_fit::{LayerFit, LayerFitOptions, fit_layers};
+use crate::profile::{InversionOptions, ProfileError, detect_inversions};
 use crate::refractivity::{RegimeOptions, detect_regimes};
 use crate::report::{
     InputReport, LayersReport, PlotOptions, ProfileGrid, ProfilePlot, layers_json, profile_csv,
@@ -91,7 +94,12 @@ impl ProfileRequest {
             atmosphere: atm.source.to_string(),
             source,
         })?;
+        let layer_fit = atm
+            .sounding
+            .as_ref()
+            .map(|s| fit_layers(s, &LayerFitOptions::default()));
         Ok(ProfileProducts {
+            layer_fit,
             csv: profile_csv(&atm.refractive, &ProfileGrid::default()),
             json: layers_json(&report),
             report,
@@ -110,15 +118,43 @@ pub struct ProfileProducts {
     pub json: Vec<u8>,
     /// `profile.png`.
     pub png: Vec<u8>,
+    /// For a measured sounding: the synthetic layers fitted to it over
+    /// [`LayerFitOptions::default`]'s range, or why no fit could be made (too few levels).
+    /// `None` for model atmospheres.
+    pub layer_fit: Option<Result<LayerFit, ProfileError>>,
 }
 
 impl ProfileProducts {
-    /// The files: `profile.csv`, `layers.json`, `profile.png`.
+    /// One summary line on the layer fit, for a measured sounding.
+    pub fn layer_fit_line(&self) -> Option<String> {
+        Some(match self.layer_fit.as_ref()? {
+            Ok(fit) => format!(
+                "Fitted synthetic layers (surface to +{:.0} m): {} layers, rms {:.2} K, max {:.2} K \
+                 (one straight lapse line: rms {:.2} K) -> fitted_layers.toml",
+                LayerFitOptions::default().range_top_above_surface_m,
+                fit.layers.len(),
+                fit.rms_k,
+                fit.max_abs_k,
+                fit.lapse_only_rms_k
+            ),
+            Err(e) => format!("Fitted synthetic layers: none ({e})"),
+        })
+    }
+
+    /// The files: `profile.csv`, `layers.json`, `profile.png`, and `fitted_layers.toml` when a
+    /// layer fit was made.
     pub fn into_products(self) -> Vec<Product> {
-        vec![
+        let mut products = vec![
             Product::new("profile.csv", self.csv),
             Product::new("layers.json", self.json),
             Product::new("profile.png", self.png),
-        ]
+        ];
+        if let Some(Ok(fit)) = &self.layer_fit {
+            products.push(Product::new(
+                "fitted_layers.toml",
+                fit.to_toml().into_bytes(),
+            ));
+        }
+        products
     }
 }

@@ -46,6 +46,14 @@ pub enum ProfileError {
         /// What is wrong.
         message: String,
     },
+    /// The layer fit's optimiser (argmin) stopped with an error.
+    #[error("the layer fit of {path} failed in the optimiser: {message}")]
+    LayerFitFailed {
+        /// The sounding being fitted.
+        path: std::path::PathBuf,
+        /// argmin's error, as text (its error type is not `Clone`/`'static`-friendly).
+        message: String,
+    },
 }
 
 /// 1-based line and column (in characters) of a byte offset in `text`.

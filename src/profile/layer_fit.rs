@@ -9,7 +9,7 @@
 //! breakpoint heights are optimised over that reduced residual by argmin's Nelder–Mead solver
 //! (derivative-free, since the reduced residual is only piecewise smooth in the breakpoints).
 //! Breakpoints are kept inside the range and at least `min_thickness_m` apart by projection.
-//! Initial breakpoints: the heights of largest |d²T/dh²| in the measured levels.
+//! Initial breakpoints: chosen greedily, each the level height that most lowers the residual.
 
 use std::path::Path;
 
@@ -30,7 +30,7 @@ pub struct LayerFitOptions {
     pub range_bottom_above_surface_m: f64,
     /// Top of the fitted range (m above the surface).
     pub range_top_above_surface_m: f64,
-    /// Largest number of linear layers.
+    /// Largest number of linear layers (default 10).
     pub max_layers: usize,
     /// Smallest layer thickness (m).
     pub min_thickness_m: f64,
@@ -45,7 +45,7 @@ impl Default for LayerFitOptions {
         LayerFitOptions {
             range_bottom_above_surface_m: 0.0,
             range_top_above_surface_m: 3000.0,
-            max_layers: 6,
+            max_layers: 10,
             min_thickness_m: 5.0,
             level_weights: None,
             max_iterations: 2000,
@@ -130,7 +130,12 @@ pub fn fit_layers(
     let (breaks, termination) = if init.is_empty() {
         (Vec::new(), TerminationStatus::NotTerminated)
     } else {
-        optimise(problem.clone(), init, options.max_iterations)?
+        optimise(problem.clone(), init, options.max_iterations).map_err(|e| {
+            ProfileError::LayerFitFailed {
+                path: sounding.source.clone(),
+                message: e.to_string(),
+            }
+        })?
     };
     let knots = problem.knots(&breaks);
     let temps = solve_knot_temperatures(&data, &knots);
@@ -212,26 +217,33 @@ fn select_levels(s: &Sounding, o: &LayerFitOptions) -> Result<Data, ProfileError
     Ok(d)
 }
 
-/// Up to `n` interior heights of largest |second difference| of T, at least `gap_m` apart.
+/// Largest number of candidate heights tried per greedy step of [`initial_breakpoints`].
+const MAX_CANDIDATES: usize = 400;
+
+/// Up to `n` interior breakpoints, at least `gap_m` apart, chosen greedily: each step adds the
+/// level height that most lowers the least-squares residual of the knots chosen so far (exact
+/// for each candidate). Unlike the largest |d²T/dh²|, this is not fooled by the level-to-level
+/// noise of 1-s soundings, and a weak inversion above a strong one still gets its own knots.
 fn initial_breakpoints(d: &Data, n: usize, gap_m: f64) -> Vec<f64> {
-    let mut scored: Vec<(f64, f64)> = (1..d.h.len().saturating_sub(1))
-        .filter_map(|i| {
-            let (h0, h1, h2) = (d.h[i - 1], d.h[i], d.h[i + 1]);
-            if h1 - h0 <= 0.0 || h2 - h1 <= 0.0 {
-                return None;
-            }
-            let s0 = (d.t[i] - d.t[i - 1]) / (h1 - h0);
-            let s1 = (d.t[i + 1] - d.t[i]) / (h2 - h1);
-            Some((((s1 - s0) * (h2 - h0) * 0.5).abs(), h1))
-        })
-        .collect();
-    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut chosen: Vec<f64> = Vec::new();
     let (lo, hi) = (d.h[0], d.h[d.h.len() - 1]);
-    for (_, h) in scored {
-        let clear = chosen.iter().all(|c| (c - h).abs() >= gap_m);
-        if chosen.len() < n && clear && h - lo >= gap_m && hi - h >= gap_m {
-            chosen.push(h);
+    let stride = d.h.len().div_ceil(MAX_CANDIDATES).max(1);
+    let candidates: Vec<f64> = d.h.iter().copied().step_by(stride).collect();
+    let mut chosen: Vec<f64> = Vec::new();
+    for _ in 0..n {
+        let best = candidates
+            .iter()
+            .filter(|&&h| h - lo >= gap_m && hi - h >= gap_m)
+            .filter(|&&h| chosen.iter().all(|c| (c - h).abs() >= gap_m))
+            .map(|&h| {
+                let mut knots: Vec<f64> = chosen.iter().copied().chain([lo, h, hi]).collect();
+                knots.sort_by(f64::total_cmp);
+                let temps = solve_knot_temperatures(d, &knots);
+                (weighted_sse(d, &knots, &temps), h)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        match best {
+            Some((_, h)) => chosen.push(h),
+            None => break,
         }
     }
     chosen.sort_by(f64::total_cmp);
@@ -281,7 +293,7 @@ fn optimise(
     problem: Reduced<'_>,
     init: Vec<f64>,
     max_iterations: u64,
-) -> Result<(Vec<f64>, TerminationStatus), ProfileError> {
+) -> Result<(Vec<f64>, TerminationStatus), argmin::core::Error> {
     let step = ((problem.hi - problem.lo) / (4.0 * (init.len() + 1) as f64)).max(problem.min_gap_m);
     let mut simplex = vec![init.clone()];
     for i in 0..init.len() {
@@ -289,23 +301,13 @@ fn optimise(
         v[i] += if i % 2 == 0 { step } else { -step };
         simplex.push(v);
     }
-    let solver = NelderMead::new(simplex)
-        .with_sd_tolerance(1e-10)
-        .map_err(|e| optimiser_error(&e))?;
+    let solver = NelderMead::new(simplex).with_sd_tolerance(1e-10)?;
     let result = Executor::new(problem, solver)
         .configure(|s| s.max_iters(max_iterations))
-        .run()
-        .map_err(|e| optimiser_error(&e))?;
+        .run()?;
     let state = result.state();
     let best = state.get_best_param().cloned().unwrap_or(init);
     Ok((best, state.get_termination_status().clone()))
-}
-
-fn optimiser_error(e: &argmin::core::Error) -> ProfileError {
-    ProfileError::BadOption {
-        name: "layer_fit",
-        message: format!("optimiser failed: {e}"),
-    }
 }
 
 /// Linear interpolation weights of `h` on `knots`: (interval index, weight of its upper knot).

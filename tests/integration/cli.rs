@@ -1167,3 +1167,35 @@ fn render_tolerance_is_validated_used_and_recorded() {
         "{lines:?}"
     );
 }
+
+/// `profile` of a real sounding writes `fitted_layers.toml` and names it in the summary; the file
+/// is an atmosphere `profile` accepts, with the sounding's surface height and temperature.
+#[test]
+fn profile_writes_fitted_layers_that_profile_accepts() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = sounding("Utqiagvik-70026_2026020600.csv");
+    let out = dir.path().join("measured");
+    let r = ok(&[
+        "profile",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(r.stdout.contains("Fitted synthetic layers"), "{}", r.stdout);
+    let toml = out.join("fitted_layers.toml");
+    let again = dir.path().join("synthetic");
+    ok(&[
+        "profile",
+        toml.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    let measured = json_file(&out.join("layers.json"));
+    let fitted = json_file(&again.join("layers.json"));
+    for key in ["height_m", "temperature_k"] {
+        let (a, b) = (&measured["surface"][key], &fitted["surface"][key]);
+        let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+        // The fit is least squares, not interpolation: the surface may move by its residual.
+        assert!((a - b).abs() < 0.5, "{key}: {a} vs {b}");
+    }
+}

@@ -4,12 +4,15 @@
 use std::path::Path;
 
 use ghostship::profile::layer_fit::{LayerFitOptions, fit_layers};
-use ghostship::profile::{AirColumn, SyntheticAtmosphere};
+use ghostship::profile::{
+    AirColumn, FitOptions, InversionOptions, Profile, ProfileError, SyntheticAtmosphere,
+    detect_inversions,
+};
 use ghostship::sounding::{
     HeightSource, Level, ReadOptions, Sounding, SoundingFormat, read_sounding,
 };
 
-use crate::support::data::{data_file, sounding};
+use crate::support::data::{data_file, sounding, soundings_dir};
 
 /// Truth: standard lapse plus a 0–40 m inversion (+0.1 K/m extra) and a 200–260 m one.
 const TRUTH: &str = "surface_temperature_c = -10.0\nsurface_pressure_hpa = 1013.25\n\
@@ -60,7 +63,33 @@ fn recovers_piecewise_linear_truth_at_10_m_spacing() {
         (tops[0] - 40.0).abs() < 3.0 && (tops[1] - 200.0).abs() < 3.0,
         "{tops:?}"
     );
-    assert!(fit.rms_k < 0.05 && fit.lapse_only_rms_k > 1.0, "{fit:?}");
+    assert!(fit.rms_k < 0.05, "{fit:?}");
+    // The baseline, recomputed here by ordinary least squares through the same samples.
+    let t: Vec<f64> = heights
+        .iter()
+        .map(|&h| truth().air_at(h).temperature_k)
+        .collect();
+    let n = heights.len() as f64;
+    let (mh, mt) = (heights.iter().sum::<f64>() / n, t.iter().sum::<f64>() / n);
+    let sxy: f64 = heights
+        .iter()
+        .zip(&t)
+        .map(|(h, t)| (h - mh) * (t - mt))
+        .sum();
+    let sxx: f64 = heights.iter().map(|h| (h - mh).powi(2)).sum();
+    let slope = sxy / sxx;
+    let ss: f64 = heights
+        .iter()
+        .zip(&t)
+        .map(|(h, t)| (t - mt - slope * (h - mh)).powi(2))
+        .sum();
+    let line_rms_k = (ss / n).sqrt();
+    assert!(
+        (fit.lapse_only_rms_k - line_rms_k).abs() < 1e-6,
+        "{} vs {line_rms_k}",
+        fit.lapse_only_rms_k
+    );
+    assert!(fit.rms_k < 0.05 * line_rms_k, "{fit:?}");
 }
 
 #[test]
@@ -126,4 +155,55 @@ fn fewer_than_three_levels_is_a_typed_error() {
     let s = sampled(&truth(), &[0.0, 10.0, 5000.0], |_| 0.0);
     let err = fit_layers(&s, &LayerFitOptions::default()).unwrap_err();
     assert!(err.to_string().contains("at least 3"), "{err}");
+}
+
+/// Every shipped real sounding (main CSVs and the all-levels files): the fit is made or refused
+/// with the typed too-few-levels error exactly when fewer than 3 levels lie in the range (counted
+/// here from the levels), its TOML parses back to the fitted temperatures, it beats a straight
+/// line, and every measured inversion of more than 1 K in the range overlaps a warming layer of
+/// the fit.
+#[test]
+fn every_shipped_sounding_fits_or_is_refused_for_too_few_levels() {
+    let mut files: Vec<_> = ["", "pressure_levels"]
+        .iter()
+        .flat_map(|sub| std::fs::read_dir(soundings_dir().join(sub)).unwrap())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 20, "{files:?}");
+    let options = LayerFitOptions::default();
+    for path in files {
+        let s = read_sounding(&path, &ReadOptions::default()).unwrap();
+        let surface_m = s.levels[0].height_m;
+        let in_range = s
+            .levels
+            .iter()
+            .filter(|l| l.height_m <= surface_m + options.range_top_above_surface_m)
+            .count();
+        let fit = match fit_layers(&s, &options) {
+            Err(ProfileError::BadSounding { .. }) if in_range < 3 => continue,
+            other => other.unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+        };
+        let back = fit.to_synthetic().unwrap();
+        for r in &fit.residuals {
+            let t = back.air_at(r.height_m).temperature_k;
+            assert!((t - r.fitted_k).abs() < 1e-6, "{}", path.display());
+        }
+        assert!(fit.rms_k <= fit.lapse_only_rms_k, "{}", path.display());
+        let top_m = surface_m + options.range_top_above_surface_m;
+        let measured = Profile::from_sounding(&s, &FitOptions::default()).unwrap();
+        let synthetic = detect_inversions(&back, top_m, &InversionOptions::default());
+        for inv in detect_inversions(&measured, top_m, &InversionOptions::default()) {
+            if inv.delta_t_k > 1.0 {
+                assert!(
+                    synthetic
+                        .iter()
+                        .any(|f| f.base_m < inv.top_m && inv.base_m < f.top_m),
+                    "{}: measured {inv:?} not in the fit's {synthetic:?}",
+                    path.display()
+                );
+            }
+        }
+    }
 }
