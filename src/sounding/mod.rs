@@ -9,7 +9,9 @@
 //! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; `%TITLE%` then
 //! `%RAW%` lines → SPC / SHARPpy; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
-//! CSV. Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
+//! CSV. Before any of these, a netCDF magic number ([`is_netcdf`]) sends the bytes to the
+//! `netcdf` reader (cargo feature `netcdf`; without it, [`SoundingError::NetcdfNotBuilt`]).
+//! Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
 //! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
 
 pub mod csv;
@@ -87,7 +89,7 @@ impl SoundingFormat {
             SoundingFormat::Igra2Data => "an IGRA2 data file",
             SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
             SoundingFormat::SpcRaw => "an SPC / SHARPpy %RAW% file",
-            SoundingFormat::Netcdf => "a netCDF sounding (ARM sondewnpn or GRUAN GDP)",
+            SoundingFormat::Netcdf => "an ARM sondewnpn or GRUAN GDP netCDF sounding",
         }
     }
 }
@@ -152,7 +154,9 @@ fn read_bytes(path: &Path) -> Result<(Vec<u8>, crate::input::Packing), SoundingE
 
 /// Reads and validates the sounding in the file at `path` (any supported format, detected from
 /// the content). Never panics, whatever the bytes; non-UTF-8 input is a
-/// [`SoundingError::NotUtf8`] naming the line. Gzip files and one-file zip archives are read
+/// [`SoundingError::NotUtf8`] naming the line, except a netCDF file (see [`is_netcdf`]), which
+/// is read when ghostship is built with the feature `netcdf` and is otherwise a
+/// [`SoundingError::NetcdfNotBuilt`]. Gzip files and one-file zip archives are read
 /// inflated (metadata `packed_as`); line numbers count lines of the inflated text.
 pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, SoundingError> {
     let (bytes, packing) = read_bytes(path)?;
@@ -178,7 +182,7 @@ pub fn is_netcdf(bytes: &[u8]) -> bool {
     NETCDF_MAGIC.iter().any(|magic| bytes.starts_with(magic))
 }
 
-/// Reads the netCDF sounding `bytes` of the file `path` ([`netcdf`] does the format).
+/// Reads the netCDF sounding `bytes` of the file `path` ([`self::netcdf`] does the format).
 #[cfg(feature = "netcdf")]
 fn read_netcdf(
     bytes: &[u8],
