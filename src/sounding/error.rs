@@ -4,6 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+/// What [`SoundingError::NetcdfNotBuilt`] says after the file name.
+pub const NETCDF_NOT_BUILT: &str = "the file is a netCDF file; this ghostship was built without \
+     netCDF support: rebuild with `cargo build --release --features netcdf` (needs libnetcdf-dev)";
+
 /// Why a sounding could not be read. Every variant names the file; line and column are given
 /// whenever the problem sits in one place of the file.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +30,12 @@ pub enum SoundingError {
         line: usize,
         /// 0-based byte offset of the first invalid byte in the file.
         byte_offset: usize,
+    },
+    /// The file is netCDF, and this build was made without the cargo feature `netcdf`.
+    #[error("{}: {}", path.display(), NETCDF_NOT_BUILT)]
+    NetcdfNotBuilt {
+        /// The file.
+        path: PathBuf,
     },
     /// A problem with the file as a whole (unknown format, too few levels, no such IGRA2 time…).
     #[error("{}: {message}", path.display())]
@@ -66,7 +76,9 @@ impl SoundingError {
             SoundingError::NotUtf8 { line, .. }
             | SoundingError::Line { line, .. }
             | SoundingError::Field { line, .. } => Some(*line),
-            SoundingError::Io { .. } | SoundingError::File { .. } => None,
+            SoundingError::Io { .. }
+            | SoundingError::NetcdfNotBuilt { .. }
+            | SoundingError::File { .. } => None,
         }
     }
 
@@ -85,6 +97,7 @@ impl SoundingError {
             SoundingError::NotUtf8 {
                 line, byte_offset, ..
             } => format!("line {line}: not UTF-8 text (invalid byte at offset {byte_offset})"),
+            SoundingError::NetcdfNotBuilt { .. } => NETCDF_NOT_BUILT.to_string(),
             SoundingError::File { message, .. } => message.clone(),
             SoundingError::Line { line, message, .. } => format!("line {line}: {message}"),
             SoundingError::Field {

@@ -9,13 +9,17 @@
 //! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; `%TITLE%` then
 //! `%RAW%` lines → SPC / SHARPpy; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
-//! CSV. Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
+//! CSV. Before any of these, a netCDF magic number ([`is_netcdf`]) sends the bytes to the
+//! `netcdf` reader (cargo feature `netcdf`; without it, [`SoundingError::NetcdfNotBuilt`]).
+//! Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
 //! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
 
 pub mod csv;
 pub mod error;
 pub mod hypsometric;
 pub mod igra2;
+#[cfg(feature = "netcdf")]
+pub mod netcdf;
 pub mod spc;
 pub mod time;
 pub mod validate;
@@ -49,7 +53,8 @@ pub struct Level {
     pub vapour_pressure_pa: Option<f64>,
     /// Whether the height was measured or computed.
     pub height_source: HeightSource,
-    /// 1-based line of the source file this level came from.
+    /// 1-based line of the source file this level came from (for netCDF: the 1-based record,
+    /// the index along the `time` dimension).
     pub line: usize,
 }
 
@@ -69,6 +74,9 @@ pub enum SoundingFormat {
     Igra2Derived,
     /// SPC / SHARPpy `%TITLE%` / `%RAW%` text.
     SpcRaw,
+    /// A netCDF sounding (ARM `sondewnpn`, GRUAN RS92/RS41 GDP); binary, read only by a build
+    /// with the cargo feature `netcdf`.
+    Netcdf,
 }
 
 impl SoundingFormat {
@@ -81,6 +89,7 @@ impl SoundingFormat {
             SoundingFormat::Igra2Data => "an IGRA2 data file",
             SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
             SoundingFormat::SpcRaw => "an SPC / SHARPpy %RAW% file",
+            SoundingFormat::Netcdf => "an ARM sondewnpn or GRUAN GDP netCDF sounding",
         }
     }
 }
@@ -145,23 +154,18 @@ fn read_bytes(path: &Path) -> Result<(Vec<u8>, crate::input::Packing), SoundingE
 
 /// Reads and validates the sounding in the file at `path` (any supported format, detected from
 /// the content). Never panics, whatever the bytes; non-UTF-8 input is a
-/// [`SoundingError::NotUtf8`] naming the line. Gzip files and one-file zip archives are read
+/// [`SoundingError::NotUtf8`] naming the line, except a netCDF file (see [`is_netcdf`]), which
+/// is read when ghostship is built with the feature `netcdf` and is otherwise a
+/// [`SoundingError::NetcdfNotBuilt`]. Gzip files and one-file zip archives are read
 /// inflated (metadata `packed_as`); line numbers count lines of the inflated text.
 pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, SoundingError> {
     let (bytes, packing) = read_bytes(path)?;
-    let text = match std::str::from_utf8(&bytes) {
-        Ok(text) => text,
-        Err(e) => {
-            let byte_offset = e.valid_up_to();
-            let line = 1 + bytes[..byte_offset].iter().filter(|&&b| b == b'\n').count();
-            return Err(SoundingError::NotUtf8 {
-                path: path.to_path_buf(),
-                line,
-                byte_offset,
-            });
-        }
+    // Binary netCDF before the UTF-8 check: its header is not text.
+    let mut sounding = if is_netcdf(&bytes) {
+        read_netcdf(&bytes, path, options)?
+    } else {
+        parse_sounding(utf8(&bytes, path)?, path, options)?
     };
-    let mut sounding = parse_sounding(text, path, options)?;
     if let Some(how) = packing.describe() {
         // Line numbers in messages count lines of the inflated text.
         sounding.metadata.insert("packed_as".into(), how);
@@ -169,11 +173,58 @@ pub fn read_sounding(path: &Path, options: &ReadOptions) -> Result<Sounding, Sou
     Ok(sounding)
 }
 
+/// The magic numbers a netCDF file starts with: classic (`CDF` 1), 64-bit offset (`CDF` 2),
+/// 64-bit data (`CDF` 5) and netCDF-4, which is HDF5.
+const NETCDF_MAGIC: [&[u8]; 4] = [b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n"];
+
+/// Whether `bytes` start like a netCDF file (classic or netCDF-4/HDF5).
+pub fn is_netcdf(bytes: &[u8]) -> bool {
+    NETCDF_MAGIC.iter().any(|magic| bytes.starts_with(magic))
+}
+
+/// Reads the netCDF sounding `bytes` of the file `path` ([`self::netcdf`] does the format).
+#[cfg(feature = "netcdf")]
+fn read_netcdf(
+    bytes: &[u8],
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Sounding, SoundingError> {
+    let format = SoundingFormat::Netcdf;
+    refuse_time(path, format, options)?;
+    let mut metadata = BTreeMap::new();
+    let (rows, names) = self::netcdf::read(path, bytes, &mut metadata)?;
+    build(path, format, metadata, Vec::new(), rows, &names, options)
+}
+
+/// Without the `netcdf` feature a netCDF file is refused with a message saying how to rebuild.
+#[cfg(not(feature = "netcdf"))]
+fn read_netcdf(_: &[u8], path: &Path, _: &ReadOptions) -> Result<Sounding, SoundingError> {
+    Err(SoundingError::NetcdfNotBuilt {
+        path: path.to_path_buf(),
+    })
+}
+
+/// `bytes` as text, or a [`SoundingError::NotUtf8`] naming the line of the first invalid byte.
+fn utf8<'b>(bytes: &'b [u8], path: &Path) -> Result<&'b str, SoundingError> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        let byte_offset = e.valid_up_to();
+        let line = 1 + bytes[..byte_offset].iter().filter(|&&b| b == b'\n').count();
+        SoundingError::NotUtf8 {
+            path: path.to_path_buf(),
+            line,
+            byte_offset,
+        }
+    })
+}
+
 /// The nominal times (`"YYYY-MM-DD HH"`, UTC) of every sounding in the IGRA2 file or Wyoming
 /// TEXT:LIST page at `path`, in file order (the values [`ReadOptions::sounding_time`] accepts); `None` for a file in another
 /// format (which holds one sounding).
 pub fn sounding_times(path: &Path) -> Result<Option<Vec<String>>, SoundingError> {
     let (bytes, _) = read_bytes(path)?;
+    if is_netcdf(&bytes) {
+        return Ok(None);
+    }
     let text = String::from_utf8_lossy(&bytes);
     if let Some(times) = igra2::times(path, &text)? {
         return Ok(Some(times));
@@ -203,25 +254,8 @@ pub fn parse_sounding(
     })?;
     let mut metadata = BTreeMap::new();
     let mut warnings = Vec::new();
-    let time = options.sounding_time.as_deref();
-    let time = time
-        .map(|t| time::canonical_time(t).map_err(|m| SoundingError::file(source, m)))
-        .transpose()?;
+    let time = refuse_time(source, format, options)?;
     let time = time.as_deref();
-    let selectable = matches!(
-        format,
-        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived | SoundingFormat::WyomingTextList
-    );
-    if let (Some(t), false) = (time, selectable) {
-        return Err(SoundingError::file(
-            source,
-            format!(
-                "a sounding time ({t:?}) was given, but the file is {} and holds one sounding; \
-                 leave the time out",
-                format.description()
-            ),
-        ));
-    }
     let (rows, names) = match format {
         SoundingFormat::NormalizedCsv | SoundingFormat::WyomingTextCsv => {
             csv::read(source, text, format, &mut metadata)?
@@ -233,8 +267,56 @@ pub fn parse_sounding(
             igra2::read(source, text, format, time, &mut metadata, &mut warnings)?
         }
         SoundingFormat::SpcRaw => spc::read(source, text, &mut metadata)?,
+        // Never detected in text: netCDF is binary and read from its bytes by read_sounding.
+        SoundingFormat::Netcdf => {
+            return Err(SoundingError::file(
+                source,
+                "a netCDF sounding is binary; read it from its file",
+            ));
+        }
     };
-    let levels = validate::build_levels(source, rows, &names, options.strict, &mut warnings)?;
+    build(source, format, metadata, warnings, rows, &names, options)
+}
+
+/// The canonical [`ReadOptions::sounding_time`], if given; an error if it is malformed or if
+/// `format` holds one sounding (only IGRA2 files and Wyoming pages hold several).
+fn refuse_time(
+    source: &Path,
+    format: SoundingFormat,
+    options: &ReadOptions,
+) -> Result<Option<String>, SoundingError> {
+    let time = options.sounding_time.as_deref();
+    let time = time
+        .map(|t| time::canonical_time(t).map_err(|m| SoundingError::file(source, m)))
+        .transpose()?;
+    let selectable = matches!(
+        format,
+        SoundingFormat::Igra2Data | SoundingFormat::Igra2Derived | SoundingFormat::WyomingTextList
+    );
+    if let (Some(t), false) = (&time, selectable) {
+        return Err(SoundingError::file(
+            source,
+            format!(
+                "a sounding time ({t:?}) was given, but the file is {} and holds one sounding; \
+                 leave the time out",
+                format.description()
+            ),
+        ));
+    }
+    Ok(time)
+}
+
+/// The validated [`Sounding`] from a reader's raw rows ([`validate::build_levels`]).
+fn build(
+    source: &Path,
+    format: SoundingFormat,
+    metadata: BTreeMap<String, String>,
+    mut warnings: Vec<String>,
+    rows: Vec<validate::RawRow>,
+    names: &validate::ColumnNames,
+    options: &ReadOptions,
+) -> Result<Sounding, SoundingError> {
+    let levels = validate::build_levels(source, rows, names, options.strict, &mut warnings)?;
     Ok(Sounding {
         source: source.to_path_buf(),
         format,

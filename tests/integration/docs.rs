@@ -18,7 +18,7 @@ use std::path::Path;
 use ghostship::atmosphere::AtmosphereOptions;
 use ghostship::profile::SyntheticAtmosphere;
 use ghostship::scene::Scene;
-use ghostship::sounding::{ReadOptions, parse_sounding};
+use ghostship::sounding::{ReadOptions, SoundingFormat, parse_sounding};
 
 use super::support::data::{data_file, repo_file};
 
@@ -364,6 +364,10 @@ fn atmosphere_page_documents_exactly_the_synthetic_keys() {
     );
 }
 
+/// Sounding formats without a text example in docs/atmosphere.md, with their serde names:
+/// netCDF files are binary (their reader is tested on real files in `ingest_netcdf.rs`).
+const BINARY_FORMATS: [(SoundingFormat, &str); 1] = [(SoundingFormat::Netcdf, "netcdf")];
+
 #[test]
 fn atmosphere_page_examples_parse() {
     let page = read_page("docs/atmosphere.md");
@@ -394,7 +398,24 @@ fn atmosphere_page_examples_parse() {
         }
     }
     assert!(synthetic_examples >= 1, "no synthetic TOML example");
-    // One example per format ingest reads (SoundingFormat's variants).
+    // Binary formats have no example (a page cannot show their bytes), but a section whose
+    // heading names them.
+    for (format, name) in BINARY_FORMATS {
+        assert_eq!(
+            serde_json::to_value(format).unwrap(),
+            serde_json::json!(name)
+        );
+        assert!(
+            !formats.contains(name),
+            "{name} is binary, yet has a text example"
+        );
+        assert!(
+            page.lines()
+                .any(|l| l.starts_with("###") && l.to_lowercase().contains(name)),
+            "docs/atmosphere.md has no section heading naming the binary format {name}"
+        );
+    }
+    // One example per text format ingest reads (SoundingFormat's other variants).
     let expected: BTreeSet<String> = [
         "normalized_csv",
         "wyoming_text_list",

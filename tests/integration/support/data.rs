@@ -4,7 +4,8 @@
 //! * `tests/data/soundings/` — real radiosonde soundings (14 normalised CSVs, `pressure_levels/`,
 //!   `raw/`), copied from the project's shared sounding collection with their provenance lines
 //!   (see its README.md), and in `public/` real archive files from public projects' test suites
-//!   (siphon, SHARPpy, sounding-wyoming-text-list), with their provenance and licences;
+//!   (siphon, SHARPpy, sounding-wyoming-text-list), with their provenance and licences, and in
+//!   `netcdf/` real ARM and GRUAN netCDF soundings (provenance in its README);
 //! * `data/` — the soundings, paper atmospheres and scenes shipped with the program;
 //! * `tests/fixtures/` — other crafted or captured inputs.
 //!
