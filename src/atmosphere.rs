@@ -240,19 +240,32 @@ pub fn load_atmosphere(
             "U.S. Standard Atmosphere 1976 (dry, surface at sea level)".to_string(),
         ),
     };
-    let refractive =
-        RefractiveAtmosphere::new(column.clone(), options.wavelength_nm).map_err(|source| {
-            AtmosphereError::Refractivity {
-                source_name: source_name.clone(),
-                source,
-            }
-        })?;
+    let mut loaded = atmosphere_from_column(source, column, description, options.wavelength_nm)?;
+    loaded.sounding = sounding;
+    loaded.top_of_data_m = top_of_data_m;
+    Ok(loaded)
+}
+
+/// A model atmosphere built in memory (e.g. the layers fitted to a sounding), refracted at
+/// `wavelength_nm`; `source` names it in messages and outputs. No sounding, defined everywhere.
+pub fn atmosphere_from_column(
+    source: &AtmosphereSource,
+    column: Arc<dyn AirColumn>,
+    description: String,
+    wavelength_nm: f64,
+) -> Result<LoadedAtmosphere, AtmosphereError> {
+    let refractive = RefractiveAtmosphere::new(column.clone(), wavelength_nm).map_err(|e| {
+        AtmosphereError::Refractivity {
+            source_name: source.to_string(),
+            source: e,
+        }
+    })?;
     Ok(LoadedAtmosphere {
         source: source.clone(),
-        sounding,
+        sounding: None,
         column,
         refractive,
-        top_of_data_m,
+        top_of_data_m: None,
         description,
     })
 }

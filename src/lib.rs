@@ -22,6 +22,7 @@
 
 pub mod analysis;
 pub mod atmosphere;
+pub mod compare;
 pub mod input;
 pub mod jobs;
 pub mod output;

@@ -1,11 +1,13 @@
 //! Command-line layer: raw arguments (clap; bad values are usage errors, exit status 2, through
 //! value parsers) → the typed requests of the library's jobs layer (`ghostship::jobs`) → their
 //! products, printed or written. One file per command: [`profile`] (stages 1–3 and their
-//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`pipeline`] (batch
+//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`compare`]
+//! (measured against synthetic layers), [`pipeline`] (batch
 //! runs of all three, shards and merge) and [`bench`] (time against error, the stress suite).
 //! Errors go back to `main` as one `anyhow` chain.
 
 pub mod bench;
+pub mod compare;
 pub mod pipeline;
 pub mod profile;
 pub mod render;
@@ -48,6 +50,10 @@ pub enum Command {
     /// Render what a camera sees through the scene's atmosphere: horizon, sea, sky, cards and
     /// sun, to PNG and/or EXR.
     Render(render::RenderArgs),
+    /// Measured against synthetic: trace and render a scene through a sounding and through
+    /// synthetic layers (by default fitted to it), and report what differs: images of each
+    /// target, horizons, trapped rays, ducts, RMSE/SSIM; writes compare.json and figures.
+    Compare(compare::CompareArgs),
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
     /// Benchmarks: `bench accuracy` measures the tracer's error against its time per ray and
@@ -67,6 +73,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Profile(args) => profile::run(args, cli.quiet),
         Command::Trace(args) => trace::run(args, cli.quiet),
         Command::Render(args) => render::run(args, cli.quiet),
+        Command::Compare(args) => compare::run(args, cli.quiet),
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
         Command::Bench(args) => bench::run(args, cli.quiet),
     }

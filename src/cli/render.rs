@@ -26,7 +26,7 @@ fn parse_output(text: &str) -> Result<PathBuf, String> {
 }
 
 /// `--tolerance-m`: within the tracer's accepted range.
-fn parse_tolerance(text: &str) -> Result<f64, String> {
+pub(super) fn parse_tolerance(text: &str) -> Result<f64, String> {
     let v: f64 = text
         .parse()
         .map_err(|_| format!("{text:?} is not a number"))?;
@@ -35,7 +35,7 @@ fn parse_tolerance(text: &str) -> Result<f64, String> {
 }
 
 /// `--exposure`: finite and > 0.
-fn parse_exposure(text: &str) -> Result<f64, String> {
+pub(super) fn parse_exposure(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
         _ => Err(format!("{text:?} is not a finite number > 0")),

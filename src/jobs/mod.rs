@@ -1,11 +1,11 @@
 //! Jobs — the library layer behind `profile`, `trace`, `render` and `pipeline run`.
 //!
 //! In: one typed request per job kind — [`ProfileRequest`], [`TraceJobRequest`],
-//! [`RenderRequest`] — built from command-line flags or from a pipeline file and validated once
+//! [`RenderRequest`], [`CompareRequest`] — built from command-line flags or from a pipeline file and validated once
 //! when it is built. Out: the job's products as named bytes ([`Product`]); nothing here but
 //! [`writer`] touches the output folder, and [`manifest`] records what was written.
 //!
-//! * [`profile`], [`trace`], [`render`] — request → products, one module per kind.
+//! * [`profile`], [`trace`], [`render`], [`compare`] — request → products, one module per kind.
 //! * [`cache`] — each atmosphere (fitted profile and refractive table) is loaded once per run and
 //!   shared by every job that names it.
 //! * [`writer`] — atomic writes (temporary file + rename) and removal of dead runs' temp files.
@@ -13,6 +13,7 @@
 //! * [`run`] — the job loop: skip unchanged jobs, run the rest `-j N` at a time, shards, merge.
 
 pub mod cache;
+pub mod compare;
 pub mod manifest;
 pub mod profile;
 pub mod render;
@@ -23,6 +24,7 @@ pub mod writer;
 use std::sync::Arc;
 
 pub use cache::AtmosphereCache;
+pub use compare::CompareRequest;
 pub use profile::ProfileRequest;
 pub use render::RenderRequest;
 pub use trace::TraceJobRequest;
@@ -55,6 +57,8 @@ pub enum JobRequest {
     Trace(TraceJobRequest),
     /// A scene rendered at one or more sizes.
     Render(RenderRequest),
+    /// A measured sounding against synthetic layers through one scene.
+    Compare(Box<CompareRequest>),
 }
 
 impl JobRequest {
@@ -64,6 +68,7 @@ impl JobRequest {
             JobRequest::Profile(_) => "profile",
             JobRequest::Trace(_) => "trace",
             JobRequest::Render(_) => "render",
+            JobRequest::Compare(_) => "compare",
         }
     }
 
@@ -73,6 +78,7 @@ impl JobRequest {
             JobRequest::Profile(r) => Some(&r.atmosphere),
             JobRequest::Trace(r) => Some(&r.atmosphere),
             JobRequest::Render(r) => r.atmosphere.as_ref(),
+            JobRequest::Compare(r) => Some(&r.measured),
         }
     }
 
@@ -83,7 +89,16 @@ impl JobRequest {
             .and_then(|a| a.source.path())
             .map(|p| vec![p.to_path_buf()])
             .unwrap_or_default();
-        if let JobRequest::Render(r) = self {
+        let render = match self {
+            JobRequest::Render(r) => Some(r),
+            JobRequest::Compare(c) => {
+                let synthetic = c.synthetic.as_ref().and_then(|s| s.source.path());
+                files.extend(synthetic.map(|p| p.to_path_buf()));
+                Some(&c.render)
+            }
+            _ => None,
+        };
+        if let Some(r) = render {
             files.extend(r.scene.source_path.clone());
             files.extend(r.scene.cards.iter().map(|c| c.image_path.clone()));
         }
@@ -100,6 +115,13 @@ impl JobRequest {
                 "atmosphere": r.atmosphere,
                 "scene_sha256": r.scene.hash_hex,
             })),
+            JobRequest::Compare(c) => serde_json::to_value(serde_json::json!({
+                "settings": c.render.settings,
+                "measured": c.measured,
+                "synthetic": c.synthetic,
+                "rays": c.trace.ray_count(),
+                "scene_sha256": c.render.scene.hash_hex,
+            })),
         };
         value.unwrap_or(serde_json::Value::Null)
     }
@@ -110,6 +132,7 @@ impl JobRequest {
             JobRequest::Profile(r) => Ok(r.products(&*cache.get(&r.atmosphere)?)?.into_products()),
             JobRequest::Trace(r) => r.products(&*cache.get(&r.atmosphere)?, true),
             JobRequest::Render(r) => r.products(cache),
+            JobRequest::Compare(c) => c.products(cache),
         }
     }
 }
@@ -166,6 +189,9 @@ pub enum JobError {
     /// An image could not be encoded.
     #[error(transparent)]
     Film(#[from] crate::output::film::FilmExportError),
+    /// Measured and synthetic could not be compared (images, figures).
+    #[error("cannot compare: {0}")]
+    Compare(String),
     /// A file could not be written.
     #[error(transparent)]
     Write(#[from] crate::output::WriteError),

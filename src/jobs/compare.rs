@@ -1,0 +1,370 @@
+//! Jobs — compare. In: a [`CompareRequest`] (a measured sounding, optionally a synthetic
+//! atmosphere file, a scene) and the atmosphere cache. Out: a [`CompareOutcome`] and the
+//! products `compare.json`, `measured.png`, `synthetic.png`, `side_by_side.png`,
+//! `profiles.png`, `transfer.png` and, when the synthetic atmosphere is the layer fit,
+//! `fitted_layers.toml`.
+//!
+//! Without a synthetic file, the synthetic atmosphere is the paper-style layers fitted to the
+//! sounding ([`crate::profile::layer_fit`], surface to +3000 m). Both atmospheres are traced
+//! with one fan spanning the camera's vertical field (targets: the scene's cards, ground to top)
+//! and rendered through the same scene at the same size.
+
+use std::sync::Arc;
+
+use super::cache::AtmosphereRequest;
+use super::render::{RenderRequest, RenderSettings};
+use super::trace::{ElevationSpec, TraceJobRequest};
+use super::{AtmosphereCache, JobError, Product};
+use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere, atmosphere_from_column};
+use crate::compare::metrics::side_by_side_png;
+use crate::compare::plot::{ProfilesPlot, profiles_png, transfer_png};
+use crate::compare::{Comparison, FitSummary, SideSummary, image_metrics};
+use crate::profile::layer_fit::{LayerFit, LayerFitOptions, fit_layers};
+use crate::refractivity::{RegimeOptions, detect_regimes};
+use crate::scene::Scene;
+use crate::tracer::TracerConfig;
+
+/// Default number of rays of the comparison fan across the camera's vertical field.
+pub const DEFAULT_COMPARE_RAYS: usize = 801;
+/// Targets used when the scene has no cards: (distance m, height m).
+pub const DEFAULT_TARGETS: [(f64, f64); 2] = [(10_000.0, 20.0), (20_000.0, 20.0)];
+/// Top of the duct search and of `profiles.png` (m above the surface).
+const PROFILE_TOP_M: f64 = 1_500.0;
+
+/// A validated comparison request.
+#[derive(Debug, Clone)]
+pub struct CompareRequest {
+    /// The scene rendered through the measured sounding (its request names the sounding).
+    pub render: RenderRequest,
+    /// The measured sounding.
+    pub measured: AtmosphereRequest,
+    /// The synthetic atmosphere file; `None`: the layers fitted to the sounding.
+    pub synthetic: Option<AtmosphereRequest>,
+    /// The fan traced through both.
+    pub trace: TraceJobRequest,
+    /// The targets, (distance m, top height m): the scene's cards, or [`DEFAULT_TARGETS`].
+    pub targets: Vec<(f64, f64)>,
+}
+
+impl CompareRequest {
+    /// Check the parts: `measured` must be a sounding and `synthetic` (if given) a synthetic
+    /// TOML or `us1976`; `settings` render the scene (its atmosphere replaced by `measured`).
+    pub fn new(
+        scene: Scene,
+        measured: AtmosphereSource,
+        sounding_time: Option<String>,
+        synthetic: Option<AtmosphereSource>,
+        settings: RenderSettings,
+        rays: usize,
+    ) -> Result<Self, JobError> {
+        let invalid = |m: String| Err(JobError::Invalid(m));
+        if !matches!(measured, AtmosphereSource::Sounding(_)) {
+            return invalid(format!(
+                "the measured atmosphere must be a sounding file, not {measured}"
+            ));
+        }
+        if matches!(synthetic, Some(AtmosphereSource::Sounding(_))) {
+            return invalid("the synthetic atmosphere must be a .toml file or us1976".into());
+        }
+        if !(3..=super::trace::MAX_RAYS).contains(&rays) {
+            return invalid(format!(
+                "rays must be 3 to {}, got {rays}",
+                super::trace::MAX_RAYS
+            ));
+        }
+        let settings = RenderSettings {
+            atmosphere: Some(measured),
+            sounding_time,
+            straight: false,
+            sizes: vec![settings.sizes.first().copied().flatten()],
+            ..settings
+        };
+        let render = RenderRequest::new(scene, settings)?;
+        let Some(measured) = render.atmosphere.clone() else {
+            return invalid("the scene traces straight rays".into());
+        };
+        let synthetic = synthetic.map(|source| AtmosphereRequest {
+            source,
+            options: crate::atmosphere::AtmosphereOptions {
+                sounding_time: None,
+                ..measured.options.clone()
+            },
+        });
+        let targets = scene_targets(&render.scene);
+        let trace = fan_request(&render, &measured, &targets, rays)?;
+        Ok(CompareRequest {
+            render,
+            measured,
+            synthetic,
+            trace,
+            targets,
+        })
+    }
+
+    /// Rough work: two renders and two fans.
+    pub fn cost(&self) -> f64 {
+        let (w, h) = self
+            .render
+            .settings
+            .sizes
+            .first()
+            .copied()
+            .flatten()
+            .unwrap_or((
+                self.render.scene.camera.width,
+                self.render.scene.camera.height,
+            ));
+        let spp = self
+            .render
+            .settings
+            .spp
+            .unwrap_or(self.render.scene.camera.samples_per_pixel) as f64;
+        2.0 * (50_000.0 + 0.3 * w as f64 * h as f64 * spp + 300.0 * self.trace.ray_count() as f64)
+    }
+
+    /// Run the comparison: load (or fit) both atmospheres, trace, render, compare.
+    pub fn outcome(&self, cache: &AtmosphereCache) -> Result<CompareOutcome, JobError> {
+        let measured = cache.get(&self.measured)?;
+        let (synthetic, fit) = match &self.synthetic {
+            Some(request) => (cache.get(request)?, None),
+            None => {
+                let (atm, fit) = fitted_atmosphere(&measured, &self.measured)?;
+                (Arc::new(atm), Some(fit))
+            }
+        };
+        let side = |atm: &LoadedAtmosphere| -> Result<_, JobError> {
+            let (report, _) = self.trace.report(atm, false)?;
+            let top = atm.refractive.surface_height_m() + PROFILE_TOP_M;
+            let layers = detect_regimes(&atm.refractive, top, &RegimeOptions::default());
+            let (film, _) = self.render.film(None, Some(atm), true)?;
+            Ok((report, layers, film))
+        };
+        let (m, s) = (side(&measured)?, side(&synthetic)?);
+        let exposure = self.render.settings.exposure;
+        let metric_err =
+            |e: crate::compare::metrics::CompareError| JobError::Compare(e.to_string());
+        let image = image_metrics(&m.2, &s.2, exposure).map_err(metric_err)?;
+        let comparison = Comparison::new(
+            SideSummary::new(
+                measured.source.to_string(),
+                measured.description.clone(),
+                &m.0,
+                &m.1,
+                &self.targets,
+            ),
+            SideSummary::new(
+                synthetic.source.to_string(),
+                synthetic.description.clone(),
+                &s.0,
+                &s.1,
+                &self.targets,
+            ),
+            image,
+            fit.as_ref().map(FitSummary::from),
+        );
+        let figures = figures(
+            &measured,
+            &synthetic,
+            &comparison,
+            (&m.0, &s.0),
+            &self.targets,
+        )?;
+        let gain = crate::compare::metrics::DIFFERENCE_GAIN;
+        let labels = [
+            "measured",
+            "synthetic",
+            &format!("|synthetic − measured| × {gain}"),
+        ];
+        let side_by_side = side_by_side_png(&m.2, &s.2, exposure, labels).map_err(metric_err)?;
+        let png = |f: &crate::render::Film| {
+            crate::output::png::encode_png(f, exposure)
+                .map_err(|e| JobError::Compare(e.to_string()))
+        };
+        Ok(CompareOutcome {
+            measured_png: png(&m.2)?,
+            synthetic_png: png(&s.2)?,
+            side_by_side_png: side_by_side,
+            profiles_png: figures.0,
+            transfer_png: figures.1,
+            fitted_toml: fit.map(|f| f.to_toml()),
+            comparison,
+        })
+    }
+
+    /// The products (see the module documentation).
+    pub fn products(&self, cache: &AtmosphereCache) -> Result<Vec<Product>, JobError> {
+        self.outcome(cache)?.into_products()
+    }
+}
+
+/// The fan: the camera's vertical field, from the camera height, to every card (ground to top).
+/// The scene's cards as targets (distance, top height), in order, duplicates dropped; the
+/// [`DEFAULT_TARGETS`] for a scene without cards.
+fn scene_targets(scene: &Scene) -> Vec<(f64, f64)> {
+    let mut targets: Vec<(f64, f64)> = Vec::new();
+    for c in &scene.cards {
+        let t = (c.distance_m, c.base_m + c.height_m);
+        if !targets.contains(&t) {
+            targets.push(t);
+        }
+    }
+    if targets.is_empty() {
+        targets = DEFAULT_TARGETS.to_vec();
+    }
+    targets
+}
+
+fn fan_request(
+    render: &RenderRequest,
+    measured: &AtmosphereRequest,
+    targets: &[(f64, f64)],
+    rays: usize,
+) -> Result<TraceJobRequest, JobError> {
+    let scene = &render.scene;
+    let frame = scene.camera.frame();
+    let (w, h) = (scene.camera.width as f64, scene.camera.height as f64);
+    let elevations: Vec<f64> = [
+        (0.0, 0.0),
+        (w / 2.0, 0.0),
+        (w, 0.0),
+        (0.0, h),
+        (w / 2.0, h),
+        (w, h),
+    ]
+    .iter()
+    .map(|&(x, y)| frame.direction(x, y).1.to_degrees())
+    .collect();
+    let lo = elevations.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = elevations.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut distances: Vec<f64> = targets.iter().map(|t| t.0).collect();
+    let mut heights: Vec<f64> = targets.iter().map(|t| t.1).collect();
+    for v in [&mut distances, &mut heights] {
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+    }
+    let tracer = TracerConfig {
+        tolerance_m: render.settings.tolerance_m,
+        ..TracerConfig::default()
+    };
+    let spec = ElevationSpec::Range {
+        from_deg: lo,
+        to_deg: hi,
+        count: rays,
+    };
+    TraceJobRequest::new(
+        measured.clone(),
+        scene.camera.height_m,
+        &spec,
+        distances,
+        heights,
+        tracer,
+        false,
+    )
+}
+
+/// The synthetic atmosphere fitted to `measured`'s sounding, refracted like it.
+fn fitted_atmosphere(
+    measured: &LoadedAtmosphere,
+    request: &AtmosphereRequest,
+) -> Result<(LoadedAtmosphere, LayerFit), JobError> {
+    let Some(sounding) = measured.sounding.as_ref() else {
+        return Err(JobError::Invalid(format!(
+            "{} is not a sounding; nothing to fit",
+            measured.source
+        )));
+    };
+    let profile_err = |source| {
+        JobError::from(crate::atmosphere::AtmosphereError::Profile {
+            source_name: measured.source.to_string(),
+            source,
+        })
+    };
+    let fit = fit_layers(sounding, &LayerFitOptions::default()).map_err(profile_err)?;
+    let column = fit.to_synthetic().map_err(profile_err)?;
+    let stem = measured.source.stem();
+    let source = AtmosphereSource::Synthetic(format!("{stem}.fitted_layers.toml").into());
+    let description = format!(
+        "{} layers fitted to {} (rms {:.2} K)",
+        fit.layers.len(),
+        measured.description,
+        fit.rms_k
+    );
+    let atm = atmosphere_from_column(
+        &source,
+        Arc::new(column),
+        description,
+        request.options.wavelength_nm,
+    )?;
+    Ok((atm, fit))
+}
+
+/// `profiles.png` and `transfer.png`.
+fn figures(
+    measured: &LoadedAtmosphere,
+    synthetic: &LoadedAtmosphere,
+    comparison: &Comparison,
+    reports: (&crate::analysis::TraceReport, &crate::analysis::TraceReport),
+    targets: &[(f64, f64)],
+) -> Result<(Vec<u8>, Vec<u8>), JobError> {
+    let plot_err = |m: String| JobError::Compare(format!("cannot draw the figures: {m}"));
+    let layers = comparison
+        .fit
+        .as_ref()
+        .map(|f| f.layers.as_slice())
+        .unwrap_or(&[]);
+    let levels = measured
+        .sounding
+        .as_ref()
+        .map(|s| s.levels.as_slice())
+        .unwrap_or(&[]);
+    let title = format!("{} — measured and synthetic", measured.source.stem());
+    let profiles = profiles_png(&ProfilesPlot {
+        measured: &measured.refractive,
+        synthetic: &synthetic.refractive,
+        levels,
+        layers,
+        top_agl_m: PROFILE_TOP_M,
+        title: &title,
+    })
+    .map_err(plot_err)?;
+    let transfer = transfer_png(reports.0, reports.1, targets).map_err(plot_err)?;
+    Ok((profiles, transfer))
+}
+
+/// What a comparison made, as bytes (nothing written yet).
+pub struct CompareOutcome {
+    /// The comparison (summary text and `compare.json` are made from it).
+    pub comparison: Comparison,
+    /// The render through the measured sounding.
+    pub measured_png: Vec<u8>,
+    /// The render through the synthetic atmosphere.
+    pub synthetic_png: Vec<u8>,
+    /// measured | synthetic | difference.
+    pub side_by_side_png: Vec<u8>,
+    /// T(h) and dN/dh of both.
+    pub profiles_png: Vec<u8>,
+    /// Both transfer curves.
+    pub transfer_png: Vec<u8>,
+    /// The fitted layers as a synthetic TOML, when the synthetic atmosphere is the fit.
+    pub fitted_toml: Option<String>,
+}
+
+impl CompareOutcome {
+    /// The files (see the module documentation).
+    pub fn into_products(self) -> Result<Vec<Product>, JobError> {
+        let mut json = serde_json::to_string_pretty(&self.comparison)?;
+        json.push('\n');
+        let mut products = vec![
+            Product::new("compare.json", json.into_bytes()),
+            Product::new("measured.png", self.measured_png),
+            Product::new("synthetic.png", self.synthetic_png),
+            Product::new("side_by_side.png", self.side_by_side_png),
+            Product::new("profiles.png", self.profiles_png),
+            Product::new("transfer.png", self.transfer_png),
+        ];
+        if let Some(toml) = self.fitted_toml {
+            products.push(Product::new("fitted_layers.toml", toml.into_bytes()));
+        }
+        Ok(products)
+    }
+}
