@@ -19,6 +19,9 @@
 //! scene = "../data/scenes/fig04_superior_mirage.toml"
 //! atmosphere = ["../data/*.csv"]         # optional: one job per atmosphere instead of the scene's
 //! name = "ghost_ship_{stem}"
+//! [[compare]]                            # measured against synthetic layers (fitted if absent)
+//! atmosphere = "../data/*.csv"           # the measured soundings, one job each
+//! scene = "../data/scenes/fig04_superior_mirage.toml"
 //! ```
 
 mod expand;
@@ -30,7 +33,7 @@ use std::path::{Path, PathBuf};
 use toml::de::{DeTable, DeValue};
 
 pub use expand::{TimeSelection, glob_files, relative_label};
-pub use tables::{PROFILE_KEYS, RENDER_KEYS, TRACE_KEYS};
+pub use tables::{COMPARE_KEYS, PROFILE_KEYS, RENDER_KEYS, TRACE_KEYS};
 
 use crate::jobs::run::PlannedJob;
 use tables::{NamedJob, Problem, Table};
@@ -89,7 +92,7 @@ pub struct ResolvedPipeline {
     pub source: PathBuf,
     /// SHA-256 of the pipeline file.
     pub sha256: String,
-    /// Every job, in file order (profile, trace, then render tables).
+    /// Every job, in file order (profile, trace, render, then compare tables).
     pub jobs: Vec<PlannedJob>,
 }
 
@@ -164,15 +167,15 @@ fn read_document(
                 defaults = t.clone();
                 check_default_keys(t, problems);
             }
-            ("profile" | "trace" | "render", DeValue::Array(_)) => {}
-            (k @ ("name" | "defaults" | "profile" | "trace" | "render"), v) => problems.push((
+            ("profile" | "trace" | "render" | "compare", DeValue::Array(_)) => {}
+            (k @ ("name" | "defaults" | "profile" | "trace" | "render" | "compare"), v) => problems.push((
                 value.span(),
                 format!("{k}: unexpected {} here", v.type_str()),
             )),
             (k, _) => problems.push((
                 key.span(),
                 format!(
-                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]] or [[render]])"
+                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]], [[render]] or [[compare]])"
                 ),
             )),
         }
@@ -181,6 +184,7 @@ fn read_document(
         ("profile", PROFILE_KEYS),
         ("trace", TRACE_KEYS),
         ("render", RENDER_KEYS),
+        ("compare", COMPARE_KEYS),
     ] {
         let Some(DeValue::Array(items)) = doc.get(kind).map(|v| v.get_ref()) else {
             continue;
@@ -197,7 +201,8 @@ fn read_document(
     if named.is_empty() && problems.is_empty() {
         problems.push((
             0..0,
-            "no jobs: add at least one [[profile]], [[trace]] or [[render]] table".into(),
+            "no jobs: add at least one [[profile]], [[trace]], [[render]] or [[compare]] table"
+                .into(),
         ));
     }
     (name, named)
@@ -206,7 +211,7 @@ fn read_document(
 fn check_default_keys(defaults: &DeTable, problems: &mut Vec<Problem>) {
     for key in defaults.keys() {
         let k: &str = key.get_ref();
-        let known = [PROFILE_KEYS, TRACE_KEYS, RENDER_KEYS]
+        let known = [PROFILE_KEYS, TRACE_KEYS, RENDER_KEYS, COMPARE_KEYS]
             .iter()
             .any(|keys| keys.contains(&k));
         if !known || k == "name" {
@@ -260,6 +265,7 @@ fn job_table(
     let jobs = match kind {
         "profile" => tables::profile_jobs(&mut table),
         "trace" => tables::trace_jobs(&mut table),
+        "compare" => tables::compare_jobs(&mut table),
         _ => tables::render_jobs(&mut table, &own_keys),
     };
     problems.append(&mut table.problems);

@@ -1,4 +1,4 @@
-//! Pipeline — job tables. In: one `[[profile]]`, `[[trace]]` or `[[render]]` table (the
+//! Pipeline — job tables. In: one `[[profile]]`, `[[trace]]`, `[[render]]` or `[[compare]]` table (the
 //! `[defaults]` merged in) with the spans of its keys. Out: the named, validated job requests
 //! it expands to (every atmosphere × scene × observer height it names), or the problems found,
 //! each at the key it concerns.
@@ -14,7 +14,7 @@ use crate::atmosphere::AtmosphereOptions;
 use crate::jobs::cache::AtmosphereRequest;
 use crate::jobs::render::{RenderSettings, parse_size};
 use crate::jobs::trace::parse_elevation_spec;
-use crate::jobs::{JobRequest, ProfileRequest, RenderRequest, TraceJobRequest};
+use crate::jobs::{CompareRequest, JobRequest, ProfileRequest, RenderRequest, TraceJobRequest};
 use crate::output::film::ImageFormat;
 use crate::scene::Scene;
 use crate::tracer::TracerConfig;
@@ -64,6 +64,21 @@ pub const RENDER_KEYS: &[&str] = &[
     "exposure",
     "exact",
     "straight",
+];
+
+/// Keys a `[[compare]]` table accepts.
+pub const COMPARE_KEYS: &[&str] = &[
+    "name",
+    "atmosphere",
+    "sounding_time",
+    "igra2_time",
+    "synthetic",
+    "scene",
+    "size",
+    "spp",
+    "tolerance_m",
+    "exposure",
+    "rays",
 ];
 
 /// A problem at a byte range of the pipeline file.
@@ -141,6 +156,22 @@ struct RawRender {
     exposure: Option<f64>,
     exact: Option<bool>,
     straight: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCompare {
+    name: Option<String>,
+    atmosphere: OneOrMany<String>,
+    #[serde(alias = "igra2_time")]
+    sounding_time: Option<String>,
+    synthetic: Option<String>,
+    scene: String,
+    size: Option<String>,
+    spp: Option<u32>,
+    tolerance_m: Option<f64>,
+    exposure: Option<f64>,
+    rays: Option<usize>,
 }
 
 /// A job table with the spans of its keys, and where problems go.
@@ -424,6 +455,72 @@ fn render_settings(t: &mut Table, raw: &RawRender) -> Option<RenderSettings> {
         straight: raw.straight.unwrap_or(false),
         ..d
     })
+}
+
+/// The jobs of a `[[compare]]` table: one per measured sounding.
+pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawCompare>() else {
+        return Vec::new();
+    };
+    let d = RenderSettings::default();
+    let size = match raw.size.as_deref().map(parse_size).transpose() {
+        Ok(size) => size,
+        Err(e) => {
+            t.problem("size", e);
+            return Vec::new();
+        }
+    };
+    let settings = RenderSettings {
+        sizes: vec![size],
+        spp: raw.spp,
+        tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
+        exposure: raw.exposure.unwrap_or(d.exposure),
+        ..d
+    };
+    let scene_path = t.folder.join(&raw.scene);
+    if let Err(e) = check_file(&scene_path) {
+        t.problem("scene", e);
+        return Vec::new();
+    }
+    let scene = match Scene::from_file(&scene_path) {
+        Ok(s) => s,
+        Err(e) => {
+            t.problem("scene", crate::jobs::run::error_text(&e));
+            return Vec::new();
+        }
+    };
+    let synthetic = raw.synthetic.as_deref().map(|name| {
+        let source = crate::atmosphere::AtmosphereSource::parse(name);
+        match source.path() {
+            Some(p) => {
+                crate::atmosphere::AtmosphereSource::parse(&t.folder.join(p).to_string_lossy())
+            }
+            None => source,
+        }
+    });
+    if let Some(Err(e)) = synthetic.as_ref().and_then(|s| s.path()).map(check_file) {
+        t.problem("synthetic", e);
+        return Vec::new();
+    }
+    let template = raw.name.clone().unwrap_or_else(|| "compare_{stem}".into());
+    let mut jobs = Vec::new();
+    for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {
+        let name = t.name(&template, &choice.stem, &stem(&scene_path), None);
+        let request = CompareRequest::new(
+            scene.clone(),
+            choice.source.clone(),
+            choice.sounding_time.clone(),
+            synthetic.clone(),
+            settings.clone(),
+            raw.rays
+                .unwrap_or(crate::jobs::compare::DEFAULT_COMPARE_RAYS),
+        );
+        match request {
+            Ok(r) => jobs.push((name, JobRequest::Compare(Box::new(r)))),
+            Err(e) => t.problem_in_message(e.to_string()),
+        }
+    }
+    jobs
 }
 
 fn scene_paths(t: &mut Table, names: &[String]) -> Vec<std::path::PathBuf> {

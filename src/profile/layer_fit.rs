@@ -137,9 +137,42 @@ pub fn fit_layers(
             }
         })?
     };
-    let knots = problem.knots(&breaks);
+    let knots = anchor_unsupported_knots(&problem.knots(&breaks), &data.h);
     let temps = solve_knot_temperatures(&data, &knots);
     Ok(assemble(sounding, &data, &knots, &temps, termination))
+}
+
+/// Knots moved onto the nearest level where a layer next to them holds fewer than two levels.
+///
+/// Such a knot's temperature is fixed only by a level near its far end (with a small hat-basis
+/// weight), so the least squares extrapolates it freely: between sparse significant levels the
+/// optimiser can place two knots in a gap and draw a 20 K spike through it at zero residual.
+/// A knot on a level is held by that level's own temperature. Knots of well-sampled layers stay
+/// where the optimiser put them; knots that land on the same level are merged.
+fn anchor_unsupported_knots(knots: &[f64], levels_m: &[f64]) -> Vec<f64> {
+    let count = |a: f64, b: f64| levels_m.iter().filter(|&&h| h >= a && h <= b).count();
+    let last = knots.len() - 1;
+    let mut out: Vec<f64> = Vec::with_capacity(knots.len());
+    for (i, &k) in knots.iter().enumerate() {
+        let below = i > 0 && count(knots[i - 1], k) < 2;
+        let above = i < last && count(k, knots[i + 1]) < 2;
+        let k = if (below || above) && 0 < i && i < last {
+            levels_m
+                .iter()
+                .copied()
+                .min_by(|a, b| (a - k).abs().total_cmp(&(b - k).abs()))
+                .unwrap_or(k)
+        } else {
+            k
+        };
+        if out.last().is_none_or(|&p| k > p) {
+            out.push(k);
+        }
+    }
+    if out.len() < 2 {
+        return vec![knots[0], knots[last]];
+    }
+    out
 }
 
 fn check_options(o: &LayerFitOptions) -> Result<(), ProfileError> {
@@ -202,12 +235,13 @@ fn select_levels(s: &Sounding, o: &LayerFitOptions) -> Result<Data, ProfileError
             d.w.push(w);
         }
     }
-    if d.h.len() < 3 {
+    // Two levels fit exactly as one straight layer; fewer leave nothing to fit.
+    if d.h.len() < 2 {
         return Err(ProfileError::BadSounding {
             path: s.source.clone(),
             line: s.levels.first().map_or(0, |l| l.line),
             message: format!(
-                "{} usable levels between {:.0} m and {:.0} m; a layer fit needs at least 3",
+                "{} usable levels between {:.0} m and {:.0} m; a layer fit needs at least 2",
                 d.h.len(),
                 range.0,
                 range.1
