@@ -271,7 +271,9 @@ pub fn atmosphere_from_column(
 }
 
 /// "station, launched time" from the sounding's metadata, or the file name. The station keeps
-/// its first two `;`-separated parts (name and WMO number); the time drops parenthesised notes.
+/// its first two `;`-separated parts (name and WMO number); the time drops parenthesised notes,
+/// and NCAR/EOL's comma form (`2024, 02, 26, 11:20:12`, kept as given by normalised CSVs
+/// converted from ESC files) is shown as `2024-02-26 11:20:12 UTC`.
 fn sounding_description(sounding: &Sounding) -> String {
     let m = &sounding.metadata;
     let station = m
@@ -281,7 +283,7 @@ fn sounding_description(sounding: &Sounding) -> String {
         .filter(|s| !s.is_empty());
     let time = |key: &str| {
         m.get(key)
-            .map(|s| s.split('(').next().unwrap_or("").trim().to_string())
+            .map(|s| crate::sounding::time::readable_time(s.split('(').next().unwrap_or("")))
             .filter(|s| !s.is_empty())
             .map(|t| {
                 if t.contains("UTC") {
@@ -305,6 +307,41 @@ mod tests {
 
     fn data(name: &str) -> PathBuf {
         PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name)
+    }
+
+    #[test]
+    fn eol_comma_times_are_shown_as_dates() {
+        let sounding = |pairs: &[(&str, &str)]| Sounding {
+            source: PathBuf::from("b.csv"),
+            format: crate::sounding::SoundingFormat::NormalizedCsv,
+            metadata: pairs
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect(),
+            levels: Vec::new(),
+            warnings: Vec::new(),
+        };
+        // The `#` lines of tests/data/soundings/Bjornoya-01028_2024022611.csv.
+        let s = sounding(&[
+            (
+                "station",
+                "Bjornoya (Bear Island), Norway; WMO 01028; IGRA2 SVM00001028",
+            ),
+            ("launch_time_utc", "2024, 02, 26, 11:20:12"),
+            ("nominal_time_utc", "2024, 02, 26, 12:00:00"),
+        ]);
+        assert_eq!(
+            sounding_description(&s),
+            "Bjornoya (Bear Island), Norway; WMO 01028, launched 2024-02-26 11:20:12 UTC"
+        );
+        let s = sounding(&[("nominal_time_utc", "2024, 02, 26, 12:00:00 (nominal)")]);
+        assert_eq!(
+            sounding_description(&s),
+            "sounding b.csv, 2024-02-26 12:00:00 UTC (nominal)"
+        );
+        // Other spellings are kept, with "UTC" added when absent.
+        let s = sounding(&[("station", "X"), ("launch_time_utc", "2026-02-05 23:29")]);
+        assert_eq!(sounding_description(&s), "X, launched 2026-02-05 23:29 UTC");
     }
 
     #[test]

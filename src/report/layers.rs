@@ -129,10 +129,20 @@ impl InputReport {
                 .metadata
                 .get("nominal_time_utc")
                 .or_else(|| sounding.metadata.get("launch_time_utc"))
-                .cloned(),
+                .map(|t| report_time(t)),
             levels_read: Some(sounding.levels.len()),
             notes: sounding.warnings.clone(),
         }
+    }
+}
+
+/// A metadata time as reports show it: NCAR/EOL's comma form (`2024, 02, 26, 12:00:00`, kept as
+/// given by normalised CSVs converted from ESC files) becomes `2024-02-26 12` when on the hour,
+/// else `2024-02-26 11:20:12 UTC`; any other text is kept.
+fn report_time(text: &str) -> String {
+    match crate::sounding::time::CommaTime::parse(text) {
+        Some(t) => t.nominal().unwrap_or_else(|| t.readable()),
+        None => text.to_string(),
     }
 }
 
@@ -335,6 +345,29 @@ mod tests {
     use super::*;
     use crate::refractivity::columns::LapseRateColumn;
     use std::sync::Arc;
+
+    #[test]
+    fn input_report_shows_eol_comma_times_as_dates() {
+        let mut sounding = crate::sounding::Sounding {
+            source: "b.csv".into(),
+            format: crate::sounding::SoundingFormat::NormalizedCsv,
+            metadata: Default::default(),
+            levels: Vec::new(),
+            warnings: Vec::new(),
+        };
+        // The `#` lines of tests/data/soundings/Bjornoya-01028_2024022611.csv.
+        let m = &mut sounding.metadata;
+        m.insert("launch_time_utc".into(), "2024, 02, 26, 11:20:12".into());
+        let time =
+            |s: &crate::sounding::Sounding| InputReport::of_sounding("b", "", s).nominal_time_utc;
+        assert_eq!(time(&sounding).as_deref(), Some("2024-02-26 11:20:12 UTC"));
+        let m = &mut sounding.metadata;
+        m.insert("nominal_time_utc".into(), "2024, 02, 26, 12:00:00".into());
+        assert_eq!(time(&sounding).as_deref(), Some("2024-02-26 12"));
+        let m = &mut sounding.metadata;
+        m.insert("nominal_time_utc".into(), "2010-06-01 00".into());
+        assert_eq!(time(&sounding).as_deref(), Some("2010-06-01 00"));
+    }
 
     #[test]
     fn summary_lists_surface_and_inversions_and_json_round_trips() {

@@ -1,5 +1,5 @@
 //! Stage 1 — ingest. In: a sounding file (normalised CSV, University of Wyoming TEXT:LIST or
-//! TEXT:CSV, IGRA2 data or derived, SPC / SHARPpy `%RAW%`). Out: a validated [`Sounding`]: levels sorted by height, in SI
+//! TEXT:CSV, IGRA2 data or derived, SPC / SHARPpy `%RAW%`, NCAR/EOL ESC). Out: a validated [`Sounding`]: levels sorted by height, in SI
 //! units, with every level carrying a height (measured or hypsometric) and its source line.
 //!
 //! Entry points: [`read_sounding`] (a file, plain, gzip or a one-file zip) and [`parse_sounding`]
@@ -7,15 +7,17 @@
 //! chosen by [`ReadOptions::sounding_time`] (canonical form in [`time`]). The
 //! format is detected from the content, never from the extension: IGRA2 header record first →
 //! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; `%TITLE%` then
-//! `%RAW%` lines → SPC / SHARPpy; a CSV header with a
+//! `%RAW%` lines → SPC / SHARPpy; a `Data Type:` line then a `Time Press Temp` column line →
+//! NCAR/EOL ESC; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
 //! CSV. Before any of these, a netCDF magic number ([`is_netcdf`]) sends the bytes to the
 //! `netcdf` reader (cargo feature `netcdf`; without it, [`SoundingError::NetcdfNotBuilt`]).
-//! Readers live in [`csv`], [`wyoming`], [`igra2`] and [`spc`]; the rules every sounding must pass
+//! Readers live in [`csv`], [`wyoming`], [`igra2`], [`spc`] and [`esc`]; the rules every sounding must pass
 //! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
 
 pub mod csv;
 pub mod error;
+pub mod esc;
 pub mod hypsometric;
 pub mod igra2;
 #[cfg(feature = "netcdf")]
@@ -74,6 +76,8 @@ pub enum SoundingFormat {
     Igra2Derived,
     /// SPC / SHARPpy `%TITLE%` / `%RAW%` text.
     SpcRaw,
+    /// NCAR/EOL ESC (EOL Sounding Composite) text, `*.cls` / `*.cls.qc`.
+    EolEsc,
     /// A netCDF sounding (ARM `sondewnpn`, GRUAN RS92/RS41 GDP); binary, read only by a build
     /// with the cargo feature `netcdf`.
     Netcdf,
@@ -89,6 +93,7 @@ impl SoundingFormat {
             SoundingFormat::Igra2Data => "an IGRA2 data file",
             SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
             SoundingFormat::SpcRaw => "an SPC / SHARPpy %RAW% file",
+            SoundingFormat::EolEsc => "an NCAR/EOL ESC sounding",
             SoundingFormat::Netcdf => "an ARM sondewnpn or GRUAN GDP netCDF sounding",
         }
     }
@@ -249,7 +254,8 @@ pub fn parse_sounding(
             source,
             "cannot recognise the format: expected a normalised CSV (header such as \
              pressure_hpa,height_m,temperature_c,dewpoint_c), a University of Wyoming TEXT:LIST \
-             or TEXT:CSV page, an IGRA2 data or derived file, or an SPC / SHARPpy %RAW% file",
+             or TEXT:CSV page, an IGRA2 data or derived file, an SPC / SHARPpy %RAW% file \
+             or an NCAR/EOL ESC sounding",
         )
     })?;
     let mut metadata = BTreeMap::new();
@@ -267,6 +273,7 @@ pub fn parse_sounding(
             igra2::read(source, text, format, time, &mut metadata, &mut warnings)?
         }
         SoundingFormat::SpcRaw => spc::read(source, text, &mut metadata)?,
+        SoundingFormat::EolEsc => esc::read(source, text, &mut metadata, &mut warnings)?,
         // Never detected in text: netCDF is binary and read from its bytes by read_sounding.
         SoundingFormat::Netcdf => {
             return Err(SoundingError::file(
@@ -331,6 +338,7 @@ pub fn detect_format(text: &str) -> Option<SoundingFormat> {
     igra2::detect(text)
         .or_else(|| wyoming::detect(text).then_some(SoundingFormat::WyomingTextList))
         .or_else(|| spc::detect(text).then_some(SoundingFormat::SpcRaw))
+        .or_else(|| esc::detect(text).then_some(SoundingFormat::EolEsc))
         .or_else(|| csv::detect(text))
 }
 

@@ -3,7 +3,8 @@
 //! `2010-06-01 12:00`). Out: the canonical `"YYYY-MM-DD HH"` (UTC) that the readers compare
 //! with, and, when no sounding has that time, a short message: how many there are, the first
 //! and last few and the ones nearest to the time asked for — never the whole list, which for a
-//! decades-long IGRA2 record runs to tens of thousands of entries.
+//! decades-long IGRA2 record runs to tens of thousands of entries. Also: the `yyyy, mm, dd,
+//! hh:mm:ss` times of NCAR/EOL headers ([`CommaTime`]) and their display form.
 
 /// The canonical form `"YYYY-MM-DD HH"` of a nominal time, or why `text` is not one. Accepted:
 /// a date `YYYY-MM-DD`, a space or `T`, an hour `HH`, optionally `:00` (or `:00:00`) and `Z`.
@@ -42,6 +43,78 @@ pub fn canonical_time(text: &str) -> Result<String, String> {
         return Err(bad());
     }
     Ok(format!("{date} {hour}"))
+}
+
+/// A date and time of day (UTC) written the way NCAR/EOL file headers write them:
+/// `2024, 02, 26, 11:20:12` (year, month, day, then `hh:mm:ss`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CommaTime {
+    /// Four-digit year.
+    pub year: u32,
+    /// Month, 1–12.
+    pub month: u32,
+    /// Day of the month, 1–31.
+    pub day: u32,
+    /// Hour, 0–23.
+    pub hour: u32,
+    /// Minute, 0–59.
+    pub minute: u32,
+    /// Second, 0–59.
+    pub second: u32,
+}
+
+impl CommaTime {
+    /// Reads `yyyy, mm, dd, hh:mm:ss` (fields of one or two digits, the year of four, spaces
+    /// optional); `None` for anything else or for an impossible date or time.
+    pub fn parse(text: &str) -> Option<CommaTime> {
+        let number = |s: &str, max_len: usize| {
+            let s = s.trim();
+            let ok = !s.is_empty() && s.len() <= max_len && s.bytes().all(|b| b.is_ascii_digit());
+            ok.then(|| s.parse::<u32>().ok()).flatten()
+        };
+        let parts: Vec<&str> = text.trim().split(',').collect();
+        let [year, month, day, clock] = parts.as_slice() else {
+            return None;
+        };
+        let clock: Vec<&str> = clock.split(':').collect();
+        let [hour, minute, second] = clock.as_slice() else {
+            return None;
+        };
+        let t = CommaTime {
+            year: number(year, 4).filter(|y| *y >= 1000)?,
+            month: number(month, 2).filter(|m| (1..=12).contains(m))?,
+            day: number(day, 2).filter(|d| (1..=31).contains(d))?,
+            hour: number(hour, 2).filter(|h| *h <= 23)?,
+            minute: number(minute, 2).filter(|m| *m <= 59)?,
+            second: number(second, 2).filter(|s| *s <= 59)?,
+        };
+        Some(t)
+    }
+
+    /// `"YYYY-MM-DD HH:MM:SS UTC"`, e.g. `"2024-02-26 11:20:12 UTC"`.
+    pub fn readable(&self) -> String {
+        format!(
+            "{:04}-{:02}-{:02} {:02}:{:02}:{:02} UTC",
+            self.year, self.month, self.day, self.hour, self.minute, self.second
+        )
+    }
+
+    /// The canonical nominal time `"YYYY-MM-DD HH"` ([`canonical_time`]) when the time is on
+    /// the hour; `None` otherwise (a nominal time is an hour).
+    pub fn nominal(&self) -> Option<String> {
+        (self.minute == 0 && self.second == 0).then(|| {
+            format!(
+                "{:04}-{:02}-{:02} {:02}",
+                self.year, self.month, self.day, self.hour
+            )
+        })
+    }
+}
+
+/// A time for display: EOL's comma form (`2024, 02, 26, 11:20:12`) becomes
+/// `"2024-02-26 11:20:12 UTC"` ([`CommaTime::readable`]); any other text is returned trimmed.
+pub fn readable_time(text: &str) -> String {
+    CommaTime::parse(text).map_or_else(|| text.trim().to_string(), |t| t.readable())
 }
 
 /// Hours since an arbitrary epoch of a canonical time (for "nearest"); `None` if malformed.
@@ -160,6 +233,43 @@ mod tests {
             "{few}"
         );
         assert!(no_such_time("x", &[]).contains("holds no soundings"));
+    }
+
+    #[test]
+    fn eol_comma_times_read_and_print() {
+        let t = CommaTime::parse("2024, 02, 26, 11:20:12").unwrap();
+        assert_eq!(
+            (t.year, t.month, t.day, t.hour, t.minute, t.second),
+            (2024, 2, 26, 11, 20, 12)
+        );
+        assert_eq!(t.readable(), "2024-02-26 11:20:12 UTC");
+        assert_eq!(t.nominal(), None);
+        let n = CommaTime::parse("2024,2,26,12:00:00").unwrap();
+        assert_eq!(n.nominal().as_deref(), Some("2024-02-26 12"));
+        assert_eq!(
+            canonical_time(&n.nominal().unwrap()).unwrap(),
+            "2024-02-26 12"
+        );
+        for bad in [
+            "2024-02-26 11:20:12",
+            "2024, 13, 26, 11:20:12",
+            "2024, 02, 26, 24:00:00",
+            "2024, 02, 26, 11:20",
+            "24, 02, 26, 11:20:12",
+            "2024, 02, 26, 11:20:12, 5",
+            "2024, 02, x, 11:20:12",
+            "",
+        ] {
+            assert_eq!(CommaTime::parse(bad), None, "{bad}");
+        }
+        assert_eq!(
+            readable_time(" 2022, 02, 22, 22:00:00 "),
+            "2022-02-22 22:00:00 UTC"
+        );
+        assert_eq!(
+            readable_time(" 2026-02-05 23:29 UTC "),
+            "2026-02-05 23:29 UTC"
+        );
     }
 
     #[test]

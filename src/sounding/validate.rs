@@ -318,7 +318,8 @@ impl Conflicts {
     }
 }
 
-fn describe_lines(lines: &[usize]) -> String {
+/// `lines` for a note: the first ten, then how many more.
+pub(crate) fn describe_lines(lines: &[usize]) -> String {
     const SHOWN: usize = 10;
     let mut s: Vec<String> = lines.iter().take(SHOWN).map(usize::to_string).collect();
     if lines.len() > SHOWN {

@@ -9,6 +9,7 @@ mod end_to_end;
 mod images;
 mod ingest;
 mod ingest_archives;
+mod ingest_esc;
 mod ingest_netcdf;
 mod layer_fit;
 mod pipeline;
