@@ -284,7 +284,8 @@ fn sounding_description(sounding: &Sounding) -> String {
     let time = |key: &str| {
         m.get(key)
             .map(|s| crate::sounding::time::readable_time(s.split('(').next().unwrap_or("")))
-            .filter(|s| !s.is_empty())
+            // A time must start with its year ("not given in this file" is no time).
+            .filter(|s| s.starts_with(|c: char| c.is_ascii_digit()))
             .map(|t| {
                 if t.contains("UTC") {
                     t
@@ -307,6 +308,25 @@ mod tests {
 
     fn data(name: &str) -> PathBuf {
         PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data")).join(name)
+    }
+
+    #[test]
+    fn a_launch_time_that_is_not_a_time_falls_back_to_the_nominal_one() {
+        let mut metadata = std::collections::BTreeMap::new();
+        metadata.insert("station".into(), "NKX".into());
+        metadata.insert(
+            "launch_time_utc".into(),
+            "not given in this file (valid time 2023-06-30 12 UTC)".into(),
+        );
+        metadata.insert("nominal_time_utc".into(), "2023-06-30 12 UTC".into());
+        let s = Sounding {
+            source: PathBuf::from("s.csv"),
+            format: crate::sounding::SoundingFormat::NormalizedCsv,
+            metadata,
+            levels: Vec::new(),
+            warnings: Vec::new(),
+        };
+        assert_eq!(sounding_description(&s), "NKX, 2023-06-30 12 UTC (nominal)");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use ghostship::atmosphere::AtmosphereSource;
-use ghostship::jobs::compare::DEFAULT_COMPARE_RAYS;
+use ghostship::jobs::compare::{CompareOptions, DEFAULT_COMPARE_RAYS};
 use ghostship::jobs::render::{RenderSettings, parse_size};
 use ghostship::jobs::{AtmosphereCache, CompareRequest};
 use ghostship::output::png::DEFAULT_EXPOSURE;
@@ -44,6 +44,9 @@ pub struct CompareArgs {
     /// Which sounding of a file holding several (IGRA2, a Wyoming page): "YYYY-MM-DD HH".
     #[arg(long = "time", visible_aliases = ["sounding-time"], value_name = "YYYY-MM-DD HH")]
     pub sounding_time: Option<String>,
+    /// Smoothing scale of the sounding fit, in metres (0 = none) [default: the scene's, 20 m].
+    #[arg(long, value_name = "M")]
+    pub smooth_m: Option<f64>,
     /// Image size, WIDTHxHEIGHT [default: the scene's].
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
@@ -77,11 +80,14 @@ pub fn run(args: CompareArgs, quiet: bool) -> anyhow::Result<()> {
     };
     let request = CompareRequest::new(
         scene,
-        AtmosphereSource::Sounding(args.measured.clone()),
-        args.sounding_time.clone(),
+        AtmosphereSource::parse(&args.measured.to_string_lossy()),
         args.synthetic.as_deref().map(AtmosphereSource::parse),
         settings,
-        args.rays,
+        &CompareOptions {
+            sounding_time: args.sounding_time.clone(),
+            smooth_m: args.smooth_m,
+            rays: args.rays,
+        },
     )?;
     let out_dir = args.out.clone().unwrap_or_else(|| {
         Path::new("out")

@@ -204,9 +204,26 @@ impl From<&LayerFit> for FitSummary {
     }
 }
 
+/// The fan both atmospheres were traced with (to repeat it with `ghostship trace`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FanSummary {
+    /// Observer (camera) height above the surface (m).
+    pub observer_height_m: f64,
+    /// Lowest elevation of the fan (deg): the bottom of the camera's field.
+    pub elevation_min_deg: f64,
+    /// Highest elevation of the fan (deg): the top of the camera's field.
+    pub elevation_max_deg: f64,
+    /// Number of rays, evenly spaced.
+    pub rays: usize,
+    /// The tracer's tolerance (m).
+    pub tolerance_m: f64,
+}
+
 /// Measured against synthetic: both sides, the image metrics and the fit (if one was made).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Comparison {
+    /// The fan traced through both.
+    pub fan: FanSummary,
     /// Through the measured sounding.
     pub measured: SideSummary,
     /// Through the synthetic atmosphere.
@@ -223,6 +240,7 @@ pub struct Comparison {
 impl Comparison {
     /// Put the two sides together and list their differences.
     pub fn new(
+        fan: FanSummary,
         measured: SideSummary,
         synthetic: SideSummary,
         image: ImageMetrics,
@@ -230,6 +248,7 @@ impl Comparison {
     ) -> Self {
         let differences = differences(&measured, &synthetic);
         Comparison {
+            fan,
             measured,
             synthetic,
             image,
@@ -243,7 +262,7 @@ impl Comparison {
         let mut out = String::new();
         if let Some(fit) = &self.fit {
             out += &format!(
-                "Synthetic: {} layers fitted to {} levels, rms {:.2} K, max {:.2} K (straight \
+                "Synthetic: {} layer(s) fitted to {} levels, rms {:.2} K, max {:.2} K (straight \
                  lapse line: rms {:.2} K)\n",
                 fit.layers.len(),
                 fit.levels,

@@ -18,7 +18,7 @@ use super::{AtmosphereCache, JobError, Product};
 use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere, atmosphere_from_column};
 use crate::compare::metrics::side_by_side_png;
 use crate::compare::plot::{ProfilesPlot, profiles_png, transfer_png};
-use crate::compare::{Comparison, FitSummary, SideSummary, image_metrics};
+use crate::compare::{Comparison, FanSummary, FitSummary, SideSummary, image_metrics};
 use crate::profile::layer_fit::{LayerFit, LayerFitOptions, fit_layers};
 use crate::refractivity::{RegimeOptions, detect_regimes};
 use crate::scene::Scene;
@@ -30,6 +30,27 @@ pub const DEFAULT_COMPARE_RAYS: usize = 801;
 pub const DEFAULT_TARGETS: [(f64, f64); 2] = [(10_000.0, 20.0), (20_000.0, 20.0)];
 /// Top of the duct search and of `profiles.png` (m above the surface).
 const PROFILE_TOP_M: f64 = 1_500.0;
+
+/// How a comparison reads the sounding and traces, beyond the render settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompareOptions {
+    /// Which sounding of a multi-sounding file.
+    pub sounding_time: Option<String>,
+    /// Smoothing scale of the sounding fit (m); `None`: the scene's (default 20 m).
+    pub smooth_m: Option<f64>,
+    /// Rays of the fan across the camera's vertical field.
+    pub rays: usize,
+}
+
+impl Default for CompareOptions {
+    fn default() -> Self {
+        CompareOptions {
+            sounding_time: None,
+            smooth_m: None,
+            rays: DEFAULT_COMPARE_RAYS,
+        }
+    }
+}
 
 /// A validated comparison request.
 #[derive(Debug, Clone)]
@@ -52,11 +73,11 @@ impl CompareRequest {
     pub fn new(
         scene: Scene,
         measured: AtmosphereSource,
-        sounding_time: Option<String>,
         synthetic: Option<AtmosphereSource>,
         settings: RenderSettings,
-        rays: usize,
+        options: &CompareOptions,
     ) -> Result<Self, JobError> {
+        let rays = options.rays;
         let invalid = |m: String| Err(JobError::Invalid(m));
         if !matches!(measured, AtmosphereSource::Sounding(_)) {
             return invalid(format!(
@@ -74,15 +95,19 @@ impl CompareRequest {
         }
         let settings = RenderSettings {
             atmosphere: Some(measured),
-            sounding_time,
+            sounding_time: options.sounding_time.clone(),
             straight: false,
             sizes: vec![settings.sizes.first().copied().flatten()],
             ..settings
         };
         let render = RenderRequest::new(scene, settings)?;
-        let Some(measured) = render.atmosphere.clone() else {
+        let Some(mut measured) = render.atmosphere.clone() else {
             return invalid("the scene traces straight rays".into());
         };
+        if let Some(smooth_m) = options.smooth_m {
+            measured.options.smooth_m = smooth_m;
+        }
+        measured.validate()?;
         let synthetic = synthetic.map(|source| AtmosphereRequest {
             source,
             options: crate::atmosphere::AtmosphereOptions {
@@ -136,7 +161,8 @@ impl CompareRequest {
             let (report, _) = self.trace.report(atm, false)?;
             let top = atm.refractive.surface_height_m() + PROFILE_TOP_M;
             let layers = detect_regimes(&atm.refractive, top, &RegimeOptions::default());
-            let (film, _) = self.render.film(None, Some(atm), true)?;
+            let size = self.render.settings.sizes.first().copied().flatten();
+            let (film, _) = self.render.film(size, Some(atm), true)?;
             Ok((report, layers, film))
         };
         let (m, s) = (side(&measured)?, side(&synthetic)?);
@@ -144,7 +170,16 @@ impl CompareRequest {
         let metric_err =
             |e: crate::compare::metrics::CompareError| JobError::Compare(e.to_string());
         let image = image_metrics(&m.2, &s.2, exposure).map_err(metric_err)?;
+        let r = &self.trace.request;
+        let fan = FanSummary {
+            observer_height_m: r.observer_height_m,
+            elevation_min_deg: r.elevation_min_deg,
+            elevation_max_deg: r.elevation_max_deg,
+            rays: r.elevation_count,
+            tolerance_m: r.tracer.tolerance_m,
+        };
         let comparison = Comparison::new(
+            fan,
             SideSummary::new(
                 measured.source.to_string(),
                 measured.description.clone(),
@@ -284,7 +319,7 @@ fn fitted_atmosphere(
     let stem = measured.source.stem();
     let source = AtmosphereSource::Synthetic(format!("{stem}.fitted_layers.toml").into());
     let description = format!(
-        "{} layers fitted to {} (rms {:.2} K)",
+        "{} layer(s) fitted to {} (rms {:.2} K)",
         fit.layers.len(),
         measured.description,
         fit.rms_k

@@ -74,6 +74,7 @@ pub const COMPARE_KEYS: &[&str] = &[
     "igra2_time",
     "synthetic",
     "scene",
+    "smooth_m",
     "size",
     "spp",
     "tolerance_m",
@@ -167,6 +168,7 @@ struct RawCompare {
     sounding_time: Option<String>,
     synthetic: Option<String>,
     scene: String,
+    smooth_m: Option<f64>,
     size: Option<String>,
     spp: Option<u32>,
     tolerance_m: Option<f64>,
@@ -506,14 +508,19 @@ pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
     let mut jobs = Vec::new();
     for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {
         let name = t.name(&template, &choice.stem, &stem(&scene_path), None);
+        let options = crate::jobs::compare::CompareOptions {
+            sounding_time: choice.sounding_time.clone(),
+            smooth_m: raw.smooth_m,
+            rays: raw
+                .rays
+                .unwrap_or(crate::jobs::compare::DEFAULT_COMPARE_RAYS),
+        };
         let request = CompareRequest::new(
             scene.clone(),
             choice.source.clone(),
-            choice.sounding_time.clone(),
             synthetic.clone(),
             settings.clone(),
-            raw.rays
-                .unwrap_or(crate::jobs::compare::DEFAULT_COMPARE_RAYS),
+            &options,
         );
         match request {
             Ok(r) => jobs.push((name, JobRequest::Compare(Box::new(r)))),

@@ -139,7 +139,30 @@ pub fn fit_layers(
     };
     let knots = anchor_unsupported_knots(&problem.knots(&breaks), &data.h);
     let temps = solve_knot_temperatures(&data, &knots);
+    let (knots, temps) = merge_collinear(&knots, &temps);
     Ok(assemble(sounding, &data, &knots, &temps, termination))
+}
+
+/// Gradients closer than this (K m⁻¹) are one layer.
+const SAME_GRADIENT_K_PER_M: f64 = 1e-6;
+
+/// The knots without those between two layers of the same gradient: when the sounding needs
+/// fewer layers than allowed, the spare breakpoints fall inside a straight stretch, and one
+/// layer is what a user expects to read there. The fitted temperatures do not change.
+fn merge_collinear(knots: &[f64], temps: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let slope = |a: usize, b: usize| (temps[b] - temps[a]) / (knots[b] - knots[a]);
+    let (mut k, mut t) = (vec![knots[0]], vec![temps[0]]);
+    let mut start = 0;
+    for i in 1..knots.len() - 1 {
+        if (slope(start, i) - slope(i, i + 1)).abs() >= SAME_GRADIENT_K_PER_M {
+            k.push(knots[i]);
+            t.push(temps[i]);
+            start = i;
+        }
+    }
+    k.push(knots[knots.len() - 1]);
+    t.push(temps[temps.len() - 1]);
+    (k, t)
 }
 
 /// Knots moved onto the nearest level where a layer next to them holds fewer than two levels.

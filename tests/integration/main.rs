@@ -4,6 +4,7 @@ mod support;
 mod accuracy;
 mod bench_accuracy;
 mod cli;
+mod compare;
 mod docs;
 mod end_to_end;
 mod images;

@@ -470,13 +470,13 @@ fn polar_pipeline_runs_every_shipped_sounding() {
         repo_file("pipelines/polar.toml").to_str().unwrap(),
         "--dry-run",
     ]);
-    // Every CSV and the IGRA2 excerpt's two complete soundings, each through three jobs.
+    // Every CSV and the IGRA2 excerpt's two complete soundings, each through four jobs.
     let atmospheres = csvs(&tests).len() + csvs(&levels).len() + 2;
     assert!(
         r.stdout.contains(&format!(
             "{} job(s): {} would run",
-            3 * atmospheres,
-            3 * atmospheres
+            4 * atmospheres,
+            4 * atmospheres
         )),
         "{}",
         r.stdout
@@ -487,6 +487,7 @@ fn polar_pipeline_runs_every_shipped_sounding() {
             stem.clone(),
             format!("{stem}_transfer"),
             format!("ghost_ship_{stem}"),
+            format!("compare_{stem}"),
         ] {
             assert!(
                 r.stdout.lines().any(|l| l.starts_with(&format!("{job} "))),
@@ -503,12 +504,23 @@ fn polar_pipeline_runs_every_shipped_sounding() {
         &["-j", "2", "-q"],
     );
     let manifest = json_file(&dir.path().join("manifest.json"));
-    assert_eq!(manifest["jobs"].as_object().unwrap().len(), 3 * atmospheres);
+    assert_eq!(manifest["jobs"].as_object().unwrap().len(), 4 * atmospheres);
     for p in csvs(&tests) {
         let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
         let frame = dir.path().join(format!("ghost_ship_{stem}/400x200.png"));
         let img = image::open(&frame).unwrap_or_else(|e| panic!("{}: {e}", frame.display()));
         assert_eq!((img.width(), img.height()), (400, 200));
+        // The comparison ran on every real sounding: both sides, both ships, a fit.
+        let c = json_file(&dir.path().join(format!("compare_{stem}/compare.json")));
+        for side in ["measured", "synthetic"] {
+            assert_eq!(c[side]["targets"].as_array().unwrap().len(), 2, "{stem}");
+        }
+        assert!(
+            c["fit"]["layers"].as_array().is_some_and(|l| !l.is_empty()),
+            "{stem}"
+        );
+        let ssim = c["image"]["ssim"].as_f64().unwrap();
+        assert!(ssim > 0.0 && ssim <= 1.0, "{stem}: {ssim}");
     }
 }
 

@@ -1,0 +1,289 @@
+//! `ghostship compare` and the `[[compare]]` pipeline job: measured soundings against synthetic
+//! layers through one scene.
+
+use std::path::{Path, PathBuf};
+
+use ghostship::profile::{AirColumn, SyntheticAtmosphere};
+
+use crate::support::cli::{fails, json_file, ok, output_tree, pipeline_ok};
+use crate::support::data::{data_file, sounding};
+
+/// A piecewise-linear truth: a superior-mirage layer (+10 K over 20 m at 90 m) on the standard
+/// lapse rate, written in the same `[[layers]]` form the layer fit writes.
+const TRUTH: &str = "description = \"piecewise-linear ghost-ship layer\"\nsurface_temperature_c = 0.0\n\
+surface_pressure_hpa = 1013.25\nbackground = -0.0065\n\n[[layers]]\nfrom_m = 90.0\nto_m = 110.0\n\
+gradient_k_per_m = 0.5065\n";
+
+/// The ghost-ship scene at a small size, as the tests render it.
+fn small(extra: &[&'static str]) -> Vec<&'static str> {
+    let mut args = vec!["--size", "160x80", "--spp", "1", "--rays", "401"];
+    args.extend_from_slice(extra);
+    args
+}
+
+fn scene() -> PathBuf {
+    data_file("scenes/fig04_superior_mirage.toml")
+}
+
+/// `TRUTH` sampled as a dry normalised CSV: every 1 m to 400 m, every 25 m to 12 km.
+fn write_truth(dir: &Path) -> (PathBuf, PathBuf) {
+    let toml = dir.join("truth.toml");
+    std::fs::write(&toml, TRUTH).unwrap();
+    let truth = SyntheticAtmosphere::from_file(&toml).unwrap();
+    let mut csv = String::from("pressure_hpa,height_m,temperature_c,dewpoint_c\n");
+    let heights = (0..400)
+        .map(f64::from)
+        .chain((16..=480).map(|i| 25.0 * i as f64));
+    for h in heights {
+        let air = truth.air_at(h);
+        csv += &format!(
+            "{:.4},{h},{:.5},\n",
+            air.pressure_pa / 100.0,
+            air.temperature_k - 273.15
+        );
+    }
+    let path = dir.join("truth_sampled.csv");
+    std::fs::write(&path, csv).unwrap();
+    (path, toml)
+}
+
+fn compare(measured: &Path, synthetic: Option<&Path>, out: &Path, extra: &[&'static str]) {
+    let mut args = vec!["compare".to_string(), measured.display().to_string()];
+    args.extend(synthetic.map(|p| p.display().to_string()));
+    args.extend(["--scene".into(), scene().display().to_string()]);
+    args.extend(["--out".into(), out.display().to_string()]);
+    args.extend(small(extra).iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    ok(&args);
+}
+
+#[test]
+fn a_real_sounding_gives_every_product_and_images_that_trace_confirms() {
+    let dir = tempfile::tempdir().unwrap();
+    let measured = sounding("TroisRivieres-UQAM_2022022222.csv");
+    compare(&measured, None, dir.path(), &[]);
+    for name in [
+        "compare.json",
+        "measured.png",
+        "synthetic.png",
+        "side_by_side.png",
+        "profiles.png",
+        "transfer.png",
+        "fitted_layers.toml",
+    ] {
+        assert!(dir.path().join(name).is_file(), "{name}");
+    }
+    let side = image::open(dir.path().join("side_by_side.png")).unwrap();
+    assert_eq!(side.width(), 3 * 160 + 2 * 6);
+    let c = json_file(&dir.path().join("compare.json"));
+    // The fitted TOML is an atmosphere `profile` accepts.
+    ok(&[
+        "profile",
+        dir.path().join("fitted_layers.toml").to_str().unwrap(),
+        "--out",
+        dir.path().join("p").to_str().unwrap(),
+    ]);
+    // The measured side's images are what `trace` finds with the same fan.
+    let fan = &c["fan"];
+    let (lo, hi) = (
+        fan["elevation_min_deg"].as_f64().unwrap(),
+        fan["elevation_max_deg"].as_f64().unwrap(),
+    );
+    let rays = fan["rays"].as_u64().unwrap() as f64;
+    let spec = format!("{lo}:{hi}:{}", (hi - lo) / (rays - 1.0));
+    let t = ok(&[
+        "trace",
+        "-a",
+        measured.to_str().unwrap(),
+        "--observer-height-m",
+        "50",
+        "--elevation-deg",
+        &spec,
+        "--distance-m",
+        "26000,60000",
+        "--target-height-m",
+        "25,40",
+        "--tolerance-m",
+        &fan["tolerance_m"].as_f64().unwrap().to_string(),
+    ]);
+    let report: serde_json::Value = serde_json::from_str(&t.stdout).unwrap();
+    assert_eq!(report["rays"].as_array().unwrap().len() as f64, rays);
+    for target in c["measured"]["targets"].as_array().unwrap() {
+        let (d, h) = (target["distance_m"].as_f64(), target["height_m"].as_f64());
+        let images: Vec<_> = report["images"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|i| i["distance_m"].as_f64() == d && i["height_m"].as_f64() == h)
+            .collect();
+        assert_eq!(
+            target["count"].as_u64(),
+            Some(images.len() as u64),
+            "{target}"
+        );
+        if let Some(first) = images.first() {
+            let lo = target["elevation_min_deg"].as_f64().unwrap();
+            assert!((lo - first["elevation_min_deg"].as_f64().unwrap()).abs() < 1e-9);
+        }
+    }
+    // Trois-Rivières' thin measured ducts (dN/dh spikes at 370–480 m) are smoothed away by ten
+    // linear layers: the comparison says so.
+    let measured_ducts = c["measured"]["ducts"].as_array().unwrap().len();
+    let synthetic_ducts = c["synthetic"]["ducts"].as_array().unwrap().len();
+    assert!(measured_ducts > synthetic_ducts, "{c}");
+    let differences = c["differences"].as_array().unwrap();
+    assert!(
+        differences
+            .iter()
+            .any(|d| d.as_str().unwrap().starts_with("ducts:")),
+        "{differences:?}"
+    );
+}
+
+#[test]
+fn a_sampled_synthetic_atmosphere_round_trips_through_the_fit_and_matches_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let (csv, toml) = write_truth(dir.path());
+    // Against the truth itself: the sounding sampled every metre shows what the truth shows.
+    let own = dir.path().join("own");
+    compare(&csv, Some(&toml), &own, &["--smooth-m", "0"]);
+    let c = json_file(&own.join("compare.json"));
+    assert!(c["fit"].is_null());
+    assert!(
+        c["image"]["ssim"].as_f64().unwrap() > 0.98,
+        "{}",
+        c["image"]
+    );
+    let (m, s) = (&c["measured"]["targets"], &c["synthetic"]["targets"]);
+    // The near ship: one erect image through both.
+    assert_eq!(m[0]["count"].as_u64(), Some(1), "{m}");
+    assert_eq!(s[0]["count"].as_u64(), Some(1), "{s}");
+    // The far ship is a ghost ship through both: one inverted image, the same band to 0.001°
+    // (the 1 m samples round the layer's corners, which may add a sliver of an erect image a
+    // fraction of an arcsecond tall over it, so the erect count is not compared).
+    assert_eq!(m[1]["inverted"].as_u64(), Some(1), "{m}");
+    assert_eq!(s[1]["inverted"].as_u64(), Some(1), "{s}");
+    for key in ["elevation_min_deg", "elevation_max_deg"] {
+        let (a, b) = (m[1][key].as_f64().unwrap(), s[1][key].as_f64().unwrap());
+        assert!((a - b).abs() < 1e-3, "{key}: {a} {b}");
+    }
+    // Fitted: the layer comes back (its base and top within 1 m, its ΔT within 0.2 K).
+    let fitted = dir.path().join("fitted");
+    compare(&csv, None, &fitted, &["--smooth-m", "0"]);
+    let c = json_file(&fitted.join("compare.json"));
+    let layers = c["fit"]["layers"].as_array().unwrap();
+    let layer = layers
+        .iter()
+        .max_by(|a, b| {
+            let g = |l: &serde_json::Value| l["gradient_k_per_m"].as_f64().unwrap();
+            g(a).total_cmp(&g(b))
+        })
+        .unwrap();
+    let base = layer["base_m"].as_f64().unwrap();
+    let top = layer["top_m"].as_f64().unwrap();
+    assert!(
+        (base - 90.0).abs() < 1.0 && (top - 110.0).abs() < 1.0,
+        "{layer}"
+    );
+    let delta = layer["delta_t_k"].as_f64().unwrap();
+    assert!((delta - 0.5 * 20.0).abs() < 0.2, "{layer}");
+    assert!(c["fit"]["rms_k"].as_f64().unwrap() < 0.05, "{}", c["fit"]);
+    let (m, s) = (&c["measured"]["targets"], &c["synthetic"]["targets"]);
+    assert_eq!(m[1]["inverted"], s[1]["inverted"], "{m} {s}");
+}
+
+#[test]
+fn compare_output_does_not_depend_on_the_thread_count() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let measured = sounding("pressure_levels/Tiksi-21824_2026020600_all-levels.csv");
+    for (dir, threads) in [(&a, "1"), (&b, "2")] {
+        let out = dir.path().to_str().unwrap();
+        let mut cmd = crate::support::cli::ghostship();
+        cmd.env("RAYON_NUM_THREADS", threads)
+            .args(["compare", measured.to_str().unwrap(), "--scene"])
+            .arg(scene())
+            .args(["--out", out])
+            .args(small(&[]))
+            .assert()
+            .success();
+    }
+    assert_eq!(output_tree(a.path()), output_tree(b.path()));
+}
+
+#[test]
+fn bad_inputs_are_refused_clearly() {
+    let scene = scene();
+    let scene = scene.to_str().unwrap();
+    let toml = data_file("superior_mirage.toml");
+    let csv = sounding("Bjornoya-01028_2024022611.csv");
+    let r = fails(&["compare", toml.to_str().unwrap(), "--scene", scene]);
+    assert!(r.stderr.contains("must be a sounding file"), "{}", r.stderr);
+    let r = fails(&[
+        "compare",
+        csv.to_str().unwrap(),
+        csv.to_str().unwrap(),
+        "--scene",
+        scene,
+    ]);
+    assert!(r.stderr.contains(".toml file or us1976"), "{}", r.stderr);
+    let r = fails(&["compare", "no/such.csv", "--scene", scene]);
+    assert!(r.stderr.contains("no/such.csv"), "{}", r.stderr);
+    let r = fails(&["compare", csv.to_str().unwrap(), "--scene", "no/scene.toml"]);
+    assert!(r.stderr.contains("no/scene.toml"), "{}", r.stderr);
+    let r = fails(&[
+        "compare",
+        csv.to_str().unwrap(),
+        "--scene",
+        scene,
+        "--rays",
+        "2",
+    ]);
+    assert!(r.stderr.contains("rays must be 3"), "{}", r.stderr);
+}
+
+#[test]
+fn a_compare_pipeline_job_writes_what_the_command_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let measured = sounding("Utqiagvik-70026_2014091012.csv");
+    let pipeline = dir.path().join("c.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[compare]]\natmosphere = {:?}\nscene = {:?}\nsize = \"160x80\"\nspp = 1\nrays = 401\n",
+            measured.display().to_string(),
+            scene().display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    pipeline_ok(&pipeline, &out, &["-q"]);
+    let job = out.join("compare_Utqiagvik-70026_2014091012");
+    let single = dir.path().join("single");
+    compare(&measured, None, &single, &[]);
+    for name in [
+        "compare.json",
+        "side_by_side.png",
+        "profiles.png",
+        "fitted_layers.toml",
+    ] {
+        assert_eq!(
+            std::fs::read(job.join(name)).unwrap(),
+            std::fs::read(single.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    // A synthetic that is a sounding is refused at the key, before any work.
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[compare]]\natmosphere = {:?}\nsynthetic = {:?}\nscene = {:?}\n",
+            measured.display().to_string(),
+            measured.display().to_string(),
+            scene().display().to_string()
+        ),
+    )
+    .unwrap();
+    let r = crate::support::cli::pipeline_run(&pipeline, &out, &[]);
+    assert_ne!(r.code, Some(0));
+    assert!(r.stderr.contains(".toml file or us1976"), "{}", r.stderr);
+}
