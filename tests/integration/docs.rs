@@ -423,6 +423,7 @@ fn atmosphere_page_examples_parse() {
         "igra2_data",
         "igra2_derived",
         "spc_raw",
+        "wmo_temp",
     ]
     .map(String::from)
     .into();

@@ -10,6 +10,7 @@ mod images;
 mod ingest;
 mod ingest_archives;
 mod ingest_netcdf;
+mod ingest_temp;
 mod layer_fit;
 mod pipeline;
 mod profile;
