@@ -1,5 +1,6 @@
 //! Stage 1 — ingest. In: a sounding file (normalised CSV, University of Wyoming TEXT:LIST or
-//! TEXT:CSV, IGRA2 data or derived, SPC / SHARPpy `%RAW%`, NCAR/EOL ESC). Out: a validated [`Sounding`]: levels sorted by height, in SI
+//! TEXT:CSV, IGRA2 data or derived, SPC / SHARPpy `%RAW%`, NCAR/EOL ESC, WMO FM-35 TEMP). Out: a
+//! validated [`Sounding`]: levels sorted by height, in SI
 //! units, with every level carrying a height (measured or hypsometric) and its source line.
 //!
 //! Entry points: [`read_sounding`] (a file, plain, gzip or a one-file zip) and [`parse_sounding`]
@@ -8,11 +9,12 @@
 //! format is detected from the content, never from the extension: IGRA2 header record first →
 //! IGRA2 data or derived; a `PRES HGHT TEMP` table header → Wyoming TEXT:LIST; `%TITLE%` then
 //! `%RAW%` lines → SPC / SHARPpy; a `Data Type:` line then a `Time Press Temp` column line →
-//! NCAR/EOL ESC; a CSV header with a
+//! NCAR/EOL ESC; a `TTAA` group followed by `YYGGId` → WMO TEMP; a CSV header with a
 //! temperature column → Wyoming TEXT:CSV (has `time` and `geopotential height_m`) or normalised
 //! CSV. Before any of these, a netCDF magic number ([`is_netcdf`]) sends the bytes to the
 //! `netcdf` reader (cargo feature `netcdf`; without it, [`SoundingError::NetcdfNotBuilt`]).
-//! Readers live in [`csv`], [`wyoming`], [`igra2`], [`spc`] and [`esc`]; the rules every sounding must pass
+//! Readers live in [`csv`], [`wyoming`], [`igra2`], [`spc`], [`esc`] and [`temp`]; the rules
+//! every sounding must pass
 //! are in [`validate`]; heights for pressure-only levels come from [`hypsometric`].
 
 pub mod csv;
@@ -23,6 +25,7 @@ pub mod igra2;
 #[cfg(feature = "netcdf")]
 pub mod netcdf;
 pub mod spc;
+pub mod temp;
 pub mod time;
 pub mod validate;
 pub mod wyoming;
@@ -78,6 +81,8 @@ pub enum SoundingFormat {
     SpcRaw,
     /// NCAR/EOL ESC (EOL Sounding Composite) text, `*.cls` / `*.cls.qc`.
     EolEsc,
+    /// A WMO FM-35 TEMP message (`TTAA` / `TTBB` / `TTCC` / `TTDD` parts).
+    WmoTemp,
     /// A netCDF sounding (ARM `sondewnpn`, GRUAN RS92/RS41 GDP); binary, read only by a build
     /// with the cargo feature `netcdf`.
     Netcdf,
@@ -94,6 +99,7 @@ impl SoundingFormat {
             SoundingFormat::Igra2Derived => "an IGRA2 derived-parameter file",
             SoundingFormat::SpcRaw => "an SPC / SHARPpy %RAW% file",
             SoundingFormat::EolEsc => "an NCAR/EOL ESC sounding",
+            SoundingFormat::WmoTemp => "a WMO FM-35 TEMP message",
             SoundingFormat::Netcdf => "an ARM sondewnpn or GRUAN GDP netCDF sounding",
         }
     }
@@ -254,8 +260,8 @@ pub fn parse_sounding(
             source,
             "cannot recognise the format: expected a normalised CSV (header such as \
              pressure_hpa,height_m,temperature_c,dewpoint_c), a University of Wyoming TEXT:LIST \
-             or TEXT:CSV page, an IGRA2 data or derived file, an SPC / SHARPpy %RAW% file \
-             or an NCAR/EOL ESC sounding",
+             or TEXT:CSV page, an IGRA2 data or derived file, an SPC / SHARPpy %RAW% file, \
+             an NCAR/EOL ESC sounding or a WMO TEMP message (TTAA …)",
         )
     })?;
     let mut metadata = BTreeMap::new();
@@ -274,6 +280,7 @@ pub fn parse_sounding(
         }
         SoundingFormat::SpcRaw => spc::read(source, text, &mut metadata)?,
         SoundingFormat::EolEsc => esc::read(source, text, &mut metadata, &mut warnings)?,
+        SoundingFormat::WmoTemp => temp::read(source, text, &mut metadata, &mut warnings)?,
         // Never detected in text: netCDF is binary and read from its bytes by read_sounding.
         SoundingFormat::Netcdf => {
             return Err(SoundingError::file(
@@ -339,6 +346,7 @@ pub fn detect_format(text: &str) -> Option<SoundingFormat> {
         .or_else(|| wyoming::detect(text).then_some(SoundingFormat::WyomingTextList))
         .or_else(|| spc::detect(text).then_some(SoundingFormat::SpcRaw))
         .or_else(|| esc::detect(text).then_some(SoundingFormat::EolEsc))
+        .or_else(|| temp::detect(text).then_some(SoundingFormat::WmoTemp))
         .or_else(|| csv::detect(text))
 }
 

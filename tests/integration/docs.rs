@@ -424,6 +424,7 @@ fn atmosphere_page_examples_parse() {
         "igra2_derived",
         "spc_raw",
         "eol_esc",
+        "wmo_temp",
     ]
     .map(String::from)
     .into();

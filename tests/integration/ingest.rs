@@ -868,8 +868,8 @@ proptest! {
     }
 }
 
-/// Every raw file either ingests (Wyoming TEXT:CSV, IGRA2, NCAR/EOL ESC) or is refused as an
-/// unrecognised format (WMO TEMP bulletins, NOAA GSL: not supported; their normalised CSVs are).
+/// Every raw file either ingests (Wyoming TEXT:CSV, IGRA2, NCAR/EOL ESC, WMO TEMP) or is refused
+/// as an unrecognised format (NOAA GSL: not supported; its normalised CSV is).
 #[test]
 fn raw_files_ingest_or_are_refused_clearly() {
     let mut seen = 0;
@@ -878,6 +878,7 @@ fn raw_files_ingest_or_are_refused_clearly() {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let supported = name.contains("uwyo_TEXT-CSV") || name.starts_with("USM00070026");
         let supported = supported || name.ends_with(".cls") || name.ends_with(".cls.qc");
+        let supported = supported || name.ends_with("_WMO-TEMP.txt");
         match read_sounding(&path, &ReadOptions::default()) {
             Ok(s) => {
                 assert!(supported, "{name} unexpectedly ingested as {:?}", s.format);

@@ -12,6 +12,7 @@ mod ingest;
 mod ingest_archives;
 mod ingest_esc;
 mod ingest_netcdf;
+mod ingest_temp;
 mod layer_fit;
 mod pipeline;
 mod profile;
