@@ -5,7 +5,8 @@
 //! when it is built. Out: the job's products as named bytes ([`Product`]); nothing here but
 //! [`writer`] touches the output folder, and [`manifest`] records what was written.
 //!
-//! * [`profile`], [`trace`], [`render`] — request → products, one module per kind.
+//! * [`profile`], [`trace`], [`render`] — request → products, one module per kind;
+//!   [`ensemble`] — the trace job's sensitivity ensemble of a sounding's fit.
 //! * [`cache`] — each atmosphere (fitted profile and refractive table) is loaded once per run and
 //!   shared by every job that names it.
 //! * [`writer`] — atomic writes (temporary file + rename) and removal of dead runs' temp files.
@@ -13,6 +14,7 @@
 //! * [`run`] — the job loop: skip unchanged jobs, run the rest `-j N` at a time, shards, merge.
 
 pub mod cache;
+pub mod ensemble;
 pub mod manifest;
 pub mod profile;
 pub mod render;

@@ -6,6 +6,7 @@ mod bench_accuracy;
 mod cli;
 mod docs;
 mod end_to_end;
+mod fit;
 mod images;
 mod ingest;
 mod ingest_archives;
