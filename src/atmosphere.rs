@@ -1,13 +1,15 @@
 //! Stages 1–3 in one call — the atmosphere resolver every command uses. In: what the user named
 //! (a sounding file, a synthetic atmosphere TOML or `us1976`) and the options that shape it
-//! (smoothing scale, wavelength, IGRA2 launch time). Out: a [`LoadedAtmosphere`] holding the
+//! (smoothing scale, temperature fit, wavelength, IGRA2 launch time). Out: a [`LoadedAtmosphere`] holding the
 //! sounding (if any), the air column and the [`RefractiveAtmosphere`] built on it, or one
 //! [`AtmosphereError`] whose chain names the file and the place in it.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::profile::{AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere};
+use crate::profile::{
+    AirColumn, FitOptions, Profile, StandardAtmosphere, SyntheticAtmosphere, TemperatureFit,
+};
 use crate::refractivity::{DEFAULT_WAVELENGTH_NM, RefractiveAtmosphere};
 use crate::sounding::{ReadOptions, Sounding, read_sounding};
 
@@ -77,6 +79,11 @@ pub struct AtmosphereOptions {
     /// Smoothing scale of the sounding fit (m); see [`FitOptions::smooth_m`]. Ignored for
     /// synthetic and standard atmospheres.
     pub smooth_m: f64,
+    /// How the sounding's temperature is interpolated between levels; see
+    /// [`FitOptions::temperature_fit`]. Ignored for synthetic and standard atmospheres. Always
+    /// serialised: it is part of a pipeline job's key, and `auto` changed what earlier runs
+    /// computed for significant-level soundings.
+    pub fit: TemperatureFit,
     /// Vacuum wavelength the refractive index is computed for (nm, 300–1700).
     pub wavelength_nm: f64,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`); `None`: the first.
@@ -105,13 +112,24 @@ impl AtmosphereOptions {
         }
         Ok(())
     }
+
+    /// The options of the sounding fit these options ask for.
+    pub fn fit_options(&self) -> FitOptions {
+        FitOptions {
+            smooth_m: self.smooth_m,
+            temperature_fit: self.fit,
+            ..FitOptions::default()
+        }
+    }
 }
 
 impl Default for AtmosphereOptions {
-    /// The fit's default smoothing (20 m), 550 nm, the first IGRA2 sounding.
+    /// The fit's default smoothing (20 m) and temperature fit (auto), 550 nm, the first IGRA2
+    /// sounding.
     fn default() -> Self {
         AtmosphereOptions {
             smooth_m: FitOptions::default().smooth_m,
+            fit: TemperatureFit::Auto,
             wavelength_nm: DEFAULT_WAVELENGTH_NM,
             sounding_time: None,
             strict: false,
@@ -125,6 +143,8 @@ pub struct LoadedAtmosphere {
     pub source: AtmosphereSource,
     /// The sounding, for measured atmospheres.
     pub sounding: Option<Sounding>,
+    /// The fitted profile, for measured atmospheres (the same as `column`).
+    pub profile: Option<Arc<Profile>>,
     /// The air column (fitted profile, synthetic layers or standard atmosphere).
     pub column: Arc<dyn AirColumn>,
     /// n(h) and dn/dh on the column.
@@ -190,10 +210,10 @@ pub fn load_atmosphere(
 ) -> Result<LoadedAtmosphere, AtmosphereError> {
     options.validate()?;
     let source_name = source.to_string();
-    let (sounding, column, top_of_data_m, description): (
+    let (sounding, profile, column, description): (
         Option<Sounding>,
+        Option<Arc<Profile>>,
         Arc<dyn AirColumn>,
-        Option<f64>,
         String,
     ) = match source {
         AtmosphereSource::Sounding(path) => {
@@ -206,19 +226,16 @@ pub fn load_atmosphere(
                     source_name: source_name.clone(),
                     source,
                 })?;
-            let fit = FitOptions {
-                smooth_m: options.smooth_m,
-                ..FitOptions::default()
-            };
-            let profile = Profile::from_sounding(&sounding, &fit).map_err(|source| {
-                AtmosphereError::Profile {
-                    source_name: source_name.clone(),
-                    source,
-                }
-            })?;
-            let top = profile.top_of_data_m();
+            let profile =
+                Profile::from_sounding(&sounding, &options.fit_options()).map_err(|source| {
+                    AtmosphereError::Profile {
+                        source_name: source_name.clone(),
+                        source,
+                    }
+                })?;
             let description = sounding_description(&sounding);
-            (Some(sounding), Arc::new(profile), Some(top), description)
+            let profile = Arc::new(profile);
+            (Some(sounding), Some(profile.clone()), profile, description)
         }
         AtmosphereSource::Synthetic(path) => {
             let synthetic = SyntheticAtmosphere::from_file(path).map_err(|source| {
@@ -231,18 +248,19 @@ pub fn load_atmosphere(
                 Some(d) if !d.trim().is_empty() => d.trim().to_string(),
                 _ => format!("synthetic atmosphere {}", path.display()),
             };
-            (None, Arc::new(synthetic), None, description)
+            (None, None, Arc::new(synthetic), description)
         }
         AtmosphereSource::Us1976 => (
             None,
-            Arc::new(StandardAtmosphere::default()),
             None,
+            Arc::new(StandardAtmosphere::default()),
             "U.S. Standard Atmosphere 1976 (dry, surface at sea level)".to_string(),
         ),
     };
     let mut loaded = atmosphere_from_column(source, column, description, options.wavelength_nm)?;
     loaded.sounding = sounding;
-    loaded.top_of_data_m = top_of_data_m;
+    loaded.top_of_data_m = profile.as_ref().map(|p| p.top_of_data_m());
+    loaded.profile = profile;
     Ok(loaded)
 }
 
@@ -266,6 +284,7 @@ pub fn atmosphere_from_column(
         column,
         refractive,
         top_of_data_m: None,
+        profile: None,
         description,
     })
 }

@@ -47,6 +47,10 @@ pub struct CompareArgs {
     /// Smoothing scale of the sounding fit, in metres (0 = none) [default: the scene's, 20 m].
     #[arg(long, value_name = "M")]
     pub smooth_m: Option<f64>,
+    /// Temperature fit between the sounding's levels: pchip, linear (in ln p) or auto (linear
+    /// for significant-level soundings, PCHIP for dense ascents) [default: the scene's, auto].
+    #[arg(long, value_name = "pchip|linear|auto", value_parser = super::profile::parse_fit)]
+    pub fit: Option<ghostship::profile::TemperatureFit>,
     /// Image size, WIDTHxHEIGHT [default: the scene's].
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
@@ -86,6 +90,7 @@ pub fn run(args: CompareArgs, quiet: bool) -> anyhow::Result<()> {
         &CompareOptions {
             sounding_time: args.sounding_time.clone(),
             smooth_m: args.smooth_m,
+            fit: args.fit,
             rays: args.rays,
         },
     )?;

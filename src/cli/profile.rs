@@ -8,6 +8,7 @@ use ghostship::atmosphere::{AtmosphereOptions, AtmosphereSource};
 use ghostship::jobs::cache::AtmosphereRequest;
 use ghostship::jobs::profile::{DEFAULT_LAYERS_TOP_M, DEFAULT_PLOT_TOP_M};
 use ghostship::jobs::{AtmosphereCache, ProfileRequest};
+use ghostship::profile::TemperatureFit;
 use ghostship::refractivity::DEFAULT_WAVELENGTH_NM;
 use ghostship::report::{summary_json, summary_text};
 
@@ -20,6 +21,11 @@ pub enum SummaryFormat {
     Json,
 }
 
+/// `--fit`: `pchip`, `linear` or `auto`.
+pub(super) fn parse_fit(text: &str) -> Result<TemperatureFit, String> {
+    text.parse()
+}
+
 /// The options shaping an atmosphere, shared by `profile` and `trace`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct AtmosphereArgs {
@@ -30,6 +36,12 @@ pub struct AtmosphereArgs {
     /// applied to temperature and humidity; 0 = none). Ignored for .toml and us1976.
     #[arg(long, value_name = "M", default_value_t = 20.0)]
     pub smooth_m: f64,
+    /// Temperature between sounding levels: `pchip` (monotone cubic in height, for dense 1-s
+    /// ascents), `linear` (linear in ln p, what significant levels are chosen for) or `auto`
+    /// (linear when the median level spacing in the lowest 3 km exceeds 25 m, else pchip).
+    /// Ignored for .toml and us1976.
+    #[arg(long, value_name = "pchip|linear|auto", default_value = "auto", value_parser = parse_fit)]
+    pub fit: TemperatureFit,
     /// Which sounding of a file holding several (IGRA2, a Wyoming TEXT:LIST page) to read:
     /// nominal date and hour (UTC), "YYYY-MM-DD HH" or "YYYY-MM-DDTHH:00Z". Default: the first.
     #[arg(long = "time", visible_aliases = ["sounding-time"], alias = "igra2-time", value_name = "YYYY-MM-DD HH")]
@@ -47,6 +59,7 @@ impl AtmosphereArgs {
             source: AtmosphereSource::parse(source),
             options: AtmosphereOptions {
                 smooth_m: self.smooth_m,
+                fit: self.fit,
                 wavelength_nm: self.wavelength_nm,
                 sounding_time: self.sounding_time.clone(),
                 strict: self.strict,

@@ -1,10 +1,11 @@
 //! `ghostship trace`: arguments → [`TraceJobRequest`] → load the atmosphere, trace the fan (the
 //! jobs layer), print the report (JSON or CSV) on stdout and optionally write the fan +
-//! transfer plot.
+//! transfer plot; with `--ensemble N` also the sensitivity ensemble (its section in the JSON,
+//! its summary on stderr).
 
 use std::path::PathBuf;
 
-use ghostship::jobs::trace::{ElevationSpec, parse_elevation_spec};
+use ghostship::jobs::trace::{ElevationSpec, parse_elevation_spec, trace_json};
 use ghostship::jobs::{AtmosphereCache, Product, TraceJobRequest};
 use ghostship::tracer::TracerConfig;
 
@@ -68,6 +69,12 @@ pub struct TraceArgs {
     /// Straight rays: refractive index 1 everywhere (no refraction), for comparison.
     #[arg(long)]
     pub straight: bool,
+    /// Sensitivity ensemble of N profiles (measured soundings only; at most 500): the temperature
+    /// between the sounding's levels is moved within ±1 K of the fit (significant-level bound),
+    /// the fan traced through each, and the spread of the images, the sea horizon and the ducts
+    /// reported (an `ensemble` section in the JSON, a summary on stderr).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub ensemble: usize,
     /// Output on stdout.
     #[arg(long, value_enum, default_value_t = TraceFormat::Json)]
     pub format: TraceFormat,
@@ -93,11 +100,16 @@ pub fn run(args: TraceArgs, quiet: bool) -> anyhow::Result<()> {
         args.target_height_m,
         tracer,
         args.straight,
-    )?;
+    )?
+    .with_ensemble(args.ensemble)?;
     let atm = AtmosphereCache::new().get(&request.atmosphere)?;
     let (report, png) = request.report(&atm, args.plot.is_some())?;
+    let ensemble = request.ensemble_report(&atm, &report)?;
+    if let Some(e) = ensemble.as_ref().filter(|_| !quiet) {
+        eprintln!("{}", e.summary.join("\n"));
+    }
     let text = match args.format {
-        TraceFormat::Json => report.to_json()? + "\n",
+        TraceFormat::Json => trace_json(&report, ensemble.as_ref())? + "\n",
         TraceFormat::Csv => String::from_utf8_lossy(&report.rays_csv()?).into_owned(),
     };
     super::print_stdout(&text)?;

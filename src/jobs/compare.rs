@@ -38,6 +38,8 @@ pub struct CompareOptions {
     pub sounding_time: Option<String>,
     /// Smoothing scale of the sounding fit (m); `None`: the scene's (default 20 m).
     pub smooth_m: Option<f64>,
+    /// Temperature fit between the sounding's levels; `None`: the scene's (default auto).
+    pub fit: Option<crate::profile::TemperatureFit>,
     /// Rays of the fan across the camera's vertical field.
     pub rays: usize,
 }
@@ -47,6 +49,7 @@ impl Default for CompareOptions {
         CompareOptions {
             sounding_time: None,
             smooth_m: None,
+            fit: None,
             rays: DEFAULT_COMPARE_RAYS,
         }
     }
@@ -106,6 +109,9 @@ impl CompareRequest {
         };
         if let Some(smooth_m) = options.smooth_m {
             measured.options.smooth_m = smooth_m;
+        }
+        if let Some(fit) = options.fit {
+            measured.options.fit = fit;
         }
         measured.validate()?;
         let synthetic = synthetic.map(|source| AtmosphereRequest {

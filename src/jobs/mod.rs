@@ -5,7 +5,8 @@
 //! when it is built. Out: the job's products as named bytes ([`Product`]); nothing here but
 //! [`writer`] touches the output folder, and [`manifest`] records what was written.
 //!
-//! * [`profile`], [`trace`], [`render`], [`compare`] — request → products, one module per kind.
+//! * [`profile`], [`trace`], [`render`], [`compare`] — request → products, one module per kind;
+//!   [`ensemble`] — the trace job's sensitivity ensemble of a sounding's fit.
 //! * [`cache`] — each atmosphere (fitted profile and refractive table) is loaded once per run and
 //!   shared by every job that names it.
 //! * [`writer`] — atomic writes (temporary file + rename) and removal of dead runs' temp files.
@@ -14,6 +15,7 @@
 
 pub mod cache;
 pub mod compare;
+pub mod ensemble;
 pub mod manifest;
 pub mod profile;
 pub mod render;

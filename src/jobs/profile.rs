@@ -65,9 +65,10 @@ impl ProfileRequest {
         let regimes = detect_regimes(&atm.refractive, top_m, &RegimeOptions::default());
         let mut report = LayersReport::new(&atm.refractive, &inversions, &regimes);
         report.input = match &atm.sounding {
-            Some(sounding) => {
-                InputReport::of_sounding(&atm.source.to_string(), &atm.description, sounding)
-            }
+            Some(sounding) => InputReport {
+                fit: atm.profile.as_ref().map(|p| p.fit_choice().clone()),
+                ..InputReport::of_sounding(&atm.source.to_string(), &atm.description, sounding)
+            },
             None => InputReport {
                 source: atm.source.to_string(),
                 description: atm.description.clone(),

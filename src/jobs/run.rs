@@ -79,7 +79,7 @@ pub fn program() -> String {
 fn cost_estimate(request: &JobRequest) -> f64 {
     match request {
         JobRequest::Profile(_) => 200_000.0,
-        JobRequest::Trace(t) => 50_000.0 + 300.0 * t.ray_count() as f64,
+        JobRequest::Trace(t) => (50_000.0 + 300.0 * t.ray_count() as f64) * (1 + t.ensemble) as f64,
         JobRequest::Compare(c) => c.cost(),
         JobRequest::Render(r) => {
             let spp = r.settings.spp.unwrap_or(r.scene.camera.samples_per_pixel) as f64;

@@ -1,11 +1,15 @@
 //! Jobs — trace. In: a [`TraceJobRequest`] (observer, fan of elevations, target distances and
-//! heights, tracer settings) and its loaded atmosphere. Out: the [`TraceReport`] and the products
-//! `trace.json` (rays, images, horizons, trapped rays) and `trace.png` (fan and transfer curves).
+//! heights, tracer settings, optional ensemble size) and its loaded atmosphere. Out: the
+//! [`TraceReport`], the optional [`EnsembleReport`], and the products `trace.json` (rays, images,
+//! horizons, trapped rays; an `ensemble` section when asked for) and `trace.png` (fan and
+//! transfer curves).
 
 use super::cache::AtmosphereRequest;
+use super::ensemble::{EnsembleReport, ensemble_report};
 use super::{JobError, Product};
 use crate::analysis::{TraceReport, TraceRequest, trace_plot_png, trace_report};
-use crate::atmosphere::LoadedAtmosphere;
+use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere};
+use crate::profile::ensemble::{EnsembleOptions, MAX_MEMBERS};
 use crate::tracer::UniformIndex;
 use crate::tracer::{StratifiedIndex, TracerConfig};
 
@@ -124,6 +128,34 @@ pub struct TraceJobRequest {
     pub request: TraceRequest,
     /// Trace through n ≡ 1 instead of the atmosphere.
     pub straight: bool,
+    /// Members of the sensitivity ensemble (0: none); see [`Self::with_ensemble`].
+    #[serde(skip_serializing_if = "is_zero")]
+    pub ensemble: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// The trace report with its optional `ensemble` section, as `trace.json` holds it.
+#[derive(serde::Serialize)]
+struct TraceJson<'a> {
+    #[serde(flatten)]
+    report: &'a TraceReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ensemble: Option<&'a EnsembleReport>,
+}
+
+/// `trace.json`'s text (pretty JSON, no final newline): the report, and the ensemble section
+/// after its fields when there is one.
+pub fn trace_json(
+    report: &TraceReport,
+    ensemble: Option<&EnsembleReport>,
+) -> Result<String, JobError> {
+    Ok(serde_json::to_string_pretty(&TraceJson {
+        report,
+        ensemble,
+    })?)
 }
 
 impl TraceJobRequest {
@@ -184,7 +216,58 @@ impl TraceJobRequest {
             atmosphere,
             request,
             straight,
+            ensemble: 0,
         })
+    }
+
+    /// The same request with a sensitivity ensemble of `members` profiles (0: none; at most
+    /// [`MAX_MEMBERS`]): the temperature between the sounding's levels is moved within the
+    /// significant-level bound and the fan traced through each (see [`ensemble_report`]).
+    /// Refused for synthetic and standard atmospheres (no levels to interpolate between) and for
+    /// straight rays.
+    pub fn with_ensemble(mut self, members: usize) -> Result<Self, JobError> {
+        if members == 0 {
+            self.ensemble = 0;
+            return Ok(self);
+        }
+        let no_levels = match &self.atmosphere.source {
+            AtmosphereSource::Sounding(_) => None,
+            AtmosphereSource::Synthetic(p) => {
+                Some(format!("{} is a synthetic atmosphere", p.display()))
+            }
+            AtmosphereSource::Us1976 => Some("us1976 is the standard atmosphere".to_string()),
+        };
+        let why = if let Some(what) = no_levels {
+            format!(
+                "ensemble needs a measured sounding: {what}, defined at every height, with no \
+                 levels to interpolate between"
+            )
+        } else if self.straight {
+            "ensemble and straight rays exclude each other (n ≡ 1 has no temperature to perturb)"
+                .to_string()
+        } else if members > MAX_MEMBERS {
+            format!("ensemble of {members} members: at most {MAX_MEMBERS} are allowed")
+        } else {
+            self.ensemble = members;
+            return Ok(self);
+        };
+        Err(JobError::Invalid(why))
+    }
+
+    /// The ensemble section for `report` (the trace through `atm` itself), if one was asked for.
+    pub fn ensemble_report(
+        &self,
+        atm: &LoadedAtmosphere,
+        report: &TraceReport,
+    ) -> Result<Option<EnsembleReport>, JobError> {
+        if self.ensemble == 0 {
+            return Ok(None);
+        }
+        let options = EnsembleOptions {
+            members: self.ensemble,
+            ..EnsembleOptions::default()
+        };
+        ensemble_report(atm, &self.request, report, &options).map(Some)
     }
 
     /// Number of rays in the fan.
@@ -220,7 +303,8 @@ impl TraceJobRequest {
     /// The products: `trace.json` and, with `plot`, `trace.png`.
     pub fn products(&self, atm: &LoadedAtmosphere, plot: bool) -> Result<Vec<Product>, JobError> {
         let (report, png) = self.report(atm, plot)?;
-        let mut json = report.to_json()?;
+        let ensemble = self.ensemble_report(atm, &report)?;
+        let mut json = trace_json(&report, ensemble.as_ref())?;
         json.push('\n');
         let mut products = vec![Product::new("trace.json", json.into_bytes())];
         if let Some(png) = png {

@@ -16,6 +16,7 @@ use crate::jobs::render::{RenderSettings, parse_size};
 use crate::jobs::trace::parse_elevation_spec;
 use crate::jobs::{CompareRequest, JobRequest, ProfileRequest, RenderRequest, TraceJobRequest};
 use crate::output::film::ImageFormat;
+use crate::profile::TemperatureFit;
 use crate::scene::Scene;
 use crate::tracer::TracerConfig;
 
@@ -27,6 +28,7 @@ pub const PROFILE_KEYS: &[&str] = &[
     "igra2_time",
     "wavelength_nm",
     "smooth_m",
+    "fit",
     "strict",
     "plot_top_m",
     "layers_top_m",
@@ -39,6 +41,7 @@ pub const TRACE_KEYS: &[&str] = &[
     "igra2_time",
     "wavelength_nm",
     "smooth_m",
+    "fit",
     "strict",
     "observer_height_m",
     "elevation_deg",
@@ -48,6 +51,7 @@ pub const TRACE_KEYS: &[&str] = &[
     "top_m",
     "max_distance_m",
     "straight",
+    "ensemble",
 ];
 /// Keys a `[[render]]` table accepts.
 pub const RENDER_KEYS: &[&str] = &[
@@ -75,6 +79,7 @@ pub const COMPARE_KEYS: &[&str] = &[
     "synthetic",
     "scene",
     "smooth_m",
+    "fit",
     "size",
     "spp",
     "tolerance_m",
@@ -116,6 +121,7 @@ struct RawProfile {
     sounding_time: Option<String>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    fit: Option<TemperatureFit>,
     strict: Option<bool>,
     plot_top_m: Option<f64>,
     layers_top_m: Option<f64>,
@@ -130,6 +136,7 @@ struct RawTrace {
     sounding_time: Option<String>,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    fit: Option<TemperatureFit>,
     strict: Option<bool>,
     observer_height_m: OneOrMany<f64>,
     elevation_deg: String,
@@ -139,6 +146,7 @@ struct RawTrace {
     top_m: Option<f64>,
     max_distance_m: Option<f64>,
     straight: Option<bool>,
+    ensemble: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -169,6 +177,7 @@ struct RawCompare {
     synthetic: Option<String>,
     scene: String,
     smooth_m: Option<f64>,
+    fit: Option<crate::profile::TemperatureFit>,
     size: Option<String>,
     spp: Option<u32>,
     tolerance_m: Option<f64>,
@@ -264,6 +273,7 @@ fn atmosphere_request(
     choice: &AtmosphereChoice,
     wavelength_nm: Option<f64>,
     smooth_m: Option<f64>,
+    fit: Option<TemperatureFit>,
     strict: Option<bool>,
 ) -> AtmosphereRequest {
     let d = AtmosphereOptions::default();
@@ -271,6 +281,7 @@ fn atmosphere_request(
         source: choice.source.clone(),
         options: AtmosphereOptions {
             smooth_m: smooth_m.unwrap_or(d.smooth_m),
+            fit: fit.unwrap_or(d.fit),
             wavelength_nm: wavelength_nm.unwrap_or(d.wavelength_nm),
             sounding_time: choice.sounding_time.clone(),
             strict: strict.unwrap_or(false),
@@ -288,7 +299,13 @@ pub fn profile_jobs(t: &mut Table) -> Vec<NamedJob> {
     for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {
         let name = t.name(&template, &choice.stem, "", None);
         let request = ProfileRequest::new(
-            atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m, raw.strict),
+            atmosphere_request(
+                &choice,
+                raw.wavelength_nm,
+                raw.smooth_m,
+                raw.fit,
+                raw.strict,
+            ),
             raw.plot_top_m
                 .unwrap_or(crate::jobs::profile::DEFAULT_PLOT_TOP_M),
             raw.layers_top_m
@@ -334,14 +351,21 @@ pub fn trace_jobs(t: &mut Table) -> Vec<NamedJob> {
         for &height in &heights {
             let name = t.name(&template, &choice.stem, "", Some(height));
             let request = TraceJobRequest::new(
-                atmosphere_request(&choice, raw.wavelength_nm, raw.smooth_m, raw.strict),
+                atmosphere_request(
+                    &choice,
+                    raw.wavelength_nm,
+                    raw.smooth_m,
+                    raw.fit,
+                    raw.strict,
+                ),
                 height,
                 &spec,
                 raw.distances_m.clone(),
                 raw.target_heights_m.clone().unwrap_or_else(|| vec![20.0]),
                 tracer.clone(),
                 raw.straight.unwrap_or(false),
-            );
+            )
+            .and_then(|r| r.with_ensemble(raw.ensemble.unwrap_or(0)));
             match request {
                 Ok(r) => jobs.push((name, JobRequest::Trace(r))),
                 Err(e) => t.problem_in_message(e.to_string()),
@@ -511,6 +535,7 @@ pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
         let options = crate::jobs::compare::CompareOptions {
             sounding_time: choice.sounding_time.clone(),
             smooth_m: raw.smooth_m,
+            fit: raw.fit,
             rays: raw
                 .rays
                 .unwrap_or(crate::jobs::compare::DEFAULT_COMPARE_RAYS),

@@ -5,9 +5,13 @@
 //! * **Smoothing** (dense soundings only): every quantity is first passed through a tricube
 //!   local-linear regression of half-width [`FitOptions::smooth_m`] (see `smooth.rs` for why).
 //!   Levels with no neighbour within `smooth_m` keep their measured values exactly.
-//! * **Temperature**: PCHIP (Fritsch–Butland) through the (smoothed) levels: C¹, no extremum
-//!   between levels, so the fit never invents an inversion; dT/dh is the analytic derivative of
-//!   the same cubic segment.
+//! * **Temperature** ([`FitOptions::temperature_fit`], see `temperature.rs`): PCHIP
+//!   (Fritsch–Butland) through the (smoothed) levels — C¹, no extremum between levels, so the fit
+//!   never invents an inversion — or linear in ln p between levels (C⁰, what significant levels
+//!   are chosen for); by default linear for significant-level soundings and PCHIP for dense
+//!   ascents. dT/dh is the analytic derivative of the same piece. The hydrostatic fill below
+//!   integrates through the linear fit taken linear in height (P is not known yet); the two
+//!   differ by far less than the 1 K significant levels promise.
 //! * **Pressure**: PCHIP of ln P through one knot per level, ln P = H + R: H is the hydrostatic
 //!   d(ln P)/dh = −g₀/(R_d·T_v) integrated through the fitted T and e (virtual temperature), R the
 //!   residual to the measured pressures — smoothed where levels are dense (over 5·smooth_m,
@@ -37,6 +41,7 @@ use super::hydrostatic::{G_OVER_R, HydrostaticTable, integrate_ln_p, virtual_tem
 use super::monotone::MonotoneCubic;
 use super::smooth::{local_linear, local_linear_varying};
 use super::standard::StandardAtmosphere;
+use super::temperature::{FitChoice, TemperatureCurve, TemperatureFit, choose_fit};
 use super::us1976::us1976;
 use super::{AirColumn, AirSample, MODEL_TOP_M, ProfileError};
 use crate::sounding::Sounding;
@@ -60,6 +65,10 @@ pub struct FitOptions {
     /// Surface pressure (Pa) to start the hydrostatic integration from when no level has a
     /// pressure; `None` takes the US1976 pressure at the surface height.
     pub surface_pressure_pa: Option<f64>,
+    /// How temperature is interpolated between levels. Default [`TemperatureFit::Auto`]:
+    /// linear in ln p for significant-level soundings, PCHIP for dense ascents (see
+    /// [`choose_fit`](super::choose_fit) for the criterion and its reason).
+    pub temperature_fit: TemperatureFit,
 }
 
 impl Default for FitOptions {
@@ -68,6 +77,7 @@ impl Default for FitOptions {
             smooth_m: 20.0,
             blend_scale_m: 2000.0,
             surface_pressure_pa: None,
+            temperature_fit: TemperatureFit::Auto,
         }
     }
 }
@@ -217,7 +227,8 @@ pub struct Profile {
     surface_height_m: f64,
     top_m: f64,
     knots: Vec<ProfileKnot>,
-    temperature: Curve,
+    fit: FitChoice,
+    temperature: TemperatureCurve,
     ln_pressure: Curve,
     vapour: Option<VapourFit>,
     above: AboveTop,
@@ -292,10 +303,16 @@ impl Profile {
         let surface_height_m = heights[0];
         let top_m = heights[heights.len() - 1];
 
-        // Temperature.
+        // Temperature (gaps linear in ln p get their ln P once the pressure is fitted).
+        let fit = choose_fit(options.temperature_fit, &heights);
         let raw_t: Vec<f64> = levels.iter().map(|l| l.temperature_k).collect();
         let t_knots = local_linear(&heights, &raw_t, smooth);
-        let temperature = Curve::new(&heights, &t_knots, us1976(top_m).dtemperature_dh_k_per_m);
+        let mut temperature = TemperatureCurve::new(
+            &heights,
+            &t_knots,
+            fit.used,
+            us1976(top_m).dtemperature_dh_k_per_m,
+        );
 
         // Vapour pressure (values only; its outside rules need P, set below).
         let e_levels: Vec<(f64, f64)> = levels
@@ -325,7 +342,7 @@ impl Profile {
                 rate_hi: 0.0,
             }
         });
-        let t_of = |h: f64| temperature.value_slope(h).0;
+        let t_of = |h: f64| temperature.at(h, None).0;
         let tv_provisional = |h: f64, p: f64| {
             let e = provisional.as_ref().map_or(0.0, |v| v.at(h, p, 0.0).0);
             virtual_temperature_k(t_of(h), e, p)
@@ -341,6 +358,7 @@ impl Profile {
         if ln_p.iter().any(|v| !v.is_finite()) {
             return Err(bad(0, "the pressure fit is not finite".into()));
         }
+        temperature.set_ln_pressure((0..n).map(|i| is_measured[i].then_some(ln_p[i])).collect());
 
         // Vapour model with the fitted pressure.
         let lnp_at = |h: f64| ln_pressure.value_slope(h);
@@ -365,7 +383,7 @@ impl Profile {
         });
 
         // Above the top: blend into US1976.
-        let (t_top, dt_top) = temperature.value_slope(top_m);
+        let (t_top, dt_top) = temperature.at(top_m, Some(ln_pressure.value_slope(top_m)));
         let std_top = us1976(top_m);
         let delta_k = t_top - std_top.temperature_k;
         let tau_m = options.blend_scale_m;
@@ -410,6 +428,7 @@ impl Profile {
             surface_height_m,
             top_m,
             knots: Vec::new(),
+            fit,
             temperature,
             ln_pressure,
             vapour,
@@ -444,6 +463,39 @@ impl Profile {
     /// The file the sounding came from.
     pub fn source(&self) -> &std::path::Path {
         &self.source
+    }
+
+    /// The temperature fit used, and why.
+    pub fn fit_choice(&self) -> &FitChoice {
+        &self.fit
+    }
+
+    /// Number of gaps between levels (levels − 1).
+    pub fn gaps(&self) -> usize {
+        self.temperature.gaps()
+    }
+
+    /// The same profile with a smooth bump a·sin(πu) added to the temperature in every gap
+    /// between two levels, `bumps_k[k]` (K) in gap k (u: the gap's ln p fraction where it is
+    /// linear in ln p, else its height fraction), so that T is unchanged at every level. P and e
+    /// are not refitted: a departure of a kelvin changes the hydrostatic d ln P/dh by 0.4 %, and
+    /// the measured pressures stay met. Fails when `bumps_k` does not hold one finite value per
+    /// gap.
+    pub fn perturbed(&self, bumps_k: &[f64]) -> Result<Profile, ProfileError> {
+        if bumps_k.len() != self.gaps() || bumps_k.iter().any(|a| !a.is_finite()) {
+            return Err(ProfileError::BadOption {
+                name: "bumps_k",
+                message: format!(
+                    "{} finite amplitudes needed (one per gap between levels), got {}",
+                    self.gaps(),
+                    bumps_k.len()
+                ),
+            });
+        }
+        Ok(Profile {
+            temperature: self.temperature.with_bumps(bumps_k.to_vec()),
+            ..self.clone()
+        })
     }
 }
 
@@ -613,10 +665,8 @@ impl AirColumn for Profile {
         }
         let h = height_m.clamp(self.surface_height_m, MODEL_TOP_M);
         let ((t, dt), (lnp, dlnp)) = if h <= self.top_m {
-            (
-                self.temperature.value_slope(h),
-                self.ln_pressure.value_slope(h),
-            )
+            let ln_p = self.ln_pressure.value_slope(h);
+            (self.temperature.at(h, Some(ln_p)), ln_p)
         } else {
             (self.above.temperature.at(h), self.above.ln_pressure(h))
         };
@@ -635,8 +685,8 @@ impl AirColumn for Profile {
         }
     }
 
-    /// The knots of the piecewise fits (every level: T and ln P are piecewise cubics, C¹ at
-    /// them), the ends of the humidity data, the top of the data (where the blend into US1976
+    /// The knots of the piecewise fits (every level: ln P is a piecewise cubic, C¹ at them, and
+    /// T one too or, for the linear fit, C⁰ with dT/dh jumping there), the ends of the humidity data, the top of the data (where the blend into US1976
     /// starts, C¹) and the US1976 layer bases above it.
     fn breaks_m(&self) -> Vec<f64> {
         let mut breaks: Vec<f64> = self.knots.iter().map(|k| k.height_m).collect();
@@ -701,6 +751,49 @@ mod tests {
             assert!(t < 270.0 && t > 200.0, "{h}: {t}");
             h += 10.0;
         }
+    }
+
+    #[test]
+    fn linear_fit_is_linear_in_ln_p_and_bumps_keep_the_levels() {
+        // Three levels with pressures; linear in ln p between them, by hand: halfway in ln p
+        // between 1000 hPa (250 K) and 980 hPa (252 K), at √(1000·980) hPa, T = 251 K.
+        let s = sounding(&[
+            (0.0, 250.0, Some(100_000.0), None),
+            (170.0, 252.0, Some(98_000.0), None),
+            (600.0, 249.0, Some(93_000.0), None),
+        ]);
+        let options = FitOptions {
+            temperature_fit: TemperatureFit::Linear,
+            ..FitOptions::default()
+        };
+        let fit = Profile::from_sounding(&s, &options).unwrap();
+        assert_eq!(fit.fit_choice().used, TemperatureFit::Linear);
+        let p_mid = (100_000.0f64 * 98_000.0).sqrt();
+        let (mut lo, mut hi) = (0.0, 170.0);
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if fit.air_at(mid).pressure_pa > p_mid {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let h_mid = 0.5 * (lo + hi);
+        assert!((fit.air_at(h_mid).temperature_k - 251.0).abs() < 1e-9);
+        // The analytic slope matches a central difference of the same curve.
+        let d = 1e-4;
+        let numeric =
+            (fit.air_at(h_mid + d).temperature_k - fit.air_at(h_mid - d).temperature_k) / (2.0 * d);
+        assert!((numeric - fit.air_at(h_mid).dtemperature_dh_k_per_m).abs() < 1e-8);
+        // Bumps: the levels stay, the mid-ln-p point moves by exactly the amplitude.
+        let bumped = fit.perturbed(&[0.7, -0.4]).unwrap();
+        for level in &s.levels {
+            let t = bumped.air_at(level.height_m).temperature_k;
+            assert!((t - level.temperature_k).abs() < 1e-9, "{level:?}");
+        }
+        assert!((bumped.air_at(h_mid).temperature_k - 251.7).abs() < 1e-9);
+        assert!(fit.perturbed(&[0.1]).is_err());
+        assert!(fit.perturbed(&[0.1, f64::NAN]).is_err());
     }
 
     #[test]

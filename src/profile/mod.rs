@@ -1,8 +1,10 @@
 //! Stage 2 — fit. In: a [`Sounding`](crate::sounding::Sounding) or a synthetic layer description.
 //! Out: a [`Profile`]: smooth, monotone-safe T(h), P(h) and vapour pressure e(h) with their height
 //! derivatives, blended into the U.S. Standard Atmosphere 1976 above the data, plus the inversion
-//! layers and refractive regimes found in it.
+//! layers and refractive regimes found in it; and ([`ensemble`]) perturbed member profiles for
+//! sensitivity studies.
 
+pub mod ensemble;
 mod error;
 mod fit;
 mod hydrostatic;
@@ -12,6 +14,7 @@ mod monotone;
 mod smooth;
 mod standard;
 mod synthetic;
+mod temperature;
 pub mod us1976;
 
 pub use error::ProfileError;
@@ -19,6 +22,9 @@ pub use fit::{FitOptions, Profile, ProfileKnot};
 pub use inversion::{InversionOptions, detect_inversions};
 pub use standard::StandardAtmosphere;
 pub use synthetic::{Background, SyntheticAtmosphere, SyntheticLayer};
+pub use temperature::{
+    AUTO_SPACING_RANGE_M, AUTO_SPARSE_SPACING_M, FitChoice, TemperatureFit, choose_fit,
+};
 
 /// Highest height any column here models (m): the top of the U.S. Standard Atmosphere 1976
 /// (86 km geometric). Above it every column returns its 86 km air.

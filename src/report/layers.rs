@@ -111,6 +111,8 @@ pub struct InputReport {
     pub levels_read: Option<usize>,
     /// What ingest skipped, merged or dropped, one line per kind.
     pub notes: Vec<String>,
+    /// The temperature fit between the levels and why it was chosen, for soundings.
+    pub fit: Option<crate::profile::FitChoice>,
 }
 
 impl InputReport {
@@ -132,6 +134,7 @@ impl InputReport {
                 .map(|t| report_time(t)),
             levels_read: Some(sounding.levels.len()),
             notes: sounding.warnings.clone(),
+            fit: None,
         }
     }
 }
@@ -265,6 +268,13 @@ pub fn summary_text(report: &LayersReport) -> String {
             input.notes.len(),
             if input.notes.len() == 1 { "" } else { "s" }
         );
+    }
+    if let Some(fit) = &input.fit {
+        let name = match fit.used {
+            crate::profile::TemperatureFit::Linear => "linear in ln p",
+            _ => "PCHIP",
+        };
+        let _ = writeln!(o, "Temperature fit: {name} ({})", fit.reason);
     }
     let s = &report.surface;
     // Writing to a String cannot fail; results are ignored.

@@ -19,6 +19,7 @@
 //! wavelength_nm = 550.0
 //! straight = false           # true: n ≡ 1 (straight rays)
 //! smooth_m = 0.0             # optional smoothing length for soundings
+//! fit = "auto"               # optional: temperature between levels, "pchip" | "linear" | "auto"
 //! sounding_time = "2024-01-15 12"   # optional: which sounding of a multi-sounding IGRA2 file
 //! strict = false                 # optional: refuse levels that contradict those below them
 //!
@@ -72,6 +73,7 @@ use serde::{Deserialize, Serialize};
 use crate::atmosphere::{
     AtmosphereError, AtmosphereOptions, AtmosphereSource, LoadedAtmosphere, load_atmosphere,
 };
+use crate::profile::TemperatureFit;
 use sha2::{Digest, Sha256};
 
 pub use camera::Camera;
@@ -132,6 +134,8 @@ pub struct AtmosphereSettings {
     pub straight: bool,
     /// Optional smoothing length for soundings (m).
     pub smooth_m: Option<f64>,
+    /// How a sounding's temperature is interpolated between levels (default auto).
+    pub fit: TemperatureFit,
     /// Which sounding of a multi-sounding IGRA2 file (`"YYYY-MM-DD HH"`, UTC); `None`: the first.
     pub sounding_time: Option<String>,
     /// Refuse a sounding whose levels contradict each other in the lowest kilometres (see
@@ -151,6 +155,7 @@ impl AtmosphereSettings {
             smooth_m: self
                 .smooth_m
                 .unwrap_or(AtmosphereOptions::default().smooth_m),
+            fit: self.fit,
             wavelength_nm: self.wavelength_nm,
             sounding_time: self.sounding_time.clone(),
             strict: self.strict,
@@ -237,6 +242,8 @@ struct RawAtmosphere {
     #[serde(default)]
     straight: bool,
     smooth_m: Option<f64>,
+    #[serde(default)]
+    fit: TemperatureFit,
     #[serde(alias = "igra2_time")]
     sounding_time: Option<String>,
     #[serde(default)]
@@ -469,6 +476,7 @@ impl Scene {
                 .smooth_m
                 .map(|s| c.range("atmosphere.smooth_m", s, 0.0, 10_000.0, "0…10000 m"))
                 .transpose()?,
+            fit: ra.fit,
             sounding_time,
             strict: ra.strict,
         };

@@ -210,7 +210,13 @@ pub fn standard_cases(data_dir: &Path, stress_dir: &Path) -> Result<Vec<BenchCas
             name: file.trim_end_matches(".csv").to_string(),
             kind: "sounding",
             source: AtmosphereSource::Sounding(data_dir.join(file)),
-            options: AtmosphereOptions::default(),
+            // Pinned: the study measures the tracer on these profiles, and BENCHMARKS.md was
+            // measured on their PCHIP fits (auto would fit Utqiagvik's significant levels
+            // linearly).
+            options: AtmosphereOptions {
+                fit: crate::profile::TemperatureFit::Pchip,
+                ..AtmosphereOptions::default()
+            },
             observer_height_m: OBSERVER_M,
         });
     }

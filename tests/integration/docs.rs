@@ -281,6 +281,7 @@ fn scene_table_defaults_are_the_parsers() {
                 close(*d as f64, n.as_f64().unwrap())
             }
             (toml::Value::Boolean(d), serde_json::Value::Bool(b)) => d == b,
+            (toml::Value::String(d), serde_json::Value::String(s)) => d == s,
             (toml::Value::Array(d), serde_json::Value::Array(s)) => {
                 d.len() == s.len()
                     && d.iter().zip(s).all(|(d, s)| {

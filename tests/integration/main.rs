@@ -7,6 +7,7 @@ mod cli;
 mod compare;
 mod docs;
 mod end_to_end;
+mod fit;
 mod images;
 mod ingest;
 mod ingest_archives;
