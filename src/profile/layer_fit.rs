@@ -9,7 +9,9 @@
 //! breakpoint heights are optimised over that reduced residual by argmin's Nelder–Mead solver
 //! (derivative-free, since the reduced residual is only piecewise smooth in the breakpoints).
 //! Breakpoints are kept inside the range and at least `min_thickness_m` apart by projection.
-//! Initial breakpoints: chosen greedily, each the level height that most lowers the residual.
+//! Initial breakpoints: the best polyline through the levels themselves (dynamic programming over
+//! the level heights). Knots of layers holding fewer than two levels are then moved onto levels,
+//! and the better of the optimised and the initial knots is kept.
 
 use std::path::Path;
 
@@ -121,6 +123,7 @@ pub fn fit_layers(
         .saturating_sub(1)
         .min(data.h.len().saturating_sub(2));
     let init = initial_breakpoints(&data, n_inner, options.min_thickness_m);
+    let init_knots = init.clone();
     let problem = Reduced {
         data: &data,
         lo,
@@ -137,7 +140,16 @@ pub fn fit_layers(
             }
         })?
     };
-    let knots = anchor_unsupported_knots(&problem.knots(&breaks), &data.h);
+    let optimised = anchor_unsupported_knots(&problem.knots(&breaks), &data.h);
+    let on_levels: Vec<f64> = [lo].into_iter().chain(init_knots).chain([hi]).collect();
+    // The optimiser starts from the level polyline; anchoring may undo some of its gain, so
+    // the better of the two (by the least-squares residual) is kept.
+    let sse = |k: &[f64]| weighted_sse(&data, k, &solve_knot_temperatures(&data, k));
+    let knots = if sse(&optimised) <= sse(&on_levels) {
+        optimised
+    } else {
+        on_levels
+    };
     let temps = solve_knot_temperatures(&data, &knots);
     let (knots, temps) = merge_collinear(&knots, &temps);
     Ok(assemble(sounding, &data, &knots, &temps, termination))
@@ -277,34 +289,64 @@ fn select_levels(s: &Sounding, o: &LayerFitOptions) -> Result<Data, ProfileError
 /// Largest number of candidate heights tried per greedy step of [`initial_breakpoints`].
 const MAX_CANDIDATES: usize = 400;
 
-/// Up to `n` interior breakpoints, at least `gap_m` apart, chosen greedily: each step adds the
-/// level height that most lowers the least-squares residual of the knots chosen so far (exact
-/// for each candidate). Unlike the largest |d²T/dh²|, this is not fooled by the level-to-level
-/// noise of 1-s soundings, and a weak inversion above a strong one still gets its own knots.
+/// Up to `n` interior breakpoints, at least `gap_m` apart, on level heights: the optimal
+/// polyline through the levels themselves (knot temperatures = the measured ones) with at most
+/// n + 1 segments, by dynamic programming over the candidate levels (exact for that polyline; the
+/// least squares and the optimiser then free the temperatures and heights). Unlike a greedy
+/// choice it keeps a thin surface step that only a pair of knots can follow.
 fn initial_breakpoints(d: &Data, n: usize, gap_m: f64) -> Vec<f64> {
-    let (lo, hi) = (d.h[0], d.h[d.h.len() - 1]);
     let stride = d.h.len().div_ceil(MAX_CANDIDATES).max(1);
-    let candidates: Vec<f64> = d.h.iter().copied().step_by(stride).collect();
-    let mut chosen: Vec<f64> = Vec::new();
-    for _ in 0..n {
-        let best = candidates
-            .iter()
-            .filter(|&&h| h - lo >= gap_m && hi - h >= gap_m)
-            .filter(|&&h| chosen.iter().all(|c| (c - h).abs() >= gap_m))
-            .map(|&h| {
-                let mut knots: Vec<f64> = chosen.iter().copied().chain([lo, h, hi]).collect();
-                knots.sort_by(f64::total_cmp);
-                let temps = solve_knot_temperatures(d, &knots);
-                (weighted_sse(d, &knots, &temps), h)
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        match best {
-            Some((_, h)) => chosen.push(h),
-            None => break,
-        }
+    let mut cand: Vec<usize> = (0..d.h.len()).step_by(stride).collect();
+    if cand.last() != Some(&(d.h.len() - 1)) {
+        cand.push(d.h.len() - 1);
     }
-    chosen.sort_by(f64::total_cmp);
-    chosen
+    let m = cand.len();
+    // seg[a][b]: weighted SSE of the chord from candidate a to candidate b.
+    let chord = |a: usize, b: usize| -> f64 {
+        let (i, j) = (cand[a], cand[b]);
+        let slope = (d.t[j] - d.t[i]) / (d.h[j] - d.h[i]);
+        (i..=j)
+            .map(|k| d.w[k] * (d.t[i] + slope * (d.h[k] - d.h[i]) - d.t[k]).powi(2))
+            .sum()
+    };
+    let seg: Vec<Vec<f64>> = (0..m)
+        .map(|a| {
+            (0..m)
+                .map(|b| {
+                    let ok = b > a && d.h[cand[b]] - d.h[cand[a]] >= gap_m;
+                    if ok { chord(a, b) } else { f64::INFINITY }
+                })
+                .collect()
+        })
+        .collect();
+    // cost[s][b], from[s][b]: best polyline of s + 1 segments from candidate 0 to b.
+    let mut cost = vec![seg[0].clone()];
+    let mut from: Vec<Vec<usize>> = vec![vec![0; m]];
+    for s in 1..=n {
+        let (mut c, mut f) = (vec![f64::INFINITY; m], vec![0; m]);
+        for b in 1..m {
+            for a in 1..b {
+                let v = cost[s - 1][a] + seg[a][b];
+                if v < c[b] {
+                    (c[b], f[b]) = (v, a);
+                }
+            }
+        }
+        cost.push(c);
+        from.push(f);
+    }
+    // The fewest segments within a hair of the best error.
+    let best = cost.iter().map(|c| c[m - 1]).fold(f64::INFINITY, f64::min);
+    let Some(s) = (0..=n).find(|&s| cost[s][m - 1] <= best * (1.0 + 1e-9) + 1e-18) else {
+        return Vec::new();
+    };
+    let (mut knots, mut b) = (Vec::new(), m - 1);
+    for level in (1..=s).rev() {
+        b = from[level][b];
+        knots.push(d.h[cand[b]]);
+    }
+    knots.reverse();
+    knots
 }
 
 /// The reduced least-squares problem in the breakpoint heights.
