@@ -65,6 +65,9 @@ pub struct SideSummary {
     pub atmosphere: String,
     /// Its one-line description.
     pub description: String,
+    /// Height of its surface (m above mean sea level): the camera stands this high plus its
+    /// own height.
+    pub surface_height_m: f64,
     /// Images of each target.
     pub targets: Vec<TargetImages>,
     /// Apparent horizon at each target distance, then the sea horizon.
@@ -84,6 +87,7 @@ impl SideSummary {
     pub fn new(
         atmosphere: String,
         description: String,
+        surface_height_m: f64,
         report: &TraceReport,
         layers: &[RefractiveLayer],
         targets: &[(f64, f64)],
@@ -102,6 +106,7 @@ impl SideSummary {
         SideSummary {
             atmosphere,
             description,
+            surface_height_m,
             targets,
             horizons: report.horizons.clone(),
             trapped_rays: trapped.len(),
@@ -349,9 +354,20 @@ fn ducts_text(ducts: &[DuctSummary]) -> String {
 
 /// Horizon shifts smaller than this (arcmin) are not listed as differences.
 const HORIZON_NOTICE_ARCMIN: f64 = 0.5;
+/// Duct bounds closer than this (m) are the same duct.
+const DUCT_NOTICE_M: f64 = 10.0;
+/// Surfaces closer than this (m) are the same ground.
+const SURFACE_NOTICE_M: f64 = 5.0;
 
 fn differences(m: &SideSummary, s: &SideSummary) -> Vec<String> {
     let mut out = Vec::new();
+    if (m.surface_height_m - s.surface_height_m).abs() > SURFACE_NOTICE_M {
+        out.push(format!(
+            "surface: {:.0} m above sea level measured, {:.0} m synthetic (the camera and the \
+             cards stand on different ground)",
+            m.surface_height_m, s.surface_height_m
+        ));
+    }
     for (a, b) in m.targets.iter().zip(&s.targets) {
         if a.count != b.count || a.inverted != b.inverted {
             out.push(format!(
@@ -391,7 +407,11 @@ fn differences(m: &SideSummary, s: &SideSummary) -> Vec<String> {
             m.trapped_rays, s.trapped_rays
         ));
     }
-    if m.ducts.len() != s.ducts.len() {
+    let moved = m.ducts.iter().zip(&s.ducts).any(|(a, b)| {
+        (a.trapping_base_m - b.trapping_base_m).abs() > DUCT_NOTICE_M
+            || (a.top_m - b.top_m).abs() > DUCT_NOTICE_M
+    });
+    if m.ducts.len() != s.ducts.len() || moved {
         out.push(format!(
             "ducts: {} measured ({}), {} synthetic ({})",
             m.ducts.len(),
@@ -401,4 +421,46 @@ fn differences(m: &SideSummary, s: &SideSummary) -> Vec<String> {
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn side(surface_m: f64, ducts: &[(f64, f64)]) -> SideSummary {
+        SideSummary {
+            atmosphere: "a".into(),
+            description: "a".into(),
+            surface_height_m: surface_m,
+            targets: Vec::new(),
+            horizons: Vec::new(),
+            trapped_rays: 0,
+            trapped_elevation_range_deg: None,
+            ducts: ducts
+                .iter()
+                .map(|&(b, t)| DuctSummary {
+                    base_m: b,
+                    trapping_base_m: b,
+                    top_m: t,
+                    m_deficit: 1.0,
+                    surface_based: b == 0.0,
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn ducts_at_other_heights_are_a_difference() {
+        let d = differences(&side(0.0, &[(370.0, 390.0)]), &side(0.0, &[(100.0, 120.0)]));
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert!(d[0].starts_with("ducts:"), "{d:?}");
+        let same = differences(&side(0.0, &[(370.0, 390.0)]), &side(0.0, &[(372.0, 391.0)]));
+        assert!(same.is_empty(), "{same:?}");
+    }
+
+    #[test]
+    fn different_ground_is_a_difference() {
+        let d = differences(&side(2830.0, &[]), &side(0.0, &[]));
+        assert!(d.iter().any(|x| x.starts_with("surface:")), "{d:?}");
+    }
 }

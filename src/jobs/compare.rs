@@ -88,7 +88,13 @@ impl CompareRequest {
             ));
         }
         if matches!(synthetic, Some(AtmosphereSource::Sounding(_))) {
-            return invalid("the synthetic atmosphere must be a .toml file or us1976".into());
+            let name = synthetic
+                .as_ref()
+                .map(|s| s.to_string())
+                .unwrap_or_default();
+            return invalid(format!(
+                "the synthetic atmosphere must be a .toml file or us1976, not the sounding {name}"
+            ));
         }
         if !(3..=super::trace::MAX_RAYS).contains(&rays) {
             return invalid(format!(
@@ -103,9 +109,15 @@ impl CompareRequest {
             sizes: vec![settings.sizes.first().copied().flatten()],
             ..settings
         };
+        let scene_name = scene
+            .source_path
+            .as_ref()
+            .map_or_else(|| "the scene".into(), |p| p.display().to_string());
         let render = RenderRequest::new(scene, settings)?;
         let Some(mut measured) = render.atmosphere.clone() else {
-            return invalid("the scene traces straight rays".into());
+            return invalid(format!(
+                "{scene_name} sets atmosphere.straight = true (n ≡ 1): there is nothing to compare"
+            ));
         };
         if let Some(smooth_m) = options.smooth_m {
             measured.options.smooth_m = smooth_m;
@@ -189,6 +201,7 @@ impl CompareRequest {
             SideSummary::new(
                 measured.source.to_string(),
                 measured.description.clone(),
+                measured.refractive.surface_height_m(),
                 &m.0,
                 &m.1,
                 &self.targets,
@@ -196,6 +209,7 @@ impl CompareRequest {
             SideSummary::new(
                 synthetic.source.to_string(),
                 synthetic.description.clone(),
+                synthetic.refractive.surface_height_m(),
                 &s.0,
                 &s.1,
                 &self.targets,
@@ -238,7 +252,6 @@ impl CompareRequest {
     }
 }
 
-/// The fan: the camera's vertical field, from the camera height, to every card (ground to top).
 /// The scene's cards as targets (distance, top height), in order, duplicates dropped; the
 /// [`DEFAULT_TARGETS`] for a scene without cards.
 fn scene_targets(scene: &Scene) -> Vec<(f64, f64)> {
@@ -255,13 +268,15 @@ fn scene_targets(scene: &Scene) -> Vec<(f64, f64)> {
     targets
 }
 
+/// The fan: the camera's vertical field at the rendered size (the horizontal field stays, the
+/// vertical follows the aspect ratio), from the camera height, to every target.
 fn fan_request(
     render: &RenderRequest,
     measured: &AtmosphereRequest,
     targets: &[(f64, f64)],
     rays: usize,
 ) -> Result<TraceJobRequest, JobError> {
-    let scene = &render.scene;
+    let scene = &render.scene_at(render.settings.sizes.first().copied().flatten());
     let frame = scene.camera.frame();
     let (w, h) = (scene.camera.width as f64, scene.camera.height as f64);
     let elevations: Vec<f64> = [
@@ -314,11 +329,11 @@ fn fitted_atmosphere(
             measured.source
         )));
     };
-    let profile_err = |source| {
-        JobError::from(crate::atmosphere::AtmosphereError::Profile {
-            source_name: measured.source.to_string(),
-            source,
-        })
+    let profile_err = |e: crate::profile::ProfileError| {
+        JobError::Compare(format!(
+            "cannot fit layers to {}: {e}; give a SYNTHETIC atmosphere to compare with",
+            measured.source
+        ))
     };
     let fit = fit_layers(sounding, &LayerFitOptions::default()).map_err(profile_err)?;
     let column = fit.to_synthetic().map_err(profile_err)?;

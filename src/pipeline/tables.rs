@@ -528,6 +528,13 @@ pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
         t.problem("synthetic", e);
         return Vec::new();
     }
+    if let Some(s @ crate::atmosphere::AtmosphereSource::Sounding(_)) = &synthetic {
+        t.problem(
+            "synthetic",
+            format!("synthetic: {s} is a sounding; give a layered .toml or us1976"),
+        );
+        return Vec::new();
+    }
     let template = raw.name.clone().unwrap_or_else(|| "compare_{stem}".into());
     let mut jobs = Vec::new();
     for choice in t.atmospheres(&raw.atmosphere.to_vec(), raw.sounding_time.as_deref()) {

@@ -160,7 +160,8 @@ const SAME_GRADIENT_K_PER_M: f64 = 1e-6;
 
 /// The knots without those between two layers of the same gradient: when the sounding needs
 /// fewer layers than allowed, the spare breakpoints fall inside a straight stretch, and one
-/// layer is what a user expects to read there. The fitted temperatures do not change.
+/// layer is what a user expects to read there. A dropped knot's temperature moves by less than
+/// the gradient tolerance times the merged layer's thickness (sub-millikelvin over a kilometre).
 fn merge_collinear(knots: &[f64], temps: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let slope = |a: usize, b: usize| (temps[b] - temps[a]) / (knots[b] - knots[a]);
     let (mut k, mut t) = (vec![knots[0]], vec![temps[0]]);
@@ -177,21 +178,35 @@ fn merge_collinear(knots: &[f64], temps: &[f64]) -> (Vec<f64>, Vec<f64>) {
     (k, t)
 }
 
-/// Knots moved onto the nearest level where a layer next to them holds fewer than two levels.
+/// Knots moved onto the nearest level where no level lies strictly inside the nearer half of either layer
+/// next to them.
 ///
-/// Such a knot's temperature is fixed only by a level near its far end (with a small hat-basis
-/// weight), so the least squares extrapolates it freely: between sparse significant levels the
-/// optimiser can place two knots in a gap and draw a 20 K spike through it at zero residual.
-/// A knot on a level is held by that level's own temperature. Knots of well-sampled layers stay
+/// A knot's temperature is held by the levels whose hat-basis weight on it is large; a knot
+/// whose neighbouring levels all sit near the layers' far ends (weight ≤ ½) is fixed only by
+/// small weights, so the least squares extrapolates it freely: between sparse significant levels
+/// the optimiser can place knots in a gap and draw a 20 K spike through it at zero residual. A
+/// knot on a level is held by that level's own temperature. Knots of well-sampled layers stay
 /// where the optimiser put them; knots that land on the same level are merged.
 fn anchor_unsupported_knots(knots: &[f64], levels_m: &[f64]) -> Vec<f64> {
-    let count = |a: f64, b: f64| levels_m.iter().filter(|&&h| h >= a && h <= b).count();
     let last = knots.len() - 1;
+    let support = |i: usize| -> f64 {
+        let (k, lo, hi) = (knots[i], knots[i - 1], knots[i + 1]);
+        levels_m
+            .iter()
+            .filter(|&&h| h >= lo && h <= hi)
+            .map(|&h| {
+                let span = if h < k { k - lo } else { hi - k };
+                if span > 0.0 {
+                    1.0 - (h - k).abs() / span
+                } else {
+                    1.0
+                }
+            })
+            .fold(0.0, f64::max)
+    };
     let mut out: Vec<f64> = Vec::with_capacity(knots.len());
     for (i, &k) in knots.iter().enumerate() {
-        let below = i > 0 && count(knots[i - 1], k) < 2;
-        let above = i < last && count(k, knots[i + 1]) < 2;
-        let k = if (below || above) && 0 < i && i < last {
+        let k = if 0 < i && i < last && support(i) <= 0.5 {
             levels_m
                 .iter()
                 .copied()
@@ -548,5 +563,54 @@ impl LayerFit {
     /// The fit as the project's synthetic atmosphere (parsed from [`LayerFit::to_toml`]).
     pub fn to_synthetic(&self) -> Result<SyntheticAtmosphere, ProfileError> {
         SyntheticAtmosphere::from_toml_str(&self.to_toml(), Path::new("<layer fit>"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_knot_whose_levels_sit_at_the_far_ends_is_anchored() {
+        // Levels cluster near 0–11 m and 1999–2000 m; the knot at 1000 m has levels in both
+        // neighbouring layers, but none in the nearer half of either.
+        let levels = [0.0, 5.0, 9.0, 10.5, 11.0, 1999.0, 2000.0];
+        let knots = anchor_unsupported_knots(&[0.0, 10.0, 1000.0, 2000.0], &levels);
+        assert_eq!(knots, vec![0.0, 10.0, 11.0, 2000.0]);
+        // The fitted temperatures then stay on the line (no spike from a 0.05 K wiggle).
+        let t: Vec<f64> = levels.iter().map(|h| 288.0 - 0.0065 * h).collect();
+        let mut t = t;
+        t[5] += 0.05;
+        let d = Data {
+            h: levels.to_vec(),
+            t: t.clone(),
+            w: vec![1.0; levels.len()],
+        };
+        let temps = solve_knot_temperatures(&d, &knots);
+        for (k, tk) in knots.iter().zip(&temps) {
+            assert!((tk - (288.0 - 0.0065 * k)).abs() < 0.1, "{k} m: {tk} K");
+        }
+    }
+
+    #[test]
+    fn knots_of_well_sampled_layers_stay_and_the_range_ends_never_move() {
+        let levels: Vec<f64> = (0..=100).map(|i| 10.0 * i as f64).collect();
+        let knots = [0.0, 95.0, 402.5, 1000.0];
+        assert_eq!(anchor_unsupported_knots(&knots, &levels), knots.to_vec());
+        // Two knots snapping onto one level merge.
+        let sparse = [0.0, 500.0, 1000.0];
+        assert_eq!(
+            anchor_unsupported_knots(&[0.0, 480.0, 520.0, 1000.0], &sparse),
+            vec![0.0, 500.0, 1000.0]
+        );
+    }
+
+    #[test]
+    fn collinear_layers_merge_and_kinks_stay() {
+        let knots = [0.0, 10.0, 20.0, 30.0];
+        let temps = [0.0, 1.0, 2.0, 1.0];
+        let (k, t) = merge_collinear(&knots, &temps);
+        assert_eq!(k, vec![0.0, 20.0, 30.0]);
+        assert_eq!(t, vec![0.0, 2.0, 1.0]);
     }
 }

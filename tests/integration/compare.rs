@@ -121,11 +121,35 @@ fn a_real_sounding_gives_every_product_and_images_that_trace_confirms() {
             Some(images.len() as u64),
             "{target}"
         );
-        if let Some(first) = images.first() {
-            let lo = target["elevation_min_deg"].as_f64().unwrap();
-            assert!((lo - first["elevation_min_deg"].as_f64().unwrap()).abs() < 1e-9);
+        let erect = images
+            .iter()
+            .filter(|i| i["erect"].as_bool() == Some(true))
+            .count();
+        assert_eq!(target["erect"].as_u64(), Some(erect as u64), "{target}");
+        let lowest = images
+            .iter()
+            .map(|i| i["elevation_min_deg"].as_f64().unwrap())
+            .reduce(f64::min);
+        let highest = images
+            .iter()
+            .map(|i| i["elevation_max_deg"].as_f64().unwrap())
+            .reduce(f64::max);
+        for (key, edge) in [
+            ("elevation_min_deg", lowest),
+            ("elevation_max_deg", highest),
+        ] {
+            match (target[key].as_f64(), edge) {
+                (Some(a), Some(b)) => assert!((a - b).abs() < 1e-9, "{key}: {a} {b}"),
+                (None, None) => {}
+                other => panic!("{key}: {other:?}"),
+            }
         }
     }
+    // The near ship is seen (so the checks above are not vacuous).
+    assert!(
+        c["measured"]["targets"][0]["count"].as_u64().unwrap() >= 1,
+        "{c}"
+    );
     // Trois-Rivières' thin measured ducts (dN/dh spikes at 370–480 m) are smoothed away by ten
     // linear layers: the comparison says so.
     let measured_ducts = c["measured"]["ducts"].as_array().unwrap().len();
@@ -190,6 +214,37 @@ fn a_sampled_synthetic_atmosphere_round_trips_through_the_fit_and_matches_itself
     assert!(c["fit"]["rms_k"].as_f64().unwrap() < 0.05, "{}", c["fit"]);
     let (m, s) = (&c["measured"]["targets"], &c["synthetic"]["targets"]);
     assert_eq!(m[1]["inverted"], s[1]["inverted"], "{m} {s}");
+}
+
+#[test]
+fn the_fan_spans_the_rendered_field_at_another_aspect_ratio() {
+    // fig04: hfov 0.9°, pitch −0.06°, 400×200. Rendered square, the vertical field is 0.9° too.
+    let dir = tempfile::tempdir().unwrap();
+    let measured = sounding("Bjornoya-01028_2024022611.csv");
+    let out = dir.path().to_str().unwrap();
+    ok(&[
+        "compare",
+        measured.to_str().unwrap(),
+        "--scene",
+        scene().to_str().unwrap(),
+        "--out",
+        out,
+        "--size",
+        "60x60",
+        "--spp",
+        "1",
+        "--rays",
+        "101",
+    ]);
+    let c = json_file(&dir.path().join("compare.json"));
+    let (lo, hi) = (
+        c["fan"]["elevation_min_deg"].as_f64().unwrap(),
+        c["fan"]["elevation_max_deg"].as_f64().unwrap(),
+    );
+    assert!(hi - lo >= 0.9 - 1e-6, "{lo}…{hi}");
+    assert!((0.5 * (lo + hi) + 0.06).abs() < 0.01, "{lo}…{hi}");
+    let img = image::open(dir.path().join("measured.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (60, 60));
 }
 
 #[test]
@@ -285,5 +340,12 @@ fn a_compare_pipeline_job_writes_what_the_command_writes() {
     .unwrap();
     let r = crate::support::cli::pipeline_run(&pipeline, &out, &[]);
     assert_ne!(r.code, Some(0));
-    assert!(r.stderr.contains(".toml file or us1976"), "{}", r.stderr);
+    // Reported at the `synthetic` key (line 3), naming the file.
+    assert!(r.stderr.contains("c.toml:3:"), "{}", r.stderr);
+    assert!(r.stderr.contains("is a sounding"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("Utqiagvik-70026_2014091012.csv"),
+        "{}",
+        r.stderr
+    );
 }
