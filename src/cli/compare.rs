@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use ghostship::atmosphere::AtmosphereSource;
-use ghostship::jobs::compare::{CompareOptions, DEFAULT_COMPARE_RAYS};
+use ghostship::jobs::compare::{CompareOptions, DEFAULT_COMPARE_RAYS, LayerShape};
 use ghostship::jobs::render::{RenderSettings, parse_size};
 use ghostship::jobs::{AtmosphereCache, CompareRequest};
 use ghostship::output::png::DEFAULT_EXPOSURE;
@@ -64,6 +64,11 @@ pub struct CompareArgs {
     /// PNG exposure (also the tone map the image metrics are computed on).
     #[arg(long, value_name = "X", value_parser = parse_exposure, default_value_t = DEFAULT_EXPOSURE)]
     pub exposure: f64,
+    /// Form of the layers fitted when no SYNTHETIC is given: smooth (the paper's form: a lapse
+    /// rate and one tanh layer per detected inversion) or linear (up to 10 constant-gradient
+    /// layers, a closer fit to dense ascents).
+    #[arg(long, value_enum, default_value_t = LayerShape::Smooth)]
+    pub layers: LayerShape,
     /// Rays of the fan traced across the camera's vertical field for the image analysis.
     #[arg(long, value_name = "N", default_value_t = DEFAULT_COMPARE_RAYS)]
     pub rays: usize,
@@ -92,6 +97,7 @@ pub fn run(args: CompareArgs, quiet: bool) -> anyhow::Result<()> {
             smooth_m: args.smooth_m,
             fit: args.fit,
             rays: args.rays,
+            layers: args.layers,
         },
     )?;
     let out_dir = args.out.clone().unwrap_or_else(|| {

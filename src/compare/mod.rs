@@ -17,6 +17,7 @@ use serde::Serialize;
 use crate::analysis::TraceReport;
 use crate::analysis::report::Horizon;
 use crate::profile::layer_fit::LayerFit;
+use crate::profile::step_fit::StepFit;
 use crate::refractivity::RefractiveLayer;
 
 pub use metrics::{ImageMetrics, image_metrics};
@@ -164,13 +165,19 @@ pub struct LayerSummary {
 /// The parameters and residuals of a layer fit.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitSummary {
+    /// `smooth` (the paper's tanh layers on a lapse rate) or `linear` (constant-gradient
+    /// layers).
+    pub shape: String,
+    /// Background lapse rate (K m⁻¹) of a smooth fit; `None` for linear layers.
+    pub background_lapse_k_per_m: Option<f64>,
     /// Surface height (m above mean sea level).
     pub surface_height_m: f64,
     /// Surface temperature (K).
     pub surface_temperature_k: f64,
     /// Surface pressure (hPa).
     pub surface_pressure_hpa: f64,
-    /// The layers, lowest first.
+    /// The layers, lowest first (a smooth layer's base and top are its centre ∓ half its
+    /// thickness, its gradient ΔT over the thickness).
     pub layers: Vec<LayerSummary>,
     /// RMS residual over the fitted levels (K).
     pub rms_k: f64,
@@ -184,9 +191,38 @@ pub struct FitSummary {
     pub termination: String,
 }
 
+impl From<&StepFit> for FitSummary {
+    fn from(fit: &StepFit) -> Self {
+        FitSummary {
+            shape: "smooth".into(),
+            background_lapse_k_per_m: Some(fit.lapse_k_per_m),
+            surface_height_m: fit.surface_height_m,
+            surface_temperature_k: fit.surface_temperature_k,
+            surface_pressure_hpa: fit.surface_pressure_pa / 100.0,
+            layers: fit
+                .layers
+                .iter()
+                .map(|l| LayerSummary {
+                    base_m: l.centre_m - 0.5 * l.thickness_m,
+                    top_m: l.centre_m + 0.5 * l.thickness_m,
+                    delta_t_k: l.delta_t_k,
+                    gradient_k_per_m: l.delta_t_k / l.thickness_m,
+                })
+                .collect(),
+            rms_k: fit.rms_k,
+            max_abs_k: fit.max_abs_k,
+            lapse_only_rms_k: fit.lapse_only_rms_k,
+            levels: fit.residuals.len(),
+            termination: "Nelder-Mead best".into(),
+        }
+    }
+}
+
 impl From<&LayerFit> for FitSummary {
     fn from(fit: &LayerFit) -> Self {
         FitSummary {
+            shape: "linear".into(),
+            background_lapse_k_per_m: None,
             surface_height_m: fit.surface_height_m,
             surface_temperature_k: fit.surface_temperature_k,
             surface_pressure_hpa: fit.surface_pressure_pa / 100.0,
@@ -267,9 +303,10 @@ impl Comparison {
         let mut out = String::new();
         if let Some(fit) = &self.fit {
             out += &format!(
-                "Synthetic: {} layer(s) fitted to {} levels, rms {:.2} K, max {:.2} K (straight \
+                "Synthetic: {} {} layer(s) fitted to {} levels, rms {:.2} K, max {:.2} K (straight \
                  lapse line: rms {:.2} K)\n",
                 fit.layers.len(),
+                fit.shape,
                 fit.levels,
                 fit.rms_k,
                 fit.max_abs_k,

@@ -4,8 +4,9 @@
 //! `profiles.png`, `transfer.png` and, when the synthetic atmosphere is the layer fit,
 //! `fitted_layers.toml`.
 //!
-//! Without a synthetic file, the synthetic atmosphere is the paper-style layers fitted to the
-//! sounding ([`crate::profile::layer_fit`], surface to +3000 m). Both atmospheres are traced
+//! Without a synthetic file, the synthetic atmosphere is fitted to the sounding from the surface
+//! to +3000 m: by default in the paper's form ([`crate::profile::step_fit`]: a lapse rate and one
+//! smooth layer per detected inversion), or as linear layers ([`crate::profile::layer_fit`]). Both atmospheres are traced
 //! with one fan spanning the camera's vertical field (targets: the scene's cards, ground to top)
 //! and rendered through the same scene at the same size.
 
@@ -19,7 +20,8 @@ use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere, atmosphere_from_colu
 use crate::compare::metrics::side_by_side_png;
 use crate::compare::plot::{ProfilesPlot, profiles_png, transfer_png};
 use crate::compare::{Comparison, FanSummary, FitSummary, SideSummary, image_metrics};
-use crate::profile::layer_fit::{LayerFit, LayerFitOptions, fit_layers};
+use crate::profile::layer_fit::{LayerFitOptions, fit_layers};
+use crate::profile::step_fit::fit_steps;
 use crate::refractivity::{RegimeOptions, detect_regimes};
 use crate::scene::Scene;
 use crate::tracer::TracerConfig;
@@ -30,6 +32,29 @@ pub const DEFAULT_COMPARE_RAYS: usize = 801;
 pub const DEFAULT_TARGETS: [(f64, f64); 2] = [(10_000.0, 20.0), (20_000.0, 20.0)];
 /// Top of the duct search and of `profiles.png` (m above the surface).
 const PROFILE_TOP_M: f64 = 1_500.0;
+
+/// The form of the synthetic layers fitted to the sounding.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum LayerShape {
+    /// The paper's form: a lapse-rate background and one smooth (tanh) layer per detected
+    /// inversion, centre, thickness and ΔT fitted ([`crate::profile::step_fit`]).
+    #[default]
+    Smooth,
+    /// Up to 10 contiguous constant-gradient layers ([`crate::profile::layer_fit`]): a closer
+    /// fit to dense ascents, but not the paper's parameters.
+    Linear,
+}
 
 /// How a comparison reads the sounding and traces, beyond the render settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,6 +67,8 @@ pub struct CompareOptions {
     pub fit: Option<crate::profile::TemperatureFit>,
     /// Rays of the fan across the camera's vertical field.
     pub rays: usize,
+    /// The form of the fitted layers (when no synthetic atmosphere is given).
+    pub layers: LayerShape,
 }
 
 impl Default for CompareOptions {
@@ -51,6 +78,7 @@ impl Default for CompareOptions {
             smooth_m: None,
             fit: None,
             rays: DEFAULT_COMPARE_RAYS,
+            layers: LayerShape::default(),
         }
     }
 }
@@ -68,6 +96,8 @@ pub struct CompareRequest {
     pub trace: TraceJobRequest,
     /// The targets, (distance m, top height m): the scene's cards, or [`DEFAULT_TARGETS`].
     pub targets: Vec<(f64, f64)>,
+    /// The form of the fitted layers.
+    pub layers: LayerShape,
 }
 
 impl CompareRequest {
@@ -141,6 +171,7 @@ impl CompareRequest {
             synthetic,
             trace,
             targets,
+            layers: options.layers,
         })
     }
 
@@ -171,7 +202,7 @@ impl CompareRequest {
         let (synthetic, fit) = match &self.synthetic {
             Some(request) => (cache.get(request)?, None),
             None => {
-                let (atm, fit) = fitted_atmosphere(&measured, &self.measured)?;
+                let (atm, fit) = fitted_atmosphere(&measured, &self.measured, self.layers)?;
                 (Arc::new(atm), Some(fit))
             }
         };
@@ -215,7 +246,7 @@ impl CompareRequest {
                 &self.targets,
             ),
             image,
-            fit.as_ref().map(FitSummary::from),
+            fit.as_ref().map(|f| f.0.clone()),
         );
         let figures = figures(
             &measured,
@@ -241,7 +272,7 @@ impl CompareRequest {
             side_by_side_png: side_by_side,
             profiles_png: figures.0,
             transfer_png: figures.1,
-            fitted_toml: fit.map(|f| f.to_toml()),
+            fitted_toml: fit.map(|f| f.1),
             comparison,
         })
     }
@@ -318,11 +349,13 @@ fn fan_request(
     )
 }
 
-/// The synthetic atmosphere fitted to `measured`'s sounding, refracted like it.
+/// The synthetic atmosphere fitted to `measured`'s sounding in the form `shape`, refracted like
+/// it, with the fit's summary and TOML.
 fn fitted_atmosphere(
     measured: &LoadedAtmosphere,
     request: &AtmosphereRequest,
-) -> Result<(LoadedAtmosphere, LayerFit), JobError> {
+    shape: LayerShape,
+) -> Result<(LoadedAtmosphere, (FitSummary, String)), JobError> {
     let Some(sounding) = measured.sounding.as_ref() else {
         return Err(JobError::Invalid(format!(
             "{} is not a sounding; nothing to fit",
@@ -335,15 +368,27 @@ fn fitted_atmosphere(
             measured.source
         ))
     };
-    let fit = fit_layers(sounding, &LayerFitOptions::default()).map_err(profile_err)?;
-    let column = fit.to_synthetic().map_err(profile_err)?;
+    let options = LayerFitOptions::default();
+    let (summary, toml, column) = match shape {
+        LayerShape::Smooth => {
+            let fit = fit_steps(sounding, &options).map_err(profile_err)?;
+            let column = fit.to_synthetic().map_err(profile_err)?;
+            (FitSummary::from(&fit), fit.to_toml(), column)
+        }
+        LayerShape::Linear => {
+            let fit = fit_layers(sounding, &options).map_err(profile_err)?;
+            let column = fit.to_synthetic().map_err(profile_err)?;
+            (FitSummary::from(&fit), fit.to_toml(), column)
+        }
+    };
     let stem = measured.source.stem();
     let source = AtmosphereSource::Synthetic(format!("{stem}.fitted_layers.toml").into());
     let description = format!(
-        "{} layer(s) fitted to {} (rms {:.2} K)",
-        fit.layers.len(),
+        "{} {} layer(s) fitted to {} (rms {:.2} K)",
+        summary.layers.len(),
+        summary.shape,
         measured.description,
-        fit.rms_k
+        summary.rms_k
     );
     let atm = atmosphere_from_column(
         &source,
@@ -351,7 +396,7 @@ fn fitted_atmosphere(
         description,
         request.options.wavelength_nm,
     )?;
-    Ok((atm, fit))
+    Ok((atm, (summary, toml)))
 }
 
 /// `profiles.png` and `transfer.png`.

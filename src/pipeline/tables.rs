@@ -80,6 +80,7 @@ pub const COMPARE_KEYS: &[&str] = &[
     "scene",
     "smooth_m",
     "fit",
+    "layers",
     "size",
     "spp",
     "tolerance_m",
@@ -178,6 +179,7 @@ struct RawCompare {
     scene: String,
     smooth_m: Option<f64>,
     fit: Option<crate::profile::TemperatureFit>,
+    layers: Option<crate::jobs::compare::LayerShape>,
     size: Option<String>,
     spp: Option<u32>,
     tolerance_m: Option<f64>,
@@ -543,6 +545,7 @@ pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
             sounding_time: choice.sounding_time.clone(),
             smooth_m: raw.smooth_m,
             fit: raw.fit,
+            layers: raw.layers.unwrap_or_default(),
             rays: raw
                 .rays
                 .unwrap_or(crate::jobs::compare::DEFAULT_COMPARE_RAYS),

@@ -13,6 +13,7 @@ pub mod layer_fit;
 mod monotone;
 mod smooth;
 mod standard;
+pub mod step_fit;
 mod synthetic;
 mod temperature;
 pub mod us1976;

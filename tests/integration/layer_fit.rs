@@ -257,3 +257,35 @@ fn a_thin_surface_step_of_a_sparse_sounding_is_kept() {
     );
     assert!(fit.max_abs_k < 0.5, "max residual {} K", fit.max_abs_k);
 }
+
+/// The paper's form round trip: the superior-mirage atmosphere of `data/` (+10 K over 15 m
+/// centred at 100 m on −6.5 K/km) sampled every metre as a sounding fits back to its own
+/// parameters.
+#[test]
+fn smooth_layer_fit_recovers_the_paper_atmosphere_it_was_sampled_from() {
+    let truth = SyntheticAtmosphere::from_file(&data_file("superior_mirage.toml")).unwrap();
+    let heights: Vec<f64> = (0..=3000).map(f64::from).collect();
+    let s = sampled(&truth, &heights, |_| 0.0);
+    let fit = ghostship::profile::step_fit::fit_steps(&s, &LayerFitOptions::default()).unwrap();
+    assert_eq!(fit.layers.len(), 1, "{:?}", fit.layers);
+    let l = fit.layers[0];
+    assert!((l.centre_m - 100.0).abs() < 0.5, "{l:?}");
+    assert!((l.thickness_m - 15.0).abs() < 0.5, "{l:?}");
+    assert!((l.delta_t_k - 10.0).abs() < 0.1, "{l:?}");
+    assert!(
+        (fit.lapse_k_per_m + 0.0065).abs() < 1e-5,
+        "{}",
+        fit.lapse_k_per_m
+    );
+    assert!(
+        (fit.surface_temperature_k - 273.15).abs() < 0.05,
+        "{}",
+        fit.surface_temperature_k
+    );
+    assert!(fit.rms_k < 0.01, "{}", fit.rms_k);
+    // Its TOML is an atmosphere again, with the fitted temperatures.
+    let back = fit.to_synthetic().unwrap();
+    for r in &fit.residuals {
+        assert!((back.air_at(r.height_m).temperature_k - r.fitted_k).abs() < 1e-6);
+    }
+}
