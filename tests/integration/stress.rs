@@ -446,10 +446,10 @@ struct SuiteRun {
 /// open on it): in the 0.1 m, 30 K jumps the worst is 6.8e-5 m at 1e-2 m (a level ray from
 /// 0.1 m) and 7.0e-5 m at 1e-3 m (the ray from 100 m tangent to the break at 30.5 m, itself
 /// 5.8e-5 m off at 1e-2 m), both well inside the tolerance but not decreasing. Measured on that
-/// ray: from 12.5 to 18.5 km both tolerances take the same 2 km steps (`max_step_m` binds, not
-/// the error test) and it is off by 3.9e-5 / 4.1e-5 m at 20 km; the minor breaks dropped there
-/// jump by at most 1.4e-13 m⁻² in d²n/dh², worth ~1e-6 m: the step cap, not the breaks, sets
-/// it. The CI monotonicity test
+/// ray (perigee 2 mm above the break, at 26 km): from 12.5 to 18.5 km both tolerances take the
+/// same 2 km steps (`max_step_m` binds), but the cap alone does not order the errors — with 1 km
+/// it is 1.1e-5 / 2.8e-5 m, with 500 m 8.5e-5 / 4.5e-6 m at 1e-2 / 1e-3 m. Far below the
+/// tolerance the error depends on where the steps fall, not on the tolerance. The CI monotonicity test
 /// checks every other atmosphere; the `*_known_failure` test (ignored) checks this one with the
 /// same bound and fails until the tracer is fixed. Every other property is checked for all
 /// fourteen atmospheres in CI.
