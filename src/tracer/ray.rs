@@ -967,8 +967,14 @@ fn aim_at_break<const N: usize, Sys: RaySystem<N>>(
             &mut root,
         )?;
         let step_m = exit.t * h;
-        let on_break = (obs.height_m - exit.height_m).abs() <= 2.0 * SHORT_OF_BREAK_M;
-        if !on_break && step_m > MIN_LANDING_STEP_M.max(cfg.min_step_m) {
+        // A crossing at the start: the ray sits on the break (within rounding) and leaves it
+        // before the step's extremum. A crossing after the extremum is the ray coming back to
+        // the break it started on (an apex or perigee in the neighbouring interval): a true
+        // crossing, landed on like any other. Taking it for the start would move the bracket
+        // to and fro and accept the whole step, straddling every break it meets.
+        let starts_on_break = (obs.height_m - exit.height_m).abs() <= 2.0 * SHORT_OF_BREAK_M;
+        let at_start = starts_on_break && extremum.is_none_or(|tm| exit.t <= tm);
+        if !at_start && step_m > MIN_LANDING_STEP_M.max(cfg.min_step_m) {
             return Some(Aim {
                 step_m,
                 exit,
