@@ -122,6 +122,7 @@ impl JobRequest {
                 "measured": c.measured,
                 "synthetic": c.synthetic,
                 "rays": c.trace.ray_count(),
+                "layers": c.layers,
                 "scene_sha256": c.render.scene.hash_hex,
             })),
         };

@@ -338,6 +338,18 @@ fn a_compare_pipeline_job_writes_what_the_command_writes() {
     .unwrap();
     let out = dir.path().join("out");
     pipeline_ok(&pipeline, &out, &["-q"]);
+    // Unchanged, it is skipped; another layer form is another job.
+    let again = pipeline_ok(&pipeline, &out, &[]);
+    assert!(
+        again.stdout.contains("0 ran, 1 unchanged"),
+        "{}",
+        again.stdout
+    );
+    let text = std::fs::read_to_string(&pipeline).unwrap();
+    std::fs::write(&pipeline, format!("{text}layers = \"linear\"\n")).unwrap();
+    let linear = pipeline_ok(&pipeline, &out, &["--dry-run"]);
+    assert!(linear.stdout.contains("1 would run"), "{}", linear.stdout);
+    std::fs::write(&pipeline, text).unwrap();
     let job = out.join("compare_Utqiagvik-70026_2014091012");
     let single = dir.path().join("single");
     compare(&measured, None, &single, &[]);
