@@ -225,7 +225,8 @@ fn anchor_unsupported_knots(knots: &[f64], levels_m: &[f64]) -> Vec<f64> {
     out
 }
 
-fn check_options(o: &LayerFitOptions) -> Result<(), ProfileError> {
+/// Check the range, layer count and minimum thickness.
+pub(super) fn check_options(o: &LayerFitOptions) -> Result<(), ProfileError> {
     let bad = |name, message: &str| {
         Err(ProfileError::BadOption {
             name,

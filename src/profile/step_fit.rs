@@ -69,13 +69,16 @@ struct Levels {
 }
 
 /// Fit the paper's form to `sounding` over the options' height range (`max_layers` caps N,
-/// `min_thickness_m` bounds every layer's thickness from below).
+/// `min_thickness_m` bounds every layer's thickness from below, the range's height from
+/// above). `level_weights` is not used: every level counts alike.
 pub fn fit_steps(sounding: &Sounding, options: &LayerFitOptions) -> Result<StepFit, ProfileError> {
+    super::layer_fit::check_options(options)?;
     let d = levels(sounding, options)?;
     let start = initial_layers(sounding, options, &d)?;
     let problem = Reduced {
         d: &d,
         min_thickness_m: options.min_thickness_m,
+        max_thickness_m: (d.h[d.h.len() - 1] - d.h[0]).max(options.min_thickness_m),
     };
     let params: Vec<f64> = start
         .iter()
@@ -151,6 +154,8 @@ fn initial_layers(
 struct Reduced<'a> {
     d: &'a Levels,
     min_thickness_m: f64,
+    /// The fitted range's height: no layer is thicker.
+    max_thickness_m: f64,
 }
 
 impl Reduced<'_> {
@@ -160,7 +165,7 @@ impl Reduced<'_> {
             .map(|c| StepLayer {
                 centre_m: if c[0].is_finite() { c[0] } else { self.d.h0 },
                 thickness_m: if c[1].is_finite() {
-                    c[1].abs().max(self.min_thickness_m)
+                    c[1].abs().clamp(self.min_thickness_m, self.max_thickness_m)
                 } else {
                     self.min_thickness_m
                 },

@@ -371,6 +371,37 @@ fn qc_summary(flags: &[f64]) -> String {
 
 /// Reads the ESC sounding `text`: metadata from the header, raw rows from the table; notes on
 /// rows dropped or changed by the quality flags go to `warnings`.
+/// Metres between the release altitude and the lowest level kept beyond which a note says so.
+const SURFACE_NOTE_M: f64 = 5.0;
+
+/// A note when the lowest level kept (the sounding's surface for every height "above the
+/// surface") lies well above the release altitude of the header, e.g. because the first rows'
+/// temperatures are flagged bad.
+fn note_raised_surface(
+    rows: &[RawRow],
+    metadata: &BTreeMap<String, String>,
+    warnings: &mut Vec<String>,
+) {
+    let release_m = metadata
+        .get("station_elevation_m")
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse::<f64>().ok());
+    let lowest = rows
+        .iter()
+        .filter(|r| r.temperature_k.is_some())
+        .filter_map(|r| r.height_m.map(|h| (h, r.line)))
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    if let (Some(release_m), Some((h, line))) = (release_m, lowest)
+        && (h - release_m).abs() > SURFACE_NOTE_M
+    {
+        warnings.push(format!(
+            "the lowest level kept (line {line}, {h} m) is {:.1} m from the release altitude \
+             ({release_m} m): heights above the surface count from {h} m",
+            h - release_m
+        ));
+    }
+}
+
 pub(crate) fn read(
     path: &Path,
     text: &str,
@@ -391,6 +422,7 @@ pub(crate) fn read(
     if !table.qt_flags.is_empty() {
         metadata.insert("temperature_qc".into(), qc_summary(&table.qt_flags));
     }
+    note_raised_surface(&table.rows, metadata, warnings);
     let dewpt = columns.dewpt.map_or("Dewpt", |i| columns.names[i].as_str());
     let names = ColumnNames {
         height: columns.names[columns.alt].clone(),

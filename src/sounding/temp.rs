@@ -166,9 +166,20 @@ fn is_heading(tokens: &[&str]) -> bool {
 fn messages(text: &str) -> Vec<Message<'_>> {
     let mut out = Vec::new();
     let mut current: Option<Message> = None;
-    for (index, line) in text.lines().enumerate() {
-        let number = index + 1;
+    // A part ending in `=` may be followed by the next on the same line: each `=` ends a
+    // segment, and segments are read like lines.
+    let segments = text.lines().enumerate().flat_map(|(index, line)| {
         let tokens: Vec<&str> = line.split_whitespace().collect();
+        let mut parts: Vec<Vec<&str>> = tokens
+            .split_inclusive(|t| t.ends_with('='))
+            .map(<[&str]>::to_vec)
+            .collect();
+        if parts.is_empty() {
+            parts.push(Vec::new());
+        }
+        parts.into_iter().map(move |p| (index + 1, p))
+    });
+    for (number, tokens) in segments {
         let start = tokens.iter().position(|t| marker(t).is_some());
         if (tokens.is_empty() || start.is_some() || is_heading(&tokens))
             && let Some(mut m) = current.take()

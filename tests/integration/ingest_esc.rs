@@ -432,3 +432,24 @@ fn profile_reports_the_esc_input() {
         "{description}"
     );
 }
+
+/// The surface is the lowest level kept; when flagged-bad first rows lift it off the release
+/// altitude of the header, a note says by how much (Trois-Rivières: release 59.0 m, first good
+/// row 91.3 m; Bjørnøya's first row is the release).
+#[test]
+fn a_surface_above_the_release_altitude_is_noted() {
+    let note = |s: &Sounding| {
+        s.warnings
+            .iter()
+            .find(|w| w.contains("from the release altitude"))
+            .cloned()
+    };
+    let bjornoya = read(&raw_path(0));
+    assert_eq!(note(&bjornoya), None, "{:?}", bjornoya.warnings);
+    let trois = read(&raw_path(2));
+    let release_m = trois.metadata_number("station_elevation_m").unwrap();
+    let lift = trois.levels[0].height_m - release_m;
+    assert!(lift > 30.0, "{lift}");
+    let text = note(&trois).expect("a note");
+    assert!(text.contains(&format!("{lift:.1} m")), "{text}");
+}

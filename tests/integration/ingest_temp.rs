@@ -559,3 +559,23 @@ proptest! {
         }
     }
 }
+
+/// Two parts on one line (`…= TTBB …=`, as some archives join a report): the second is read,
+/// not dropped with the rest of the line. The same report, each part on its own line, gives the
+/// same levels.
+#[test]
+fn a_part_after_an_equals_sign_on_the_same_line_is_read() {
+    let text = raw_text("Cherskiy-25123_2026020600");
+    let apart = parse(&text).unwrap();
+    // The whole bulletin on one line: only the `=` separate the parts.
+    let joined = text.replace('\n', " ");
+    assert_ne!(joined, text);
+    let together = parse(&joined).unwrap();
+    let air = |s: &Sounding| -> Vec<(Option<f64>, f64)> {
+        s.levels
+            .iter()
+            .map(|l| (l.pressure_pa, l.temperature_k))
+            .collect()
+    };
+    assert_eq!(air(&together), air(&apart));
+}
