@@ -409,6 +409,29 @@ mod tests {
     }
 
     #[test]
+    fn chord_error_for_refracted_rays_is_the_sag() {
+        // A constant-curvature ray (k = κR) is exactly a straight line over an Earth of radius
+        // R/(1 − k): its optical depth is the chord's over that sphere. The renderer uses the
+        // chord over R instead; the difference is the documented sag error.
+        let e = hazy(20_000.0, 1_000.0, 0.0975);
+        let r = 6_371_000.0;
+        for (k, d, bound) in [
+            (0.13, 50_000.0, 0.01),
+            (0.5, 50_000.0, 0.03),
+            (0.13, 20_000.0, 2e-3),
+        ] {
+            // End at the height a horizontal ray from 10 m reaches over the effective Earth.
+            let r_eff = r / (1.0 - k);
+            let h1 = 10.0 + d * d / (2.0 * r_eff);
+            let exact = e.chord_optical_depth(r_eff, 10.0, h1, d);
+            let chord = e.chord_optical_depth(r, 10.0, h1, d);
+            let relative = (chord[1] / exact[1] - 1.0).abs();
+            eprintln!("k = {k}, d = {d} m: chord error {relative:.3e} of tau");
+            assert!(relative < bound, "k = {k}, d = {d}: {relative:.2e}");
+        }
+    }
+
+    #[test]
     fn attenuation_fades_to_the_horizon_sky() {
         let e = hazy(5_000.0, 1_000.0, 0.0975);
         let far = e.attenuate([0.0; 3], 1.0, [40.0; 3]);
