@@ -41,7 +41,7 @@ use crate::scene::{Scene, samples_per_pixel_root};
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
-use shade::{AngleTable, Shader, ViewCard, wrap_pi};
+use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
@@ -641,6 +641,12 @@ pub fn render_scene(
         heading_rad: cam.heading_rad,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),
+        aerial: scene.sky.extinction().map(|extinction| AerialShading {
+            extinction,
+            camera_height_m: cam.height_m,
+            earth_radius_m: radius,
+            distances_m: distances_m.clone(),
+        }),
     };
 
     let bar = if options.quiet || !std::io::stderr().is_terminal() {

@@ -1,13 +1,40 @@
 //! Render — shading. In: one sample's apparent elevation and direction, and its ray (interpolated
 //! from the elevation fan or traced): heights at the card distances and how it ended. Out: linear
 //! RGB radiance from the cards it meets (front to back, alpha respected), then the sky, sun or sea
-//! behind them. Tables of sky and sea radiance by angle make each sample a few lookups.
+//! behind them. Tables of sky and sea radiance by angle make each sample a few lookups. With
+//! the sky's aerial perspective ([`crate::scene::sky::Extinction`]) a card or the sea is seen
+//! through the optical depth of the chord from the camera to the point the ray meets it.
 
 use rayon::prelude::*;
 
 use super::ray_model::FanEnd;
 use crate::scene::camera::ViewDirection;
+use crate::scene::sky::Extinction;
 use crate::scene::{Sun, Texture};
+
+/// The aerial perspective of a frame: extinction and the geometry of the chords.
+pub(super) struct AerialShading {
+    pub(super) extinction: Extinction,
+    pub(super) camera_height_m: f64,
+    pub(super) earth_radius_m: f64,
+    /// The card distances (m), indexed like a ray's heights.
+    pub(super) distances_m: Vec<f64>,
+}
+
+impl AerialShading {
+    /// `radiance` (premultiplied, coverage `alpha`) of a point at `height_m` and ground distance
+    /// `distance_m`, as seen from the camera through the air between.
+    #[inline]
+    fn seen(&self, radiance: [f64; 3], alpha: f64, height_m: f64, distance_m: f64) -> [f64; 3] {
+        let tau = self.extinction.chord_optical_depth(
+            self.earth_radius_m,
+            self.camera_height_m,
+            height_m,
+            distance_m,
+        );
+        self.extinction.attenuate(radiance, alpha, tau)
+    }
+}
 
 /// A card prepared for shading.
 pub(super) struct ViewCard<'a> {
@@ -87,6 +114,8 @@ pub(super) struct Shader<'a> {
     /// Camera heading (rad): sample azimuths are offsets from it.
     pub(super) heading_rad: f64,
     pub(super) fallback: [f64; 3],
+    /// Aerial perspective towards cards and the sea (`None`: none).
+    pub(super) aerial: Option<AerialShading>,
 }
 
 #[inline]
@@ -151,8 +180,13 @@ impl Shader<'_> {
             let u = 0.5 + 0.5 * offset / card.half_width_rad;
             let v = (card.top_m - h) / card.height_m;
             let t = card.texture.sample(u, v);
+            let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
+            if let Some(aerial) = &self.aerial {
+                let d = aerial.distances_m[card.distance_index];
+                rgb = aerial.seen(rgb, t[3] as f64, h, d);
+            }
             for c in 0..3 {
-                acc[c] += transmit * t[c] as f64;
+                acc[c] += transmit * rgb[c];
             }
             transmit *= 1.0 - t[3] as f64;
             if transmit < 1e-6 {
@@ -185,7 +219,16 @@ impl Shader<'_> {
     pub(super) fn background(&self, dir: &ViewDirection, end: FanEnd) -> [f64; 3] {
         let alpha = dir.elevation_rad;
         match end {
-            FanEnd::Ground { grazing_rad, .. } => self.sea_table.at(grazing_rad),
+            FanEnd::Ground {
+                grazing_rad,
+                distance_m,
+            } => {
+                let sea = self.sea_table.at(grazing_rad);
+                match &self.aerial {
+                    Some(aerial) => aerial.seen(sea, 1.0, 0.0, distance_m),
+                    None => sea,
+                }
+            }
             FanEnd::Sky { elevation_rad } => {
                 let l = self.sky_table.at(alpha);
                 // The elevation test is the disc's own quick reject, done before the azimuth.

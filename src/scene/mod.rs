@@ -30,6 +30,8 @@
 //! brightness = 1.0
 //! rayleigh_optical_depth = 0.0975
 //! aerosol_optical_depth = 0.02
+//! visibility_km = 20.0       # optional: aerial perspective (haze) towards cards and the sea
+//! aerosol_scale_height_m = 1000.0   # optional (default 1000); no effect without visibility_km
 //!
 //! [sea]                      # see scene::sea
 //! water_rgb = [0.004, 0.012, 0.018]
@@ -79,7 +81,7 @@ use sha2::{Digest, Sha256};
 pub use camera::Camera;
 pub use card::{Card, Texture};
 pub use sea::Sea;
-pub use sky::{Sky, Sun};
+pub use sky::{AerialPerspective, Sky, Sun};
 
 /// A scene file could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -262,6 +264,8 @@ struct RawSky {
     brightness: Option<f64>,
     rayleigh_optical_depth: Option<f64>,
     aerosol_optical_depth: Option<f64>,
+    visibility_km: Option<f64>,
+    aerosol_scale_height_m: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -334,6 +338,40 @@ impl Checker<'_> {
             message,
         }
     }
+}
+
+/// `sky.visibility_km` and `sky.aerosol_scale_height_m` checked: `None` without a visibility
+/// (a scale height alone is checked and has no effect). The visibility must stay below that of
+/// the Rayleigh air alone ([`sky::rayleigh_visibility_m`]): it is the total extinction.
+fn aerial_perspective(
+    c: &Checker<'_>,
+    raw: &RawSky,
+    rayleigh_optical_depth: f64,
+) -> Result<Option<AerialPerspective>, SceneError> {
+    let aerosol_scale_height_m = c.positive(
+        "sky.aerosol_scale_height_m",
+        raw.aerosol_scale_height_m
+            .unwrap_or(sky::DEFAULT_AEROSOL_SCALE_HEIGHT_M),
+        1e12,
+    )?;
+    let Some(visibility_km) = raw.visibility_km else {
+        return Ok(None);
+    };
+    let limit_km = sky::rayleigh_visibility_m(rayleigh_optical_depth) / 1000.0;
+    let visibility_km = c.positive("sky.visibility_km", visibility_km, 1e6)?;
+    if visibility_km > limit_km {
+        return Err(c.invalid(
+            "sky.visibility_km",
+            format!(
+                "must be ≤ {limit_km:.1} km, the visibility of Rayleigh air alone with \
+                 sky.rayleigh_optical_depth = {rayleigh_optical_depth}, got {visibility_km}"
+            ),
+        ));
+    }
+    Ok(Some(AerialPerspective {
+        visibility_m: visibility_km * 1000.0,
+        aerosol_scale_height_m,
+    }))
 }
 
 /// Largest number of samples per pixel (32 × 32). Without a bound a mistyped `--spp` (any
@@ -514,6 +552,11 @@ impl Scene {
                 10.0,
                 "0…10",
             )?,
+            aerial: None,
+        };
+        let sky = Sky {
+            aerial: aerial_perspective(&c, &raw.sky, sky.rayleigh_optical_depth)?,
+            ..sky
         };
 
         let d = Sea::default();
@@ -745,6 +788,43 @@ mod tests {
                 .to_string()
                 .contains("sun.elevation_deg")
         );
+    }
+
+    #[test]
+    fn visibility_sets_the_aerial_perspective_and_is_checked() {
+        assert_eq!(parse(MINIMAL).unwrap().sky.aerial, None);
+        let scene = parse(&format!("{MINIMAL}[sky]\nvisibility_km = 12.5\n")).unwrap();
+        let aerial = scene.sky.aerial.unwrap();
+        assert_eq!(aerial.visibility_m, 12_500.0);
+        assert_eq!(aerial.aerosol_scale_height_m, 1000.0);
+        let text = format!("{MINIMAL}[sky]\nvisibility_km = 5\naerosol_scale_height_m = 1e9\n");
+        assert_eq!(
+            parse(&text)
+                .unwrap()
+                .sky
+                .aerial
+                .unwrap()
+                .aerosol_scale_height_m,
+            1e9
+        );
+        // Rayleigh air alone (τ_R = 0.0975) sees 3.912 × 8 km / 0.0975 = 321 km.
+        for (bad, key) in [
+            ("visibility_km = 0", "sky.visibility_km"),
+            ("visibility_km = 330", "sky.visibility_km"),
+            (
+                "visibility_km = 5\naerosol_scale_height_m = -1",
+                "sky.aerosol_scale_height_m",
+            ),
+            ("aerosol_scale_height_m = 0", "sky.aerosol_scale_height_m"),
+        ] {
+            let err = parse(&format!("{MINIMAL}[sky]\n{bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(key), "{bad}: {err}");
+        }
+        assert!(parse(&format!("{MINIMAL}[sky]\nvisibility_km = 320\n")).is_ok());
+        let text = format!("{MINIMAL}[sky]\naerosol_scale_height_m = 500\n");
+        assert_eq!(parse(&text).unwrap().sky.aerial, None);
     }
 
     #[test]

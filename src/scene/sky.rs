@@ -24,6 +24,16 @@
 //! `exp(−τ_c · m(e))` with e the ray's APPARENT elevation at the camera (clamped at 0): this reddens
 //! the low sun. Where the disc is seen is decided by the ray's FINAL direction, so a sun below the
 //! astronomical horizon can be seen through rays that come up (Novaya Zemlya).
+//!
+//! **Aerial perspective** (only with `visibility_km`, [`AerialPerspective`]): the air between the
+//! camera and a card or the sea both dims it and adds scattered light. Extinction per channel at
+//! height h is `β_c(h) = β_R,c e^(−h/8 km) + β_A,c e^(−h/H_A)`, with the Rayleigh part at sea
+//! level from the sky's own column, `β_R,c = τ_R (550/λ_c)⁴ / 8 km`, and the aerosol part from the
+//! Koschmieder visibility V (meteorological optical range: the TOTAL extinction at 550 nm at the
+//! surface is 3.912 / V), `β_A,c = (3.912/V − τ_R/8 km) (550/λ_c)^1.3`. An object of radiance L
+//! seen through optical depth τ_c appears as `L e^(−τ_c) + L_path,c (1 − e^(−τ_c))` with the path
+//! radiance L_path = the horizon sky `radiance(0)` (the same uniform-source limit the sky model
+//! uses), so an object far beyond the visibility fades exactly into the horizon sky.
 
 use serde::Serialize;
 
@@ -49,6 +59,127 @@ pub struct Sky {
     pub rayleigh_optical_depth: f64,
     /// Aerosol optical depth at 550 nm (0: pure Rayleigh sky).
     pub aerosol_optical_depth: f64,
+    /// Aerial perspective between the camera and cards or the sea; `None`: objects are seen
+    /// without extinction (and the scene hash is unchanged from before the setting existed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub aerial: Option<AerialPerspective>,
+}
+
+/// Rayleigh scale height (m) of the extinction profile used by the aerial perspective.
+pub const RAYLEIGH_SCALE_HEIGHT_M: f64 = 8_000.0;
+
+/// Koschmieder's constant: −ln 0.02, the contrast threshold that defines the visibility.
+pub const KOSCHMIEDER_CONSTANT: f64 = 3.912;
+
+/// Default aerosol scale height (m) of the aerial perspective.
+pub const DEFAULT_AEROSOL_SCALE_HEIGHT_M: f64 = 1_000.0;
+
+/// The scene's haze: visibility and the aerosol scale height (module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AerialPerspective {
+    /// Koschmieder visibility at the surface (m): total extinction at 550 nm is 3.912 / this.
+    pub visibility_m: f64,
+    /// Scale height of the aerosol extinction (m).
+    pub aerosol_scale_height_m: f64,
+}
+
+/// Visibility (m) of an aerosol-free sky with Rayleigh optical depth `rayleigh_optical_depth`:
+/// the largest `visibility_m` the aerial perspective accepts (∞ without Rayleigh extinction).
+pub fn rayleigh_visibility_m(rayleigh_optical_depth: f64) -> f64 {
+    KOSCHMIEDER_CONSTANT * RAYLEIGH_SCALE_HEIGHT_M / rayleigh_optical_depth
+}
+
+/// Gauss–Legendre nodes on [0, 1] and weights (summing to 1) of order `n` (Newton on P_n).
+fn gauss_legendre_unit(n: usize) -> Vec<(f64, f64)> {
+    (1..=n)
+        .map(|i| {
+            let mut x = (std::f64::consts::PI * (i as f64 - 0.25) / (n as f64 + 0.5)).cos();
+            let mut dp = 1.0;
+            for _ in 0..100 {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    (p0, p1) = (p1, p2);
+                }
+                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+                let dx = p1 / dp;
+                x -= dx;
+                if dx.abs() < 1e-15 {
+                    break;
+                }
+            }
+            let w = 2.0 / ((1.0 - x * x) * dp * dp);
+            (0.5 * (1.0 + x), 0.5 * w)
+        })
+        .collect()
+}
+
+/// Order of the Gauss–Legendre rule along a chord.
+const CHORD_NODES: usize = 16;
+
+/// Extinction coefficients and path radiance of a sky with aerial perspective, resolved once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Extinction {
+    /// Rayleigh extinction per channel at sea level (1/m).
+    pub rayleigh_per_m: [f64; 3],
+    /// Aerosol extinction per channel at sea level (1/m).
+    pub aerosol_per_m: [f64; 3],
+    /// Aerosol scale height (m).
+    pub aerosol_scale_height_m: f64,
+    /// Radiance the air adds in the optically thick limit: the horizon sky.
+    pub path_radiance: [f64; 3],
+    nodes: Vec<(f64, f64)>,
+}
+
+impl Extinction {
+    /// Extinction coefficient per channel at `height_m` (1/m).
+    pub fn coefficient_per_m(&self, height_m: f64) -> [f64; 3] {
+        let r = (-height_m / RAYLEIGH_SCALE_HEIGHT_M).exp();
+        let a = (-height_m / self.aerosol_scale_height_m).exp();
+        [0, 1, 2].map(|c| self.rayleigh_per_m[c] * r + self.aerosol_per_m[c] * a)
+    }
+
+    /// Optical depth per channel along the straight chord from height `from_m` (ground distance
+    /// 0) to height `to_m` at ground distance `ground_distance_m`, over a sphere of
+    /// `earth_radius_m`: Gauss–Legendre quadrature in the chord's exact line–sphere geometry (a
+    /// curved ray differs from its chord by its sag, κL²/8; see `docs/scene.md`).
+    pub fn chord_optical_depth(
+        &self,
+        earth_radius_m: f64,
+        from_m: f64,
+        to_m: f64,
+        ground_distance_m: f64,
+    ) -> [f64; 3] {
+        let (r0, r1) = (earth_radius_m + from_m, earth_radius_m + to_m);
+        let theta = ground_distance_m / earth_radius_m;
+        // Camera at (0, r0), end point at (r1 sin θ, r1 cos θ).
+        let (bx, by) = (r1 * theta.sin(), r1 * theta.cos() - r0);
+        let length_m = bx.hypot(by);
+        let mut tau = [0.0; 3];
+        for &(t, w) in &self.nodes {
+            let h = (t * bx).hypot(r0 + t * by) - earth_radius_m;
+            let beta = self.coefficient_per_m(h);
+            for c in 0..3 {
+                tau[c] += w * beta[c];
+            }
+        }
+        tau.map(|t| t * length_m)
+    }
+
+    /// What an object of premultiplied radiance `radiance` and coverage `alpha` looks like
+    /// through optical depth `tau`: `L e^(−τ) + α L_path (1 − e^(−τ))`. A non-finite τ (a ray
+    /// with an unknown end) is taken as optically thick.
+    #[inline]
+    pub fn attenuate(&self, radiance: [f64; 3], alpha: f64, tau: [f64; 3]) -> [f64; 3] {
+        [0, 1, 2].map(|c| {
+            let t = if tau[c].is_finite() {
+                (-tau[c]).exp()
+            } else {
+                0.0
+            };
+            radiance[c] * t + alpha * self.path_radiance[c] * (1.0 - t)
+        })
+    }
 }
 
 impl Default for Sky {
@@ -57,6 +188,7 @@ impl Default for Sky {
             brightness: 1.0,
             rayleigh_optical_depth: 0.0975,
             aerosol_optical_depth: 0.02,
+            aerial: None,
         }
     }
 }
@@ -83,6 +215,21 @@ impl Sky {
     pub fn radiance_with_depths(&self, elevation_rad: f64, depths: [f64; 3]) -> [f64; 3] {
         let m = relative_air_mass(elevation_rad);
         depths.map(|tau| self.brightness * (1.0 - (-tau * m).exp()))
+    }
+
+    /// The aerial perspective's extinction, if the sky has one (module documentation).
+    pub fn extinction(&self) -> Option<Extinction> {
+        let aerial = self.aerial?;
+        let rayleigh_550 = self.rayleigh_optical_depth / RAYLEIGH_SCALE_HEIGHT_M;
+        let aerosol_550 = (KOSCHMIEDER_CONSTANT / aerial.visibility_m - rayleigh_550).max(0.0);
+        let ratios = CHANNEL_WAVELENGTHS_NM.map(|l| 550.0 / l);
+        Some(Extinction {
+            rayleigh_per_m: ratios.map(|r| rayleigh_550 * r.powi(4)),
+            aerosol_per_m: ratios.map(|r| aerosol_550 * r.powf(AEROSOL_ANGSTROM_EXPONENT)),
+            aerosol_scale_height_m: aerial.aerosol_scale_height_m,
+            path_radiance: self.radiance(0.0),
+            nodes: gauss_legendre_unit(CHORD_NODES),
+        })
     }
 
     /// Transmittance exp(−τ_c·m(e)) of each channel along apparent elevation `elevation_rad`.
@@ -191,6 +338,109 @@ mod tests {
         let daz = 0.999 * r / 0.1f64.cos();
         assert!(sun.disc(1.0 + daz, 0.1) > 0.0);
         assert!(sun.disc(1.0 + 1.01 * r / 0.1f64.cos(), 0.1) == 0.0);
+    }
+
+    fn hazy(visibility_m: f64, aerosol_scale_height_m: f64, rayleigh: f64) -> Extinction {
+        let sky = Sky {
+            rayleigh_optical_depth: rayleigh,
+            aerial: Some(AerialPerspective {
+                visibility_m,
+                aerosol_scale_height_m,
+            }),
+            ..Sky::default()
+        };
+        sky.extinction().unwrap()
+    }
+
+    #[test]
+    fn gauss_legendre_integrates_polynomials_exactly() {
+        let nodes = gauss_legendre_unit(CHORD_NODES);
+        assert!((nodes.iter().map(|n| n.1).sum::<f64>() - 1.0).abs() < 1e-14);
+        // ∫₀¹ t^k dt = 1/(k+1) up to degree 2n − 1.
+        for k in [1, 7, 20, 31] {
+            let q: f64 = nodes.iter().map(|&(t, w)| w * t.powi(k)).sum();
+            assert!((q - 1.0 / (k + 1) as f64).abs() < 1e-13, "{k}: {q}");
+        }
+    }
+
+    #[test]
+    fn visibility_is_the_total_extinction_at_550_nm() {
+        // Green (549 nm) at the surface: 3.912 / V, up to (550/549)^1.3 ≈ 1.0024 on the aerosol
+        // share (and (550/549)⁴ on the small Rayleigh share).
+        let e = hazy(10_000.0, 1_000.0, 0.0975);
+        let beta = e.coefficient_per_m(0.0);
+        assert!(
+            (beta[1] / (3.912 / 10_000.0) - 1.0).abs() < 3e-3,
+            "{beta:?}"
+        );
+        assert!(beta[2] > beta[1] && beta[1] > beta[0]);
+        // The aerosol share falls by e over its scale height, the Rayleigh share over 8 km.
+        let up = e.coefficient_per_m(1_000.0);
+        let expected =
+            e.rayleigh_per_m[1] * (-1.0f64 / 8.0).exp() + e.aerosol_per_m[1] * (-1.0f64).exp();
+        assert!((up[1] - expected).abs() < 1e-15);
+    }
+
+    #[test]
+    fn chord_depth_matches_closed_forms() {
+        // Uniform air (no Rayleigh share, aerosol scale height 1e12 m): τ = β × chord length
+        // (law of cosines, independently).
+        let e = hazy(5_000.0, 1e12, 0.0);
+        let (r, h0, h1, d) = (6_371_000.0f64, 10.0, 300.0, 20_000.0);
+        let (a, b) = (r + h0, r + h1);
+        let chord = (a * a + b * b - 2.0 * a * b * (d / r).cos()).sqrt();
+        let tau = e.chord_optical_depth(r, h0, h1, d);
+        let beta = e.coefficient_per_m(0.0);
+        for c in 0..3 {
+            assert!(
+                (tau[c] / (beta[c] * chord) - 1.0).abs() < 1e-6,
+                "{c}: {tau:?}"
+            );
+        }
+        // A vertical path from h0 to h1 on a flat-ish scale: ∫ β0 e^(−h/H) dh in closed form.
+        let e = hazy(5_000.0, 1_000.0, 0.0975);
+        let tau = e.chord_optical_depth(r, 0.0, 3_000.0, 0.0);
+        let closed = |b0: f64, hs: f64| b0 * hs * (1.0 - (-3_000.0 / hs).exp());
+        for c in 0..3 {
+            let want = closed(e.rayleigh_per_m[c], RAYLEIGH_SCALE_HEIGHT_M)
+                + closed(e.aerosol_per_m[c], 1_000.0);
+            assert!((tau[c] / want - 1.0).abs() < 1e-10, "{c}: {tau:?} {want}");
+        }
+    }
+
+    #[test]
+    fn chord_error_for_refracted_rays_is_the_sag() {
+        // A constant-curvature ray (k = κR) is exactly a straight line over an Earth of radius
+        // R/(1 − k): its optical depth is the chord's over that sphere. The renderer uses the
+        // chord over R instead; the difference is the documented sag error.
+        let e = hazy(20_000.0, 1_000.0, 0.0975);
+        let r = 6_371_000.0;
+        for (k, d, bound) in [
+            (0.13, 50_000.0, 0.01),
+            (0.5, 50_000.0, 0.03),
+            (0.13, 20_000.0, 2e-3),
+        ] {
+            // End at the height a horizontal ray from 10 m reaches over the effective Earth.
+            let r_eff = r / (1.0 - k);
+            let h1 = 10.0 + d * d / (2.0 * r_eff);
+            let exact = e.chord_optical_depth(r_eff, 10.0, h1, d);
+            let chord = e.chord_optical_depth(r, 10.0, h1, d);
+            let relative = (chord[1] / exact[1] - 1.0).abs();
+            eprintln!("k = {k}, d = {d} m: chord error {relative:.3e} of tau");
+            assert!(relative < bound, "k = {k}, d = {d}: {relative:.2e}");
+        }
+    }
+
+    #[test]
+    fn attenuation_fades_to_the_horizon_sky() {
+        let e = hazy(5_000.0, 1_000.0, 0.0975);
+        let far = e.attenuate([0.0; 3], 1.0, [40.0; 3]);
+        let horizon = Sky::default().radiance(0.0);
+        for c in 0..3 {
+            assert!((far[c] - horizon[c]).abs() < 1e-12);
+        }
+        assert_eq!(e.attenuate([0.3; 3], 1.0, [0.0; 3]), [0.3; 3]);
+        assert_eq!(e.attenuate([0.3; 3], 1.0, [f64::NAN; 3]), horizon);
     }
 
     #[test]

@@ -2,6 +2,7 @@
 mod support;
 
 mod accuracy;
+mod aerial;
 mod bench_accuracy;
 mod cli;
 mod compare;
