@@ -410,18 +410,7 @@ proptest! {
 
 #[test]
 fn profile_reports_the_esc_input() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = raw_path(0);
-    let r = crate::support::cli::ok(&[
-        "profile",
-        path.to_str().unwrap(),
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--format",
-        "json",
-        "--quiet",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    let v = crate::support::cli::profile_json(&raw_path(0));
     let input = &v["input"];
     assert_eq!(input["format"], "eol_esc");
     assert_eq!(input["nominal_time_utc"], "2024-02-26 12");

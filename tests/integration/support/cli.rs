@@ -43,6 +43,22 @@ pub fn ok(args: &[&str]) -> Run {
     r
 }
 
+/// `ghostship profile PATH --format json` (files written to a temporary folder), which must
+/// succeed: the summary JSON printed on stdout.
+pub fn profile_json(path: &Path) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let r = ok(&[
+        "profile",
+        path.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--format",
+        "json",
+        "--quiet",
+    ]);
+    serde_json::from_str(&r.stdout).unwrap()
+}
+
 /// Run `ghostship ARGS`, which must fail with status 1, an `error:` line and no panic.
 pub fn fails(args: &[&str]) -> Run {
     let r = run(args);
