@@ -29,8 +29,9 @@ use super::ray_model::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
-    BouguerEnvelope, DensityPaths, FateWatch, Ground, RayRecord, Settled, Spherical,
-    StratifiedIndex, Termination, Tracer, TracerConfig, TracerError, trace_field,
+    BouguerEnvelope, DensityPaths, FateWatch, Ground, RayDensityPaths, RayPoint, RayRecord,
+    Settled, Spherical, StratifiedIndex, Termination, Tracer, TracerConfig, TracerError,
+    trace_field,
 };
 
 /// The tracer settings the renderer uses: [`TracerConfig::default`] (its tolerance, top at
@@ -223,7 +224,63 @@ fn density_paths_through<S: StratifiedIndex + ?Sized>(
     tracer.density_paths_m(camera_height_m, elevation_rad, &hook, &record)
 }
 
+/// The density-weighted path lengths to the ground distances `distances_m` and the ground of
+/// the ray that the renderer's fan traces (as [`CurvedRays::trace_record_into`], without the
+/// final sky direction).
+fn density_paths_along_through<S: StratifiedIndex + ?Sized>(
+    tracer: &Tracer<'_, S>,
+    fates: &Fates,
+    camera_height_m: f64,
+    elevation_rad: f64,
+    distances_m: &[f64],
+    scale_heights_m: [f64; 2],
+) -> Option<RayDensityPaths> {
+    let watch = fates.watch(
+        tracer.field(),
+        camera_height_m,
+        elevation_rad,
+        distances_m,
+        false,
+    );
+    let mut hook = DensityPaths::new(watch, scale_heights_m).at_distances(distances_m);
+    let mut record = RayRecord::default();
+    tracer
+        .trace_into(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            &mut hook,
+            &mut record,
+            None,
+        )
+        .ok()?;
+    let start = RayPoint {
+        arc_length_m: 0.0,
+        distance_m: 0.0,
+        height_m: camera_height_m,
+        elevation_rad,
+    };
+    Some(hook.finish(start, &record))
+}
+
 impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
+    fn density_paths_along(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        scales: [f64; 2],
+    ) -> Option<RayDensityPaths> {
+        density_paths_along_through(
+            &self.tracer,
+            &self.fates,
+            h,
+            elevation_rad,
+            distances_m,
+            scales,
+        )
+    }
+
     fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
         density_paths_through(&self.tracer, &self.fates, h, elevation_rad, scales)
     }
@@ -324,6 +381,23 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
 }
 
 impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
+    fn density_paths_along(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        scales: [f64; 2],
+    ) -> Option<RayDensityPaths> {
+        density_paths_along_through(
+            &self.planar,
+            &self.fates,
+            h,
+            elevation_rad,
+            distances_m,
+            scales,
+        )
+    }
+
     /// Through the planar tracer: in a stratified atmosphere the ray's path does not depend on
     /// how it is integrated (the fan and exact paths agree; see the renderer's tests).
     fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {

@@ -25,6 +25,7 @@
 //! image is the same whatever the thread count (rows are rendered in parallel, each pixel on its
 //! own). With one sample per pixel the pixel centre is used.
 
+mod air_paths;
 pub mod curved;
 pub mod elevation_fan;
 pub mod ray_model;
@@ -39,6 +40,7 @@ use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
 use crate::scene::{Scene, Sun, samples_per_pixel_root};
+use air_paths::AirPaths;
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
@@ -124,6 +126,9 @@ pub struct RenderStats {
     /// Rays whose optical depth towards the sun was integrated along their path (0 without a
     /// sun in view).
     pub sun_rays: usize,
+    /// Rays whose paths to the cards and the sea were integrated for the aerial perspective (0
+    /// without `visibility_km`, or for straight rays, whose chord is their path).
+    pub air_path_rays: usize,
 }
 
 /// A rendered image: linear RGBA f32, row-major, row 0 at the top.
@@ -655,12 +660,15 @@ pub fn render_scene(
         .map_or(std::f64::consts::FRAC_PI_2, |g| {
             g.min(std::f64::consts::FRAC_PI_2)
         });
+    // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact mode.
+    let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
+    let traced = match &fan {
+        Some(fan) if needs_paths => fan.rays_and_ends(),
+        None if needs_paths => traced_grid(tracer, cam.height_m, elevations, pixel_rad),
+        _ => Vec::new(),
+    };
     let sun_path = scene.sun.and_then(|sun| {
         let band = sun_band_rad(&sun, pixel_rad);
-        let traced = match &fan {
-            Some(fan) => fan.rays_and_ends(),
-            None => traced_grid(tracer, cam.height_m, elevations, pixel_rad),
-        };
         SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
     });
     let shader = Shader {
@@ -677,11 +685,18 @@ pub fn render_scene(
         heading_rad: cam.heading_rad,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),
-        aerial: scene.sky.extinction().map(|extinction| AerialShading {
-            extinction,
-            camera_height_m: cam.height_m,
-            earth_radius_m: radius,
-            distances_m: distances_m.clone(),
+        aerial: scene.sky.extinction().map(|extinction| {
+            let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
+            let scales = extinction.scale_heights_m();
+            let paths = AirPaths::build(tracer, cam.height_m, &distances_m, scales, &alphas);
+            stats.air_path_rays = paths.as_ref().map_or(0, AirPaths::len);
+            AerialShading {
+                extinction,
+                camera_height_m: cam.height_m,
+                earth_radius_m: radius,
+                distances_m: distances_m.clone(),
+                paths,
+            }
         }),
     };
 

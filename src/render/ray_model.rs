@@ -17,7 +17,7 @@
 //! Both serve as development back-ends and as test oracles. They are written by hand because they
 //! are a few lines of trigonometry that no crate provides in this form.
 
-use crate::tracer::straight_density_paths_m;
+use crate::tracer::{RayDensityPaths, straight_density_paths_m};
 
 /// What the renderer needs of one ray launched from the camera at apparent elevation α.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,6 +98,20 @@ pub trait RayTracer: Sync {
         _elevation_rad: f64,
         _scale_heights_m: [f64; 2],
     ) -> Option<[f64; 2]> {
+        None
+    }
+
+    /// The same integrals from the camera to each of the ground distances `distances_m` the ray
+    /// reaches and to where it meets the sea, for the aerial perspective towards cards and the
+    /// sea. `None` when the model cannot follow the ray's path (the renderer then integrates
+    /// along the straight chord, which is exact for straight rays). Default: `None`.
+    fn density_paths_along(
+        &self,
+        _camera_height_m: f64,
+        _elevation_rad: f64,
+        _distances_m: &[f64],
+        _scale_heights_m: [f64; 2],
+    ) -> Option<RayDensityPaths> {
         None
     }
 }

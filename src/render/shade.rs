@@ -7,6 +7,7 @@
 
 use rayon::prelude::*;
 
+use super::air_paths::{AirPaths, Meets};
 use super::ray_model::FanEnd;
 use super::sun::SunTransmittance;
 use crate::scene::camera::ViewDirection;
@@ -20,19 +21,35 @@ pub(super) struct AerialShading {
     pub(super) earth_radius_m: f64,
     /// The card distances (m), indexed like a ray's heights.
     pub(super) distances_m: Vec<f64>,
+    /// The rays' own paths to the cards and the sea, where the tracer can integrate them.
+    pub(super) paths: Option<AirPaths>,
 }
 
 impl AerialShading {
-    /// `radiance` (premultiplied, coverage `alpha`) of a point at `height_m` and ground distance
-    /// `distance_m`, as seen from the camera through the air between.
+    /// `radiance` (premultiplied, coverage `alpha`) of what the ray at apparent elevation
+    /// `elevation_rad` `meets` at `height_m` and ground distance `distance_m`, as seen from the
+    /// camera through the air between: along the ray's own path where [`AirPaths`] has it, else
+    /// along the straight chord.
     #[inline]
-    fn seen(&self, radiance: [f64; 3], alpha: f64, height_m: f64, distance_m: f64) -> [f64; 3] {
-        let tau = self.extinction.chord_optical_depth(
-            self.earth_radius_m,
-            self.camera_height_m,
-            height_m,
-            distance_m,
-        );
+    fn seen(
+        &self,
+        radiance: [f64; 3],
+        alpha: f64,
+        elevation_rad: f64,
+        meets: Meets,
+        height_m: f64,
+        distance_m: f64,
+    ) -> [f64; 3] {
+        let along = self.paths.as_ref().and_then(|p| p.at(elevation_rad, meets));
+        let tau = match along {
+            Some(d) => self.extinction.path_optical_depth(d),
+            None => self.extinction.chord_optical_depth(
+                self.earth_radius_m,
+                self.camera_height_m,
+                height_m,
+                distance_m,
+            ),
+        };
         self.extinction.attenuate(radiance, alpha, tau)
     }
 }
@@ -186,8 +203,9 @@ impl Shader<'_> {
             let t = card.texture.sample(u, v);
             let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
             if let Some(aerial) = &self.aerial {
-                let d = aerial.distances_m[card.distance_index];
-                rgb = aerial.seen(rgb, t[3] as f64, h, d);
+                let k = card.distance_index;
+                let d = aerial.distances_m[k];
+                rgb = aerial.seen(rgb, t[3] as f64, dir.elevation_rad, Meets::Card(k), h, d);
             }
             for c in 0..3 {
                 acc[c] += transmit * rgb[c];
@@ -229,7 +247,7 @@ impl Shader<'_> {
             } => {
                 let sea = self.sea_table.at(grazing_rad);
                 match &self.aerial {
-                    Some(aerial) => aerial.seen(sea, 1.0, 0.0, distance_m),
+                    Some(aerial) => aerial.seen(sea, 1.0, alpha, Meets::Sea, 0.0, distance_m),
                     None => sea,
                 }
             }

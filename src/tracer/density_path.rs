@@ -27,6 +27,19 @@ pub struct DensityPaths<H> {
     scale_heights_m: [f64; 2],
     sums_m: [f64; 2],
     last: Option<RayPoint>,
+    /// Ascending ground distances (m) at which the sums so far are wanted, and those sums.
+    targets_m: Vec<f64>,
+    at_targets_m: Vec<Option<[f64; 2]>>,
+    next_target: usize,
+}
+
+/// The density-weighted path lengths of one ray (m), from the observer: see [`DensityPaths`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RayDensityPaths {
+    /// To each requested ground distance the ray reached, in the order requested.
+    pub at_distances_m: Vec<Option<[f64; 2]>>,
+    /// To where it met the ground, if it did.
+    pub to_ground_m: Option<[f64; 2]>,
 }
 
 impl<H> DensityPaths<H> {
@@ -37,7 +50,40 @@ impl<H> DensityPaths<H> {
             scale_heights_m,
             sums_m: [0.0; 2],
             last: None,
+            targets_m: Vec::new(),
+            at_targets_m: Vec::new(),
+            next_target: 0,
         }
+    }
+
+    /// Also keep the sums at the ground distances `distances_m` (ascending, m).
+    pub fn at_distances(mut self, distances_m: &[f64]) -> Self {
+        self.targets_m = distances_m.to_vec();
+        self.at_targets_m = vec![None; distances_m.len()];
+        self
+    }
+
+    /// The sums at every target distance in (from, to], taken on the segment between the two
+    /// points (its height linear in ground distance), before `sums_m` moves past it.
+    fn note_targets(&mut self, from: &RayPoint, to: &RayPoint) {
+        let mut next = self.next_target;
+        let span_m = to.distance_m - from.distance_m;
+        while next < self.targets_m.len() && self.targets_m[next] <= to.distance_m {
+            let target = self.targets_m[next];
+            if target >= from.distance_m {
+                let f = if span_m > 0.0 {
+                    (target - from.distance_m) / span_m
+                } else {
+                    1.0
+                };
+                let h = from.height_m + f * (to.height_m - from.height_m);
+                let ds = f * (to.arc_length_m - from.arc_length_m);
+                let piece = self.segment(from.height_m, h, ds);
+                self.at_targets_m[next] = Some([0, 1].map(|k| self.sums_m[k] + piece[k]));
+            }
+            next += 1;
+        }
+        self.next_target = next;
     }
 
     /// ∫ exp(−h/H_k) ds over `ds_m` of path along which h goes linearly from `from_m` to `to_m`.
@@ -61,6 +107,9 @@ impl<H: RayHook> RayHook for DensityPaths<H> {
     }
 
     fn after_step(&mut self, from: &RayPoint, to: &RayPoint) -> HookAction {
+        if !self.targets_m.is_empty() {
+            self.note_targets(from, to);
+        }
         let ds = to.arc_length_m - from.arc_length_m;
         let piece = self.segment(from.height_m, to.height_m, ds);
         for (sum, p) in self.sums_m.iter_mut().zip(piece) {
@@ -68,6 +117,44 @@ impl<H: RayHook> RayHook for DensityPaths<H> {
         }
         self.last = Some(*to);
         self.inner.after_step(from, to)
+    }
+}
+
+impl<H> DensityPaths<H> {
+    /// What the hook holds for the ray `record` holds (traced from `start`), once its last
+    /// partial step — from the last accepted point to where it ended, which the tracer does not
+    /// pass to hooks — is added: the sums at the target distances it reached and, if it met the
+    /// ground, to the ground.
+    pub fn finish(mut self, start: RayPoint, record: &RayRecord) -> RayDensityPaths {
+        let last = self.last.unwrap_or(start);
+        let end = record.end;
+        if end.distance_m >= last.distance_m && end.arc_length_m >= last.arc_length_m {
+            if !self.targets_m.is_empty() {
+                self.note_targets(&last, &end);
+            }
+            let ground = record.termination == Some(Termination::Ground);
+            let piece = self.segment(
+                last.height_m,
+                end.height_m,
+                end.arc_length_m - last.arc_length_m,
+            );
+            let total = [0, 1].map(|k| self.sums_m[k] + piece[k]);
+            let to_ground_m = (ground && total.iter().all(|v| v.is_finite())).then_some(total);
+            // Only where the tracer reported the ray (not past a closed-form climb out).
+            for (d, h) in self.at_targets_m.iter_mut().zip(&record.heights_m) {
+                if h.is_none() {
+                    *d = None;
+                }
+            }
+            return RayDensityPaths {
+                at_distances_m: self.at_targets_m,
+                to_ground_m,
+            };
+        }
+        RayDensityPaths {
+            at_distances_m: self.at_targets_m,
+            to_ground_m: None,
+        }
     }
 }
 

@@ -35,7 +35,7 @@ use crate::render::{
     TRACER_TOLERANCE_RANGE_M, prepare_tracer, render_scene, render_tracer_config,
 };
 use crate::scene::{Scene, SceneError};
-use crate::tracer::{RayRecord, TracerConfig};
+use crate::tracer::{RayDensityPaths, RayRecord, TracerConfig};
 
 use super::stats::median;
 
@@ -445,6 +445,17 @@ impl RayTracer for Counting<'_> {
         self.inner.density_paths_m(h, elevation_rad, scales)
     }
 
+    fn density_paths_along(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        scales: [f64; 2],
+    ) -> Option<RayDensityPaths> {
+        self.inner
+            .density_paths_along(h, elevation_rad, distances_m, scales)
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,
@@ -598,6 +609,23 @@ impl RayTracer for Recording<'_> {
     fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
         let start = Instant::now();
         let paths = self.inner.density_paths_m(h, elevation_rad, scales);
+        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.nanos.fetch_add(ns, Ordering::Relaxed);
+        paths
+    }
+
+    /// Passed on and timed with the traces.
+    fn density_paths_along(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        scales: [f64; 2],
+    ) -> Option<RayDensityPaths> {
+        let start = Instant::now();
+        let paths = self
+            .inner
+            .density_paths_along(h, elevation_rad, distances_m, scales);
         let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.nanos.fetch_add(ns, Ordering::Relaxed);
         paths

@@ -713,6 +713,91 @@ fn sparse_levels() -> impl Strategy<Value = Vec<(f64, f64, Option<f64>, Option<f
     })
 }
 
+/// The analytic dT/dh, dP/dh and de/dh of the fit of `levels` against central differences at
+/// the `fractions` of every gap.
+fn derivatives_match_finite_differences_at(
+    levels: &[(f64, f64, Option<f64>, Option<f64>)],
+    fractions: &[f64],
+) -> Result<(), TestCaseError> {
+    let profile = fit(&sounding(levels));
+    for w in levels.windows(2) {
+        let width = w[1].0 - w[0].0;
+        let dh = 1e-4 * width;
+        for f in fractions {
+            let h = w[0].0 + f * width;
+            let (lo, mid, hi) = (
+                profile.air_at(h - dh),
+                profile.air_at(h),
+                profile.air_at(h + dh),
+            );
+            // Central difference of a cubic: error dh²·|third derivative|/6, and the third
+            // derivative of a PCHIP segment is at most 12·|ΔT|/width³·(1 + 2·3) ≤ 1e4/width³.
+            // Rounding: a linear-in-ln-p gap has T' = (dT/d ln p)·(d ln p/dh), and the
+            // difference quotient of ln P (≈ 11.6, rounded to ε·11.6) is amplified by
+            // |dT/d ln p|, huge across a 1 m gap with a 76 K jump (ΔlnP ≈ 1e-5).
+            let dlnp_dh = mid.dpressure_dh_pa_per_m / mid.pressure_pa;
+            let dt_dlnp = (mid.dtemperature_dh_k_per_m / dlnp_dh).abs();
+            let rounding = 4.0 * f64::EPSILON * mid.pressure_pa.ln() / dh * dt_dlnp;
+            let tol_t = 1e-7 + dh * dh * 2e3 / width.powi(3) + rounding;
+            let fd_t = (hi.temperature_k - lo.temperature_k) / (2.0 * dh);
+            prop_assert!(
+                (fd_t - mid.dtemperature_dh_k_per_m).abs() < tol_t,
+                "T' at {}: fd {} analytic {}",
+                h,
+                fd_t,
+                mid.dtemperature_dh_k_per_m
+            );
+            let fd_p = (hi.pressure_pa - lo.pressure_pa) / (2.0 * dh);
+            prop_assert!(
+                (fd_p - mid.dpressure_dh_pa_per_m).abs()
+                    < 1e-5 * mid.dpressure_dh_pa_per_m.abs() + 1e-6,
+                "P' at {}: fd {} analytic {}",
+                h,
+                fd_p,
+                mid.dpressure_dh_pa_per_m
+            );
+            let fd_e = (hi.vapour_pressure_pa - lo.vapour_pressure_pa) / (2.0 * dh);
+            prop_assert!(
+                (fd_e - mid.dvapour_pressure_dh_pa_per_m).abs()
+                    < 1e-5 * (1.0 + mid.dvapour_pressure_dh_pa_per_m.abs()),
+                "e' at {}: fd {} analytic {}",
+                h,
+                fd_e,
+                mid.dvapour_pressure_dh_pa_per_m
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A case proptest found: a 1 m gap with a 76.6 K jump, fitted linear in ln p (ΔlnP ≈ 1e-5), where
+/// the difference quotient's rounding is amplified by dT/d ln p.
+#[test]
+fn derivatives_match_finite_differences_across_a_thin_steep_gap() {
+    let levels = [
+        (-99.0, 200.0, Some(104_998.950_005_249_98), None),
+        (
+            -98.0,
+            276.556_583_838_795_1,
+            Some(104_997.900_020_999_85),
+            None,
+        ),
+        (
+            369.475_429_935_177_2,
+            200.0,
+            Some(104_508.206_127_557_07),
+            None,
+        ),
+        (
+            730.656_979_211_583_6,
+            200.0,
+            Some(104_131.422_615_409_5),
+            None,
+        ),
+    ];
+    derivatives_match_finite_differences_at(&levels, &[0.05; 4]).unwrap();
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
 
@@ -771,36 +856,7 @@ proptest! {
         levels in sparse_levels(),
         fractions in prop::collection::vec(0.05f64..0.95, 4),
     ) {
-        let profile = fit(&sounding(&levels));
-        for w in levels.windows(2) {
-            let width = w[1].0 - w[0].0;
-            let dh = 1e-4 * width;
-            for f in &fractions {
-                let h = w[0].0 + f * width;
-                let (lo, mid, hi) =
-                    (profile.air_at(h - dh), profile.air_at(h), profile.air_at(h + dh));
-                // Central difference of a cubic: error dh²·|third derivative|/6, and the third
-                // derivative of a PCHIP segment is at most 12·|ΔT|/width³·(1 + 2·3) ≤ 1e4/width³.
-                let tol_t = 1e-7 + dh * dh * 2e3 / width.powi(3);
-                let fd_t = (hi.temperature_k - lo.temperature_k) / (2.0 * dh);
-                prop_assert!(
-                    (fd_t - mid.dtemperature_dh_k_per_m).abs() < tol_t,
-                    "T' at {}: fd {} analytic {}", h, fd_t, mid.dtemperature_dh_k_per_m
-                );
-                let fd_p = (hi.pressure_pa - lo.pressure_pa) / (2.0 * dh);
-                prop_assert!(
-                    (fd_p - mid.dpressure_dh_pa_per_m).abs()
-                        < 1e-5 * mid.dpressure_dh_pa_per_m.abs() + 1e-6,
-                    "P' at {}: fd {} analytic {}", h, fd_p, mid.dpressure_dh_pa_per_m
-                );
-                let fd_e = (hi.vapour_pressure_pa - lo.vapour_pressure_pa) / (2.0 * dh);
-                prop_assert!(
-                    (fd_e - mid.dvapour_pressure_dh_pa_per_m).abs()
-                        < 1e-5 * (1.0 + mid.dvapour_pressure_dh_pa_per_m.abs()),
-                    "e' at {}: fd {} analytic {}", h, fd_e, mid.dvapour_pressure_dh_pa_per_m
-                );
-            }
-        }
+        derivatives_match_finite_differences_at(&levels, &fractions)?;
     }
 
     #[test]

@@ -25,7 +25,9 @@ use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
 use crate::render::{at_edge, max_channel_difference};
 use crate::support::data::data_dir;
-use crate::support::reference::{BreakSource, atmosphere_index, reference_heights};
+use crate::support::reference::{
+    BreakSource, atmosphere_index, reference_density_paths, reference_heights,
+};
 
 pub(crate) fn load_scene(name: &str) -> Scene {
     let path = data_dir().join("scenes").join(name);
@@ -511,57 +513,106 @@ fn novaya_zemlya_sun_is_seen_below_the_horizon_and_not_with_straight_rays() {
     assert!(max_gain < 1e-6, "{max_gain}");
 }
 
-/// The sun's light comes along its own curved ray: the density-weighted path lengths
-/// ∫ e^(−h/H) ds that the renderer's tracer integrates for the rays that show the Novaya Zemlya
-/// sun (−0.046° … −0.029°, 830–890 km to the top), a level ray and two climbing ones agree with
-/// the independent reference tracer's path (heights every 100 m of ground, segment lengths from
-/// the polar geometry, midpoint weights).
+/// The Novaya Zemlya atmosphere (fig. 12) as the renderer traces it, with its reference index.
+fn novaya_zemlya_rays() -> (RefractiveAtmosphere, SyntheticAtmosphere) {
+    let nz = SyntheticAtmosphere::from_file(&data_dir().join("novaya_zemlya.toml")).unwrap();
+    (
+        RefractiveAtmosphere::new(Arc::new(nz.clone()), 550.0).unwrap(),
+        nz,
+    )
+}
+
+fn assert_paths_agree(what: &str, got: [f64; 2], want: [f64; 2], bound: f64) {
+    for k in 0..2 {
+        let relative = got[k] / want[k] - 1.0;
+        eprintln!(
+            "{what} [{k}]: {} vs {} m ({relative:+.2e})",
+            got[k], want[k]
+        );
+        assert!(relative.abs() < bound, "{what} [{k}]: {relative:+e}");
+    }
+}
+
+/// The sun's light comes along its own curved ray: the density-weighted path lengths that the
+/// renderer's tracer integrates for the rays that show the Novaya Zemlya sun (−0.046° … −0.029°,
+/// 830–890 km to the top), a level ray and two climbing ones agree with the independent
+/// reference tracer's path.
 #[test]
 fn the_suns_path_through_the_air_is_the_reference_tracers_path() {
-    let nz_path = data_dir().join("novaya_zemlya.toml");
-    let nz = SyntheticAtmosphere::from_file(&nz_path).unwrap();
-    let atm = RefractiveAtmosphere::new(Arc::new(nz.clone()), 550.0).unwrap();
+    let (atm, nz) = novaya_zemlya_rays();
     let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
-    let radius = ghostship::units::EARTH_RADIUS_M;
-    let config = render_tracer_config(radius);
-    let top = config.top_m;
-    let rays = CurvedRays::new(&atm, config, 0.0).unwrap();
+    let rays = CurvedRays::new(&atm, render_tracer_config(atm_radius()), 0.0).unwrap();
     let scales = [8_000.0, 1_000.0];
-    let h0 = 100.0;
     for elevation_deg in [-0.046, -0.04, -0.029, 0.0, 0.5, 3.0] {
         let alpha = f64::to_radians(elevation_deg);
-        let got = rays.density_paths_m(h0, alpha, scales).unwrap();
-        let step_m = 100.0;
-        let distances: Vec<f64> = (0..12_000).map(|i| i as f64 * step_m).collect();
-        let reach = reference_heights(&index, radius, top, h0, alpha, &distances);
-        let heights: Vec<f64> = std::iter::once(h0)
-            .chain(reach.iter().skip(1).map_while(|r| r.height_m()))
-            .collect();
-        assert!(
-            heights.len() < distances.len(),
-            "{elevation_deg}°: did not reach the top"
-        );
-        let mut want = [0.0; 2];
-        for w in heights.windows(2) {
-            let mid = 0.5 * (w[0] + w[1]);
-            let ds = (w[1] - w[0]).hypot(step_m * (radius + mid) / radius);
-            for k in 0..2 {
-                want[k] += (-mid / scales[k]).exp() * ds;
+        let got = rays.density_paths_m(100.0, alpha, scales).unwrap();
+        let want = reference_density_paths(&index, 100.0, alpha, 1.2e6, 100.0, scales);
+        assert_paths_agree(&format!("{elevation_deg}° to the top"), got, want, 1e-5);
+    }
+}
+
+/// The haze towards cards and the sea comes along the rays' own paths too: the tracer's
+/// integrals to 5, 20 and 30 km and to the sea agree with the reference tracer's path, where the
+/// straight chord — below a ray that follows the Earth by d²/8R, 18 m at 30 km — does not.
+#[test]
+fn the_path_to_cards_and_the_sea_is_the_reference_tracers_path() {
+    let (atm, nz) = novaya_zemlya_rays();
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    // Cards up to 1 km high: rays are followed to every distance below that.
+    let rays = CurvedRays::new(&atm, render_tracer_config(atm_radius()), 1_000.0).unwrap();
+    let scales = [8_000.0, 1_000.0];
+    let distances = [5_000.0, 20_000.0, 30_000.0];
+    for elevation_deg in [-0.01, 0.0, 0.02] {
+        let alpha = f64::to_radians(elevation_deg);
+        let got = rays
+            .density_paths_along(10.0, alpha, &distances, scales)
+            .unwrap();
+        for (k, &d) in distances.iter().enumerate() {
+            let want = reference_density_paths(&index, 10.0, alpha, d, 10.0, scales);
+            let at = got.at_distances_m[k].unwrap();
+            assert_paths_agree(&format!("{elevation_deg}° to {d} m"), at, want, 1e-5);
+            if elevation_deg == 0.0 && d == 30_000.0 {
+                // The chord from the camera to the ray's point at 30 km: a straight line over
+                // the sphere, summed in 1 m pieces.
+                let end_h = reference_heights(&index, atm_radius(), 40e3, 10.0, 0.0, &[d])[0];
+                let chord = chord_density_paths(10.0, end_h.height_m().unwrap(), d, scales);
+                let off = chord[1] / want[1] - 1.0;
+                eprintln!("the chord to 30 km: {chord:?} ({off:+.2e} in the aerosol part)");
+                assert!(off.abs() > 100.0 * 1e-5, "the chord is as good: {off:+e}");
             }
         }
+    }
+    // Into the sea from 100 m at −0.3° (about 19 km away).
+    let alpha = f64::to_radians(-0.3);
+    let got = rays.density_paths_along(100.0, alpha, &[], scales).unwrap();
+    let want = reference_density_paths(&index, 100.0, alpha, 40_000.0, 2.0, scales);
+    assert_paths_agree("−0.3° to the sea", got.to_ground_m.unwrap(), want, 1e-5);
+}
+
+/// ∫ e^(−h/H_k) ds along the straight line from height `from_m` to height `to_m` at ground
+/// distance `distance_m` (1 m pieces, midpoints).
+fn chord_density_paths(from_m: f64, to_m: f64, distance_m: f64, scales: [f64; 2]) -> [f64; 2] {
+    let r = atm_radius();
+    let theta = distance_m / r;
+    let (bx, by) = (
+        (r + to_m) * theta.sin(),
+        (r + to_m) * theta.cos() - (r + from_m),
+    );
+    let length = bx.hypot(by);
+    let n = length.ceil() as usize;
+    let mut paths = [0.0; 2];
+    for i in 0..n {
+        let t = (i as f64 + 0.5) / n as f64;
+        let h = (t * bx).hypot(r + from_m + t * by) - r;
         for k in 0..2 {
-            let relative = got[k] / want[k] - 1.0;
-            eprintln!(
-                "{elevation_deg}° H = {} m: {} vs {} m ({relative:+.2e})",
-                scales[k], got[k], want[k]
-            );
-            assert!(
-                relative.abs() < 1e-5,
-                "{elevation_deg}°, H = {} m: {relative:+e}",
-                scales[k]
-            );
+            paths[k] += (-h / scales[k]).exp() * length / n as f64;
         }
     }
+    paths
+}
+
+fn atm_radius() -> f64 {
+    ghostship::units::EARTH_RADIUS_M
 }
 
 /// The brightest pixel of `film` (by the sum of its channels).

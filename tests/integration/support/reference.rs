@@ -171,6 +171,50 @@ impl ReferenceSteps {
     }
 }
 
+/// The density-weighted path lengths ∫ e^(−h/H_k) ds (H = `scales`) of the independent
+/// reference tracer's ray from `h0` at `alpha`, from heights every `step_m` of ground (segment
+/// lengths from the polar geometry, midpoint weights): to `until_m` of ground, or to its end if
+/// it ends before (the top, or the ground, found by extrapolating the last segment to h = 0).
+/// Earth radius 6371 km, top 40 km (the renderer's).
+pub fn reference_density_paths(
+    index: &ReferenceIndex,
+    h0: f64,
+    alpha: f64,
+    until_m: f64,
+    step_m: f64,
+    scales: [f64; 2],
+) -> [f64; 2] {
+    let radius = ghostship::units::EARTH_RADIUS_M;
+    let top = 40_000.0;
+    let n = (until_m / step_m).round() as usize;
+    let distances: Vec<f64> = (0..=n).map(|i| i as f64 * step_m).collect();
+    let reach = reference_heights(index, radius, top, h0, alpha, &distances);
+    let mut points: Vec<(f64, f64)> = std::iter::once((0.0, h0))
+        .chain(
+            reach
+                .iter()
+                .zip(&distances)
+                .skip(1)
+                .map_while(|(r, &d)| r.height_m().map(|h| (d, h))),
+        )
+        .collect();
+    let ended = points.len() <= n;
+    if ended && reach[points.len()] == RefReach::GroundBefore {
+        let [(d0, h0), (d1, h1)] = [points[points.len() - 2], points[points.len() - 1]];
+        points.push((d1 + h1 * (d1 - d0) / (h0 - h1), 0.0));
+    }
+    let mut paths = [0.0; 2];
+    for w in points.windows(2) {
+        let ((d0, h0), (d1, h1)) = (w[0], w[1]);
+        let mid = 0.5 * (h0 + h1);
+        let ds = (h1 - h0).hypot((d1 - d0) * (radius + mid) / radius);
+        for k in 0..2 {
+            paths[k] += (-mid / scales[k]).exp() * ds;
+        }
+    }
+    paths
+}
+
 /// A ray launched at `elevation_rad` from `observer_height_m` (above the surface) over a sphere
 /// of `earth_radius_m`, through `index` up to `top_m`: what it does at each ground distance of
 /// `distances_m` (ascending, ≥ 0; distance = R·θ), with the default steps.
