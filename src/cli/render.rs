@@ -137,7 +137,7 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
     super::write_files(&files, quiet)?;
     if !quiet {
         eprintln!(
-            "{}x{} in {:.0} ms ({} fan rays{})",
+            "{}x{} in {:.0} ms ({} fan rays{}{}{})",
             film.width,
             film.height,
             render_s * 1e3,
@@ -146,6 +146,14 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
                 format!(", {} per-sample rays", film.stats.sample_rays)
             } else {
                 String::new()
+            },
+            match film.stats.sun_rays {
+                0 => String::new(),
+                n => format!(", {n} sun paths"),
+            },
+            match film.stats.air_path_rays {
+                0 => String::new(),
+                n => format!(", {n} haze paths"),
             }
         );
     }

@@ -293,7 +293,7 @@ impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
 /// Absolute accuracy (m of density-weighted path) of [`climb_out_density_paths`]: a climb
 /// through the whole atmosphere has at least 1 km of such path at every scale height used, so
 /// this is better than 1e-4 of the total.
-pub(crate) const DENSITY_TOLERANCE_M: f64 = 0.1;
+pub(crate) const DENSITY_TOLERANCE_M: f64 = 10.0;
 
 /// Along a climbing ray at `height_m` with local elevation `elevation_rad` (> 0), as in
 /// [`climb_out`]: ∫ exp(−h/H_k) ds from there to `top_m` for the two scale heights
