@@ -442,27 +442,6 @@ struct SuiteRun {
     problems: Vec<(Kind, String)>,
 }
 
-/// The one atmosphere whose worst error is known not to shrink monotonically (issue 8 stays
-/// open on it): in the 0.1 m, 30 K jumps the worst is 6.8e-5 m at 1e-2 m (a level ray from
-/// 0.1 m) and 7.0e-5 m at 1e-3 m (the ray from 100 m tangent to the break at 30.5 m, itself
-/// 5.8e-5 m off at 1e-2 m), both well inside the tolerance but not decreasing. Measured on that
-/// ray (perigee 2 mm above the break, at 26 km): from 12.5 to 18.5 km both tolerances take the
-/// same 2 km steps (`max_step_m` binds), but the cap alone does not order the errors — with 1 km
-/// it is 1.1e-5 / 2.8e-5 m, with 500 m 8.5e-5 / 4.5e-6 m at 1e-2 / 1e-3 m. Far below the
-/// tolerance the error depends on where the steps fall, not on the tolerance. The CI monotonicity test
-/// checks every other atmosphere; the `*_known_failure` test (ignored) checks this one with the
-/// same bound and fails until the tracer is fixed. Every other property is checked for all
-/// fourteen atmospheres in CI.
-const KNOWN_NON_MONOTONE: &str = "thin_jumps_30k";
-
-/// Whether a problem text is about the known non-monotone atmosphere.
-fn in_known_non_monotone(problem: &str) -> bool {
-    problem
-        .split_whitespace()
-        .take(2)
-        .any(|word| word.trim_end_matches(':') == KNOWN_NON_MONOTONE)
-}
-
 impl SuiteRun {
     /// Panic listing the problems of `kind` for which `selected` holds, if any.
     fn assert_none_where(&self, kind: Kind, selected: impl Fn(&str) -> bool) {
@@ -598,15 +577,7 @@ fn stress_error_is_within_the_tolerance_of_the_independent_reference() {
 
 #[test]
 fn stress_error_does_not_grow_as_the_tolerance_shrinks() {
-    fast_suite().assert_none_where(Kind::Monotone, |p| !in_known_non_monotone(p));
-}
-
-#[test]
-#[ignore = "known failure (issue 8 open): in the 0.1 m, 30 K jumps the worst error grows from \
-            6.8e-5 m at 1e-2 m to 7.0e-5 m at 1e-3 m; \
-            cargo test --release --test integration known_failure -- --ignored"]
-fn stress_error_does_not_grow_as_the_tolerance_shrinks_known_failure() {
-    fast_suite().assert_none_where(Kind::Monotone, in_known_non_monotone);
+    fast_suite().assert_none(Kind::Monotone);
 }
 
 /// Long mode: the dense launch set (≈ 150 elevations and tangent rays to every twentieth break
