@@ -167,8 +167,11 @@ impl Dem {
     fn grid_position(&self, lat_deg: f64, lon_deg: f64) -> Option<(f64, f64)> {
         let r = (self.north_lat_deg - lat_deg) / self.lat_step_deg;
         let c = (lon_deg - self.west_lon_deg) / self.lon_step_deg;
-        let inside = |x: f64, n: usize| x >= 0.0 && x <= (n - 1) as f64;
-        (inside(r, self.rows) && inside(c, self.cols)).then_some((r, c))
+        // Points on the edge stay on the grid despite rounding (a millionth of a step).
+        let inside = |x: f64, n: usize| x >= -1e-6 && x <= (n - 1) as f64 + 1e-6;
+        let clamp = |x: f64, n: usize| x.clamp(0.0, (n - 1) as f64);
+        (inside(r, self.rows) && inside(c, self.cols))
+            .then_some((clamp(r, self.rows), clamp(c, self.cols)))
     }
 
     /// Bilinear height (m) at a point; `None` outside the grid or next to a void.
