@@ -398,6 +398,8 @@ fn terrain_section(
                 "0…90°",
             )?
             .to_radians(),
+        light_azimuth_rad: light_az.to_radians(),
+        light_elevation_rad: light_el.to_radians(),
         light_enu: terrain::light_direction(light_az.to_radians(), light_el.to_radians()),
     };
     let bytes = crate::input::read_limited(&dem_path, terrain::dem::MAX_DEM_BYTES).map_err(

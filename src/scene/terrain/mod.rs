@@ -46,7 +46,12 @@ pub struct Palette {
     pub snow_line_m: f64,
     /// Slope from which the ground is ice (rad).
     pub ice_slope_rad: f64,
-    /// Unit vector (east, north, up) towards the light.
+    /// Azimuth the light comes from (rad, clockwise from north).
+    pub light_azimuth_rad: f64,
+    /// Elevation of the light (rad).
+    pub light_elevation_rad: f64,
+    /// Unit vector (east, north, up) towards the light (from the two angles).
+    #[serde(skip)]
     pub light_enu: [f64; 3],
 }
 
@@ -63,6 +68,8 @@ impl Palette {
             ice_rgb: [0.50, 0.64, 0.75],
             snow_line_m: 300.0,
             ice_slope_rad: 35f64.to_radians(),
+            light_azimuth_rad: 180f64.to_radians(),
+            light_elevation_rad: 30f64.to_radians(),
             light_enu: light_direction(180f64.to_radians(), 30f64.to_radians()),
         }
     }
@@ -106,6 +113,7 @@ pub struct Terrain {
     /// Observer (camera) longitude (°).
     pub observer_lon_deg: f64,
     /// How hits are coloured.
+    #[serde(flatten)]
     pub palette: Palette,
     /// Highest terrain height in the model (m; 0 if it is all sea).
     pub max_height_m: f64,
