@@ -27,7 +27,8 @@ fn height_m(x_km: f64, y_km: f64) -> f64 {
         h * (-((x_km - cx) / sx).powi(2) - ((y_km - cy) / sy).powi(2)).exp()
     };
     let massif = bump(1.0, 0.5, 4.0, 3.0, 900.0) + bump(-4.5, -0.5, 3.0, 2.5, 600.0);
-    let ridges = 1.0 + 0.12 * (2.0 * PI * (x_km / 2.3 + y_km / 5.1)).sin()
+    let ridges = 1.0
+        + 0.12 * (2.0 * PI * (x_km / 2.3 + y_km / 5.1)).sin()
         + 0.08 * (2.0 * PI * (x_km / 1.1 - y_km / 1.7)).sin();
     // The coast: heights fall to the sea where the massif is low, with a cliff on the south.
     let cliff = if y_km < -3.5 { 0.0 } else { 60.0 };
@@ -58,7 +59,10 @@ fn main() -> anyhow::Result<()> {
     let mut image = tiff.new_image::<colortype::GrayI16>(COLS, ROWS)?;
     let dir = image.encoder();
     dir.write_tag(Tag::ModelPixelScaleTag, &[DLON, DLAT, 0.0][..])?;
-    dir.write_tag(Tag::ModelTiepointTag, &[0.0, 0.0, 0.0, WEST, NORTH, 0.0][..])?;
+    dir.write_tag(
+        Tag::ModelTiepointTag,
+        &[0.0, 0.0, 0.0, WEST, NORTH, 0.0][..],
+    )?;
     // Version 1.1.0, 3 keys: model type geographic, raster PixelIsArea, WGS 84.
     let keys: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326];
     dir.write_tag(Tag::GeoKeyDirectoryTag, &keys[..])?;

@@ -776,10 +776,9 @@ pub fn render_scene(
                         let c = match &fan {
                             Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
                             Some(fan) => {
-                                match terrain
-                                    .as_ref()
-                                    .and_then(|t| Some((t, t.hit(alpha, dir.azimuth_offset_rad())?)))
-                                {
+                                match terrain.as_ref().and_then(|t| {
+                                    Some((t, t.hit(alpha, dir.azimuth_offset_rad())?))
+                                }) {
                                     Some((t, hit)) => {
                                         fan.interpolate(alpha, heights);
                                         terrain::shade_hit(

@@ -29,8 +29,8 @@ use rayon::prelude::*;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::Shader;
-use crate::scene::camera::ViewDirection;
 use crate::scene::Terrain;
+use crate::scene::camera::ViewDirection;
 
 /// Most grid distances per frame.
 pub const MAX_TERRAIN_DISTANCES: usize = 2048;
@@ -138,7 +138,10 @@ impl<'a> TerrainView<'a> {
             .flat_map(|z| {
                 (0..n_blocks).map(move |b| {
                     let end = ((b + 1) * BLOCK + 1).min(n);
-                    z[b * BLOCK..end].iter().copied().fold(f32::NEG_INFINITY, f32::max)
+                    z[b * BLOCK..end]
+                        .iter()
+                        .copied()
+                        .fold(f32::NEG_INFINITY, f32::max)
                 })
             })
             .collect();
@@ -269,7 +272,12 @@ impl<'a> TerrainView<'a> {
         end: FanEnd,
     ) -> Option<TerrainHit> {
         let p = self.profile(offset_rad)?;
-        self.march(p, |j| heights.get(j).copied().flatten(), |_| f32::NEG_INFINITY, end)
+        self.march(
+            p,
+            |j| heights.get(j).copied().flatten(),
+            |_| f32::NEG_INFINITY,
+            end,
+        )
     }
 
     /// March profile `p` with a ray's heights `height(j)` (block minima `block_min(b)`, which
@@ -286,16 +294,16 @@ impl<'a> TerrainView<'a> {
         let z = &self.profiles[p * n..(p + 1) * n];
         let zmax = &self.block_max[p * self.n_blocks..(p + 1) * self.n_blocks];
         let mut prev: Option<(f64, f64)> = None; // (h, z) at the previous grid point
-        for b in 0..self.n_blocks {
-            if block_min(b) > zmax[b] {
+        for (b, &block_top) in zmax.iter().enumerate() {
+            if block_min(b) > block_top {
                 prev = None; // the block's last point is above ground: restart there
                 continue;
             }
             let start = b * BLOCK;
             let stop = ((b + 1) * BLOCK).min(n - 1);
             let first = if prev.is_some() { start + 1 } else { start };
-            for j in first..=stop {
-                let zj = z[j] as f64;
+            for (j, &zj) in z.iter().enumerate().take(stop + 1).skip(first) {
+                let zj = zj as f64;
                 let Some(hj) = height(j) else {
                     return self.landing(prev, j, zj, end);
                 };
@@ -344,12 +352,13 @@ impl<'a> TerrainView<'a> {
         };
         let (hp, zp) = prev?;
         let d = &self.distances_m;
-        if !(ds > d[j - 1] && ds <= d[j]) || !zp.is_finite() || !zj.is_finite() {
+        if !(ds > d[j - 1] && ds <= d[j] && zp.is_finite() && zj.is_finite()) {
             return None;
         }
         let s = (ds - d[j - 1]) / (d[j] - d[j - 1]);
         let zs = zp + (zj - zp) * s;
-        (zs > 0.0).then(|| self.crossing(Some((hp, zp)), j, 0.0, zs.max(0.0)))
+        (zs > 0.0)
+            .then(|| self.crossing(Some((hp, zp)), j, 0.0, zs.max(0.0)))
             .map(|mut hit| {
                 hit.distance_m = hit.distance_m.min(ds);
                 hit

@@ -402,15 +402,16 @@ fn terrain_section(
         light_elevation_rad: light_el.to_radians(),
         light_enu: terrain::light_direction(light_az.to_radians(), light_el.to_radians()),
     };
-    let bytes = crate::input::read_limited(&dem_path, terrain::dem::MAX_DEM_BYTES).map_err(
-        |source| SceneError::Terrain {
-            path: c.path.to_path_buf(),
-            source: Box::new(DemError::Read {
-                path: dem_path.clone(),
-                source,
-            }),
-        },
-    )?;
+    let bytes =
+        crate::input::read_limited(&dem_path, terrain::dem::MAX_DEM_BYTES).map_err(|source| {
+            SceneError::Terrain {
+                path: c.path.to_path_buf(),
+                source: Box::new(DemError::Read {
+                    path: dem_path.clone(),
+                    source,
+                }),
+            }
+        })?;
     let dem = Dem::from_bytes(&dem_path, &bytes).map_err(|source| SceneError::Terrain {
         path: c.path.to_path_buf(),
         source: Box::new(source),

@@ -42,7 +42,9 @@ fn hgt_reader_gives_known_samples_at_their_latitude_and_longitude() {
         assert!((h - f(r, c) as f64).abs() < 1e-6, "({r}, {c}): {h}");
     }
     // Halfway between two samples of a row: their mean.
-    let mid = dem.height_at(11.0 - 5.0 / 1200.0, -20.0 + 5.5 / 1200.0).unwrap();
+    let mid = dem
+        .height_at(11.0 - 5.0 / 1200.0, -20.0 + 5.5 / 1200.0)
+        .unwrap();
     assert!((mid - 0.5 * (f(5, 5) + f(5, 6)) as f64).abs() < 1e-6);
     // The void and what borders it have no height; off the tile neither.
     assert_eq!(dem.height_at(11.0 - 0.5, -20.0 + 601.0 / 1200.0), None);
@@ -268,11 +270,17 @@ fn cards_and_terrain_compose_in_depth_order() {
         let x = film.width / 2;
         let below = film.pixel(x, (ridge_top + 3) as u32);
         let above = film.pixel(x, (ridge_top - 3) as u32);
-        assert!(is_green(above), "card {card_m} m: above the ridge {above:?}");
+        assert!(
+            is_green(above),
+            "card {card_m} m: above the ridge {above:?}"
+        );
         if in_front {
             assert!(is_green(below), "card {card_m} m: over the ridge {below:?}");
         } else {
-            assert!(is_terrain(below), "card {card_m} m: over the ridge {below:?}");
+            assert!(
+                is_terrain(below),
+                "card {card_m} m: over the ridge {below:?}"
+            );
         }
     }
 }

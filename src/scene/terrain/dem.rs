@@ -115,12 +115,11 @@ impl Dem {
 
     /// Read a `.hgt` or GeoTIFF file (by extension), at most [`MAX_DEM_BYTES`].
     pub fn from_file(path: &Path) -> Result<Self, DemError> {
-        let bytes = crate::input::read_limited(path, MAX_DEM_BYTES).map_err(|source| {
-            DemError::Read {
+        let bytes =
+            crate::input::read_limited(path, MAX_DEM_BYTES).map_err(|source| DemError::Read {
                 path: path.to_path_buf(),
                 source,
-            }
-        })?;
+            })?;
         Self::from_bytes(path, &bytes)
     }
 
@@ -205,7 +204,10 @@ impl Dem {
         let gy = north / (2.0 * dlat * m_per_deg);
         let gx = east / (2.0 * dlon * m_per_deg * lat_deg.to_radians().cos().max(1e-6));
         let norm = (gx * gx + gy * gy + 1.0).sqrt();
-        Some(((gx * gx + gy * gy).sqrt().atan(), [-gx / norm, -gy / norm, 1.0 / norm]))
+        Some((
+            (gx * gx + gy * gy).sqrt().atan(),
+            [-gx / norm, -gy / norm, 1.0 / norm],
+        ))
     }
 
     /// The finest grid spacing (m) on a sphere of `radius_m` (the east–west spacing shrinks with
@@ -414,9 +416,10 @@ fn read_geotiff(path: &Path, bytes: &[u8]) -> Result<Dem, DemError> {
         Some(v) => {
             let s = v.into_string().map_err(tiff_err)?;
             let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
-            Some(s.parse::<f64>().map_err(|_| {
-                invalid(path, "GDAL_NODATA", format!("{s:?} is not a number"))
-            })?)
+            Some(
+                s.parse::<f64>()
+                    .map_err(|_| invalid(path, "GDAL_NODATA", format!("{s:?} is not a number")))?,
+            )
         }
         None => None,
     };
@@ -480,7 +483,9 @@ mod tests {
     #[test]
     fn bilinear_height_and_slope_of_a_plane() {
         // h = 10·row + 2·col on a 3 × 4 grid.
-        let h: Vec<f32> = (0..12).map(|k| (10 * (k / 4) + 2 * (k % 4)) as f32).collect();
+        let h: Vec<f32> = (0..12)
+            .map(|k| (10 * (k / 4) + 2 * (k % 4)) as f32)
+            .collect();
         let dem = Dem::new(3, 4, (1.0, 0.0), (0.5, 0.25), h).unwrap();
         let v = dem.height_at(0.75, 0.125).unwrap();
         assert!((v - (10.0 * 0.5 + 2.0 * 0.5)).abs() < 1e-9, "{v}");

@@ -204,7 +204,10 @@ impl Terrain {
     pub fn land_distance_range_m(&self, radius_m: f64) -> Option<(f64, f64)> {
         let dem = &self.dem;
         // At most ~1M samples visited; the range is widened by the stride's diagonal.
-        let stride = ((dem.rows * dem.cols) as f64 / 1.0e6).sqrt().ceil().max(1.0) as usize;
+        let stride = ((dem.rows * dem.cols) as f64 / 1.0e6)
+            .sqrt()
+            .ceil()
+            .max(1.0) as usize;
         let mut lo = f64::INFINITY;
         let mut hi = 0.0f64;
         for r in (0..dem.rows).step_by(stride) {

@@ -33,8 +33,11 @@ pub fn write_geotiff(path: &Path, grid: &Grid<'_>, model_type: u16, with_tiepoin
         .unwrap();
     if with_tiepoint {
         let (west, north) = (grid.west_lon_deg - 0.5 * sx, grid.north_lat_deg + 0.5 * sy);
-        dir.write_tag(Tag::ModelTiepointTag, &[0.0, 0.0, 0.0, west, north, 0.0][..])
-            .unwrap();
+        dir.write_tag(
+            Tag::ModelTiepointTag,
+            &[0.0, 0.0, 0.0, west, north, 0.0][..],
+        )
+        .unwrap();
     }
     let keys: [u16; 12] = [1, 1, 0, 2, 1024, 0, 1, model_type, 1025, 0, 1, 1];
     dir.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
