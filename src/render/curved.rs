@@ -29,8 +29,8 @@ use super::ray_model::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
-    BouguerEnvelope, FateWatch, Ground, RayRecord, Settled, Spherical, StratifiedIndex,
-    Termination, Tracer, TracerConfig, TracerError, trace_field,
+    BouguerEnvelope, DensityPaths, FateWatch, Ground, RayRecord, Settled, Spherical,
+    StratifiedIndex, Termination, Tracer, TracerConfig, TracerError, trace_field,
 };
 
 /// The tracer settings the renderer uses: [`TracerConfig::default`] (its tolerance, top at
@@ -198,7 +198,36 @@ impl<S: StratifiedIndex + ?Sized> CurvedRays<'_, S> {
     }
 }
 
+/// The density-weighted path lengths of a ray traced by the planar `tracer` with the fate rule
+/// `fates` (nothing to meet: an escaping ray climbs out in closed form at once).
+fn density_paths_through<S: StratifiedIndex + ?Sized>(
+    tracer: &Tracer<'_, S>,
+    fates: &Fates,
+    camera_height_m: f64,
+    elevation_rad: f64,
+    scale_heights_m: [f64; 2],
+) -> Option<[f64; 2]> {
+    let watch = fates.watch(tracer.field(), camera_height_m, elevation_rad, &[], true);
+    let mut hook = DensityPaths::new(watch, scale_heights_m);
+    let mut record = RayRecord::default();
+    tracer
+        .trace_into(
+            camera_height_m,
+            elevation_rad,
+            &[],
+            &mut hook,
+            &mut record,
+            None,
+        )
+        .ok()?;
+    tracer.density_paths_m(camera_height_m, elevation_rad, &hook, &record)
+}
+
 impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        density_paths_through(&self.tracer, &self.fates, h, elevation_rad, scales)
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,
@@ -237,6 +266,8 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
 pub struct ExactRays<'a, S: StratifiedIndex + ?Sized> {
     /// The field in 3-D, its minor breaks settled once for `config`.
     field: Settled<Spherical<&'a S>>,
+    /// The planar tracer of the same index and settings, for path integrals.
+    planar: Tracer<'a, S>,
     config: TracerConfig,
     fates: Fates,
 }
@@ -251,6 +282,7 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         };
         Ok(Self {
             field: Settled::new(field, &config),
+            planar: Tracer::new(index, config.clone())?,
             fates: Fates::new(index, &config, cards_top_m),
             config,
         })
@@ -292,6 +324,12 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
 }
 
 impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
+    /// Through the planar tracer: in a stratified atmosphere the ray's path does not depend on
+    /// how it is integrated (the fan and exact paths agree; see the renderer's tests).
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        density_paths_through(&self.planar, &self.fates, h, elevation_rad, scales)
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,

@@ -357,6 +357,15 @@ impl ElevationFan {
         &self.alphas
     }
 
+    /// Every ray's apparent elevation with how it ended, ascending.
+    pub fn rays_and_ends(&self) -> Vec<(f64, FanEnd)> {
+        self.alphas
+            .iter()
+            .copied()
+            .zip(self.ends.iter().copied())
+            .collect()
+    }
+
     /// Index i of the interval [αᵢ, αᵢ₊₁] holding `alpha` (clamped to the fan), in O(1).
     #[inline]
     fn interval(&self, alpha: f64) -> usize {

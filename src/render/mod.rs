@@ -29,6 +29,7 @@ pub mod curved;
 pub mod elevation_fan;
 pub mod ray_model;
 mod shade;
+mod sun;
 pub mod terrain;
 
 use std::io::IsTerminal;
@@ -38,11 +39,12 @@ use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
-use crate::scene::{Scene, samples_per_pixel_root};
+use crate::scene::{Scene, Sun, samples_per_pixel_root};
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
+use sun::SunTransmittance;
 use terrain::{TerrainFrame, TerrainView};
 
 /// How to render.
@@ -121,6 +123,9 @@ pub struct RenderStats {
     pub non_finite_samples: u64,
     /// Cards in view.
     pub cards_in_view: usize,
+    /// Rays whose optical depth towards the sun was integrated along their path (0 without a
+    /// sun in view).
+    pub sun_rays: usize,
 }
 
 /// A rendered image: linear RGBA f32, row-major, row 0 at the top.
@@ -529,6 +534,31 @@ fn exact_terrain_hit(
     view.hit_traced(dir.azimuth_offset_rad(), &ray.heights_m, ray.end)
 }
 
+/// The final elevations (rad) at which rays may show the sun: its disc and two pixels.
+fn sun_band_rad(sun: &Sun, pixel_rad: f64) -> (f64, f64) {
+    let r = 0.5 * sun.angular_diameter_rad + 2.0 * pixel_rad;
+    (sun.elevation_rad - r, sun.elevation_rad + r)
+}
+
+/// Rays one pixel apart across `elevations_rad` with their ends (exact mode has no fan to take
+/// them from).
+fn traced_grid(
+    tracer: &dyn RayTracer,
+    camera_height_m: f64,
+    elevations_rad: (f64, f64),
+    pixel_rad: f64,
+) -> Vec<(f64, FanEnd)> {
+    let (lo, hi) = elevations_rad;
+    let count = ((hi - lo) / pixel_rad).ceil().clamp(1.0, 1e6) as usize + 1;
+    (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let alpha = lo + (hi - lo) * i as f64 / (count - 1).max(1) as f64;
+            (alpha, tracer.trace(camera_height_m, alpha, &[], true).end)
+        })
+        .collect()
+}
+
 /// Render `scene` through `tracer`.
 pub fn render_scene(
     scene: &Scene,
@@ -628,10 +658,7 @@ pub fn render_scene(
             distances_m: distances_m.clone(),
             max_top_m,
             need_sky_direction,
-            sun_band_rad: scene.sun.map(|s| {
-                let r = 0.5 * s.angular_diameter_rad + 2.0 * pixel_rad;
-                (s.elevation_rad - r, s.elevation_rad + r)
-            }),
+            sun_band_rad: scene.sun.map(|s| sun_band_rad(&s, pixel_rad)),
             elevation_range_rad: elevations,
             // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
             // sub-pixel bound holds everywhere, not only at the centre.
@@ -675,6 +702,14 @@ pub fn render_scene(
         .map_or(std::f64::consts::FRAC_PI_2, |g| {
             g.min(std::f64::consts::FRAC_PI_2)
         });
+    let sun_path = scene.sun.and_then(|sun| {
+        let band = sun_band_rad(&sun, pixel_rad);
+        let traced = match &fan {
+            Some(fan) => fan.rays_and_ends(),
+            None => traced_grid(tracer, cam.height_m, elevations, pixel_rad),
+        };
+        SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
+    });
     let shader = Shader {
         cards,
         sky_table,
@@ -685,6 +720,7 @@ pub fn render_scene(
         sun_transmittance: scene
             .sun
             .map(|_| AngleTable::new(elevations.0, elevations.1, |e| sky.transmittance(e))),
+        sun_path: sun_path.inspect(|p| stats.sun_rays = p.len()),
         heading_rad: cam.heading_rad,
         // A lost (trapped) ray travels in the lowest air: show the horizon sky.
         fallback: scene.sky.radiance(0.0),

@@ -17,6 +17,8 @@
 //! Both serve as development back-ends and as test oracles. They are written by hand because they
 //! are a few lines of trigonometry that no crate provides in this form.
 
+use crate::tracer::straight_density_paths_m;
+
 /// What the renderer needs of one ray launched from the camera at apparent elevation α.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FanRay {
@@ -83,6 +85,21 @@ pub trait RayTracer: Sync {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FanRay;
+
+    /// The density-weighted path lengths ∫ exp(−h/H_k) ds (m) of the ray launched from
+    /// `camera_height_m` at `elevation_rad`, from the camera to where it leaves the atmosphere,
+    /// for the scale heights `scale_heights_m` (Rayleigh, aerosol): an exponential extinction
+    /// profile's optical depth along the ray's own path, which the renderer needs for the sun.
+    /// `None` when the ray does not leave through the top, or the model cannot follow its path
+    /// (the renderer then uses the sky's air mass). Default: `None`.
+    fn density_paths_m(
+        &self,
+        _camera_height_m: f64,
+        _elevation_rad: f64,
+        _scale_heights_m: [f64; 2],
+    ) -> Option<[f64; 2]> {
+        None
+    }
 }
 
 /// The parameters of a closed-form ray model were invalid.
@@ -131,6 +148,10 @@ impl RayTracer for StraightRays {
     ) -> FanRay {
         self.inner
             .trace(camera_height_m, elevation_rad, distances_m, need)
+    }
+
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        self.inner.density_paths_m(h, elevation_rad, scales)
     }
 }
 
@@ -261,6 +282,13 @@ impl RayTracer for ConstantCurvatureRays {
             end,
             monotone,
         }
+    }
+
+    /// The line's own geometry over the effective sphere (its path length there is the model's
+    /// path length; heights above the surface are the same on both spheres).
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        let (re, top) = (self.effective_radius_m, self.top_m);
+        straight_density_paths_m(re, h, elevation_rad, top, scales)
     }
 }
 

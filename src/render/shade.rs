@@ -8,6 +8,7 @@
 use rayon::prelude::*;
 
 use super::ray_model::FanEnd;
+use super::sun::SunTransmittance;
 use crate::scene::camera::ViewDirection;
 use crate::scene::sky::Extinction;
 use crate::scene::{Sun, Texture};
@@ -111,6 +112,9 @@ pub(super) struct Shader<'a> {
     pub(super) sun: Option<Sun>,
     /// The sky's transmittance towards the sun by apparent elevation (with a sun only).
     pub(super) sun_transmittance: Option<AngleTable>,
+    /// The transmittance towards the sun along each ray's own path, where the tracer could
+    /// integrate it (preferred over `sun_transmittance`, the air-mass fallback).
+    pub(super) sun_path: Option<SunTransmittance>,
     /// Camera heading (rad): sample azimuths are offsets from it.
     pub(super) heading_rad: f64,
     pub(super) fallback: [f64; 3],
@@ -258,7 +262,10 @@ impl Shader<'_> {
         let azimuth = self.heading_rad + dir.azimuth_offset_rad();
         let disc = sun.disc(azimuth, elevation_rad);
         if disc > 0.0 {
-            let t = table.at(alpha);
+            let t = match &self.sun_path {
+                Some(path) => path.at(alpha),
+                None => table.at(alpha),
+            };
             for c in 0..3 {
                 sky[c] += disc * t[c];
             }

@@ -51,7 +51,7 @@
 //! azimuth_deg = 0.0
 //! angular_diameter_deg = 0.533   # default from 1 392 000 km at 149.6e6 km
 //! limb_darkening = 0.6
-//! intensity = 100.0          # disc-centre radiance above the atmosphere, 1 = horizon sky (default 100)
+//! intensity = 1.85e5         # disc-centre radiance above the atmosphere, 1 = horizon sky (default 1.85e5)
 //!
 //! [terrain]                  # optional; see scene::terrain
 //! dem = "island.tif"         # SRTM .hgt or geographic GeoTIFF
@@ -60,11 +60,13 @@
 //! ```
 
 /// Default radiance of the sun's disc centre above the atmosphere, in film units (1 = the white
-/// horizon sky). The real ratio is about 1e5; 100 keeps the disc far brighter than the sky (so the
-/// reddened low sun still reads orange after the PNG's hue-preserving highlight compression) while
-/// a pixel only partly covered by the disc stays below white, so flattened strips keep their
-/// shape instead of blooming. EXR files carry the linear values as rendered.
-pub const DEFAULT_SUN_INTENSITY: f64 = 100.0;
+/// horizon sky): the ratio of the sky model's own radiances. The optically thick horizon sky of
+/// a uniformly lit, isotropically scattering atmosphere has radiance E/(4π) for a solar
+/// irradiance E, and the disc has E/Ω with Ω = π(θ/2)² its solid angle, so the ratio is
+/// 16/θ² = 1.85e5 for θ = 0.533°. The sun's light along its own path (often e^−7 and less for a
+/// ducted Novaya Zemlya ray, see `sky`) then leaves a dim red sun where it should. EXR files
+/// carry the linear values as rendered; the PNG compresses highlights keeping their hue.
+pub const DEFAULT_SUN_INTENSITY: f64 = 1.85e5;
 
 pub mod assets;
 pub mod camera;
@@ -888,6 +890,16 @@ mod tests {
 
     fn parse(text: &str) -> Result<Scene, SceneError> {
         Scene::from_toml_str(text, Path::new("/base"), Path::new("test.toml"))
+    }
+
+    #[test]
+    fn the_default_sun_is_the_sky_models_own_ratio_of_disc_to_horizon_radiance() {
+        let theta = sky::sun_angular_diameter_rad();
+        let ratio = 16.0 / (theta * theta);
+        assert!(
+            (DEFAULT_SUN_INTENSITY / ratio - 1.0).abs() < 5e-3,
+            "{ratio}"
+        );
     }
 
     #[test]

@@ -21,9 +21,14 @@
 //!
 //! **Sun**: a limb-darkened disc, `I(μ) = 1 − u (1 − μ)` (linear law, μ = cos of the angle from
 //! disc centre to the line of sight at the solar surface), times `intensity`, attenuated by
-//! `exp(−τ_c · m(e))` with e the ray's APPARENT elevation at the camera (clamped at 0): this reddens
-//! the low sun. Where the disc is seen is decided by the ray's FINAL direction, so a sun below the
-//! astronomical horizon can be seen through rays that come up (Novaya Zemlya).
+//! `exp(−τ_c)` with τ_c integrated along the ray's own curved path from the camera to the top
+//! ([`Sky::sun_extinction`] gives the extinction profile; the renderer traces each ray that may
+//! show the sun): this reddens and dims the low sun, and a Novaya Zemlya ray that skims hundreds
+//! of kilometres of near-surface air far more than an air-mass formula would. Where no traced
+//! path is at hand (a ray model that cannot integrate one) the air mass stands in:
+//! `exp(−τ_c · m(e))` with e the ray's APPARENT elevation at the camera (clamped at 0). Where the
+//! disc is seen is decided by the ray's FINAL direction, so a sun below the astronomical horizon
+//! can be seen through rays that come up (Novaya Zemlya).
 //!
 //! **Aerial perspective** (only with `visibility_km`, [`AerialPerspective`]): the air between the
 //! camera and a card or the sea both dims it and adds scattered light. Extinction per channel at
@@ -132,6 +137,18 @@ pub struct Extinction {
 }
 
 impl Extinction {
+    /// Scale heights (m) of the two parts of the profile: Rayleigh, then aerosol.
+    pub fn scale_heights_m(&self) -> [f64; 2] {
+        [RAYLEIGH_SCALE_HEIGHT_M, self.aerosol_scale_height_m]
+    }
+
+    /// Optical depth per channel along a path whose density-weighted lengths are
+    /// `density_paths_m`: ∫ exp(−h/H) ds (m) for each of [`Self::scale_heights_m`].
+    pub fn path_optical_depth(&self, density_paths_m: [f64; 2]) -> [f64; 3] {
+        let [rayleigh_m, aerosol_m] = density_paths_m;
+        [0, 1, 2].map(|c| self.rayleigh_per_m[c] * rayleigh_m + self.aerosol_per_m[c] * aerosol_m)
+    }
+
     /// Extinction coefficient per channel at `height_m` (1/m).
     pub fn coefficient_per_m(&self, height_m: f64) -> [f64; 3] {
         let r = (-height_m / RAYLEIGH_SCALE_HEIGHT_M).exp();
@@ -230,6 +247,27 @@ impl Sky {
             path_radiance: self.radiance(0.0),
             nodes: gauss_legendre_unit(CHORD_NODES),
         })
+    }
+
+    /// The extinction along the sun's own ray: the aerial perspective's (module documentation)
+    /// with `visibility_km`; otherwise the sky's own columns spread over their scale heights,
+    /// β_R,c = τ_R,c / 8 km and β_A,c = τ_A,c / 1 km, so a vertical path through the whole
+    /// atmosphere has the sky's optical depths (less the 0.7 % of the Rayleigh column above a
+    /// 40 km top).
+    pub fn sun_extinction(&self) -> Extinction {
+        if let Some(extinction) = self.extinction() {
+            return extinction;
+        }
+        let ratios = CHANNEL_WAVELENGTHS_NM.map(|l| 550.0 / l);
+        let rayleigh_550 = self.rayleigh_optical_depth / RAYLEIGH_SCALE_HEIGHT_M;
+        let aerosol_550 = self.aerosol_optical_depth / DEFAULT_AEROSOL_SCALE_HEIGHT_M;
+        Extinction {
+            rayleigh_per_m: ratios.map(|r| rayleigh_550 * r.powi(4)),
+            aerosol_per_m: ratios.map(|r| aerosol_550 * r.powf(AEROSOL_ANGSTROM_EXPONENT)),
+            aerosol_scale_height_m: DEFAULT_AEROSOL_SCALE_HEIGHT_M,
+            path_radiance: self.radiance(0.0),
+            nodes: gauss_legendre_unit(CHORD_NODES),
+        }
     }
 
     /// Transmittance exp(−τ_c·m(e)) of each channel along apparent elevation `elevation_rad`.

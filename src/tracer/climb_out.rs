@@ -93,16 +93,9 @@ pub(crate) fn climb_out(
         return None;
     }
     let leg = Leg::new(&index, radius_m, height_m, elevation_rad, span_m);
-    let mut angle_rad = 0.0;
-    let mut arc_length_m = 0.0;
-    let inside = breaks_m.iter().filter(|&&b| b > height_m && b < top_m);
-    let mut lower_u = leg.variable(height_m);
-    for upper_u in inside.map(|&b| leg.variable(b)).chain([1.0]) {
-        let (angle, arc) = leg.integrate(lower_u, upper_u, tolerance_rad)?;
-        angle_rad += angle;
-        arc_length_m += arc;
-        lower_u = upper_u;
-    }
+    let integrand = |u| leg.integrand(u);
+    let tolerances = [tolerance_rad, f64::INFINITY];
+    let [angle_rad, arc_length_m] = leg.integrate_climb(breaks_m, top_m, integrand, tolerances)?;
     let (gap_m, g_m) = leg.gap(top_m)?;
     let index_top = index(top_m).0;
     let elevation_top_rad = (gap_m * (g_m + leg.invariant_m))
@@ -190,60 +183,78 @@ impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
     }
 
     /// dθ/du and ds/du at u.
-    fn integrand(&self, u: f64) -> Option<(f64, f64)> {
+    fn integrand(&self, u: f64) -> Option<[f64; 2]> {
         let (h, dh_du) = self.height(u);
         let (gap, g) = self.gap(h)?;
         let root = (gap * (g + self.invariant_m)).sqrt();
         let r = self.radius_m + h;
-        Some((self.invariant_m * dh_du / (r * root), g * dh_du / root))
+        Some([self.invariant_m * dh_du / (r * root), g * dh_du / root])
     }
 
-    /// The Kronrod estimates of both integrals over [a, b] and the Kronrod − Gauss difference of
-    /// the angle.
-    fn rule(&self, a: f64, b: f64) -> Option<(f64, f64, f64)> {
+    /// exp(−h/H_k)·ds/du at u, for each scale height H_k of `scale_heights_m`.
+    fn density_integrand(&self, u: f64, scale_heights_m: [f64; 2]) -> Option<[f64; 2]> {
+        let (h, _) = self.height(u);
+        let [_, arc] = self.integrand(u)?;
+        Some(scale_heights_m.map(|s| (-h / s).exp() * arc))
+    }
+
+    /// The Kronrod estimates of the integrals of `f` over [a, b] and their Kronrod − Gauss
+    /// differences.
+    fn rule<const K: usize>(
+        a: f64,
+        b: f64,
+        f: &impl Fn(f64) -> Option<[f64; K]>,
+    ) -> Option<([f64; K], [f64; K])> {
         let centre = 0.5 * (a + b);
         let half = 0.5 * (b - a);
-        let (mut angle_k, mut arc_k, mut angle_g) = (0.0, 0.0, 0.0);
+        let (mut kronrod, mut gauss) = ([0.0; K], [0.0; K]);
         for (i, (&x, &w)) in XGK.iter().zip(&WGK).enumerate() {
             let nodes = if x == 0.0 { 1 } else { 2 };
             for sign in [1.0, -1.0].into_iter().take(nodes) {
-                let (angle, arc) = self.integrand(centre + sign * half * x)?;
-                angle_k += w * angle;
-                arc_k += w * arc;
-                if i % 2 == 1 {
-                    angle_g += WG[i / 2] * angle;
+                let values = f(centre + sign * half * x)?;
+                for k in 0..K {
+                    kronrod[k] += w * values[k];
+                    if i % 2 == 1 {
+                        gauss[k] += WG[i / 2] * values[k];
+                    }
                 }
             }
         }
-        Some((
-            angle_k * half,
-            arc_k * half,
-            (angle_k - angle_g).abs() * half,
-        ))
+        let error = std::array::from_fn(|k| (kronrod[k] - gauss[k]).abs() * half);
+        Some((kronrod.map(|v| v * half), error))
     }
 
-    /// Both integrals over [a, b] (in u), the angle to `tolerance_rad` spread by length.
-    fn integrate(&self, a: f64, b: f64, tolerance_rad: f64) -> Option<(f64, f64)> {
+    /// The integrals of `f` over [a, b] (in u), each to its `tolerances` spread by length
+    /// (an infinite tolerance: that integral is not checked).
+    fn integrate<const K: usize>(
+        a: f64,
+        b: f64,
+        f: impl Fn(f64) -> Option<[f64; K]>,
+        tolerances: [f64; K],
+    ) -> Option<[f64; K]> {
+        let mut total = [0.0; K];
         if b <= a {
-            return Some((0.0, 0.0));
+            return Some(total);
         }
-        let per_u = tolerance_rad / (b - a);
+        let per_u = tolerances.map(|t| t / (b - a));
         let mut stack = [(0.0, 0.0); MAX_PIECES];
         stack[0] = (a, b);
         let mut depth = 1;
         let mut pieces = 0;
-        let (mut angle, mut arc) = (0.0, 0.0);
         while depth > 0 {
             depth -= 1;
             let (lo, hi) = stack[depth];
-            let (piece_angle, piece_arc, error) = self.rule(lo, hi)?;
+            let (piece, error) = Self::rule(lo, hi, &f)?;
             pieces += 1;
-            if error <= per_u * (hi - lo) || pieces >= MAX_PIECES {
-                if error > per_u * (hi - lo) {
+            let settled =
+                (0..K).all(|k| per_u[k].is_infinite() || error[k] <= per_u[k] * (hi - lo));
+            if settled || pieces >= MAX_PIECES {
+                if !settled {
                     return None;
                 }
-                angle += piece_angle;
-                arc += piece_arc;
+                for k in 0..K {
+                    total[k] += piece[k];
+                }
                 continue;
             }
             if depth + 2 > MAX_PIECES {
@@ -254,8 +265,59 @@ impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
             stack[depth + 1] = (lo, mid);
             depth += 2;
         }
-        Some((angle, arc))
+        Some(total)
     }
+
+    /// The integrals of `f` over the whole climb, piece by piece between the breaks.
+    fn integrate_climb<const K: usize>(
+        &self,
+        breaks_m: &[f64],
+        top_m: f64,
+        f: impl Fn(f64) -> Option<[f64; K]>,
+        tolerances: [f64; K],
+    ) -> Option<[f64; K]> {
+        let mut total = [0.0; K];
+        let inside = breaks_m.iter().filter(|&&b| b > self.height_m && b < top_m);
+        let mut lower_u = self.variable(self.height_m);
+        for upper_u in inside.map(|&b| self.variable(b)).chain([1.0]) {
+            let piece = Self::integrate(lower_u, upper_u, &f, tolerances)?;
+            for k in 0..K {
+                total[k] += piece[k];
+            }
+            lower_u = upper_u;
+        }
+        Some(total)
+    }
+}
+
+/// Absolute accuracy (m of density-weighted path) of [`climb_out_density_paths`]: a climb
+/// through the whole atmosphere has at least 1 km of such path at every scale height used, so
+/// this is better than 1e-4 of the total.
+pub(crate) const DENSITY_TOLERANCE_M: f64 = 0.1;
+
+/// Along a climbing ray at `height_m` with local elevation `elevation_rad` (> 0), as in
+/// [`climb_out`]: ∫ exp(−h/H_k) ds from there to `top_m` for the two scale heights
+/// `scale_heights_m` (m of path; the optical depth of an exponential extinction profile is its
+/// surface coefficient times this), each to [`DENSITY_TOLERANCE_M`]. `None` as for
+/// [`climb_out`].
+pub(crate) fn climb_out_density_paths(
+    index: impl Fn(f64) -> (f64, f64),
+    breaks_m: &[f64],
+    radius_m: f64,
+    height_m: f64,
+    elevation_rad: f64,
+    top_m: f64,
+    scale_heights_m: [f64; 2],
+) -> Option<[f64; 2]> {
+    let span_m = top_m - height_m;
+    let valid = scale_heights_m.iter().all(|&s| s > 0.0);
+    if !(elevation_rad > 0.0 && span_m > 0.0 && valid) {
+        return None;
+    }
+    let leg = Leg::new(&index, radius_m, height_m, elevation_rad, span_m);
+    let f = |u| leg.density_integrand(u, scale_heights_m);
+    let paths = leg.integrate_climb(breaks_m, top_m, f, [DENSITY_TOLERANCE_M; 2])?;
+    paths.iter().all(|v| v.is_finite()).then_some(paths)
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 mod bouguer;
 mod breaks;
 mod climb_out;
+mod density_path;
 mod dopri;
 mod ray;
 mod straight;
@@ -26,6 +27,7 @@ use rayon::prelude::*;
 
 pub use bouguer::{BouguerEnvelope, Fate, FateWatch};
 pub use breaks::MinorBreak;
+pub use density_path::{DensityPaths, straight_density_paths_m};
 pub use ray::{
     HookAction, NoHook, RayHook, RayPoint, RayRecord, Termination, TracerConfig, TracerError,
 };

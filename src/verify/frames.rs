@@ -441,6 +441,10 @@ impl<'t> Counting<'t> {
 }
 
 impl RayTracer for Counting<'_> {
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        self.inner.density_paths_m(h, elevation_rad, scales)
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,
@@ -590,6 +594,15 @@ struct Recording<'t> {
 }
 
 impl RayTracer for Recording<'_> {
+    /// Passed on and timed with the traces (the sun's path integrals are tracer time too).
+    fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+        let start = Instant::now();
+        let paths = self.inner.density_paths_m(h, elevation_rad, scales);
+        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.nanos.fetch_add(ns, Ordering::Relaxed);
+        paths
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,

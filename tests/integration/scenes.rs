@@ -23,8 +23,9 @@ use ghostship::scene::card::srgb_to_linear;
 use ghostship::scene::{Scene, Texture, assets};
 use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
-use crate::render::at_edge;
+use crate::render::{at_edge, max_channel_difference};
 use crate::support::data::data_dir;
+use crate::support::reference::{BreakSource, atmosphere_index, reference_heights};
 
 pub(crate) fn load_scene(name: &str) -> Scene {
     let path = data_dir().join("scenes").join(name);
@@ -510,6 +511,98 @@ fn novaya_zemlya_sun_is_seen_below_the_horizon_and_not_with_straight_rays() {
     assert!(max_gain < 1e-6, "{max_gain}");
 }
 
+/// The sun's light comes along its own curved ray: the density-weighted path lengths
+/// ∫ e^(−h/H) ds that the renderer's tracer integrates for the rays that show the Novaya Zemlya
+/// sun (−0.046° … −0.029°, 830–890 km to the top), a level ray and two climbing ones agree with
+/// the independent reference tracer's path (heights every 100 m of ground, segment lengths from
+/// the polar geometry, midpoint weights).
+#[test]
+fn the_suns_path_through_the_air_is_the_reference_tracers_path() {
+    let nz_path = data_dir().join("novaya_zemlya.toml");
+    let nz = SyntheticAtmosphere::from_file(&nz_path).unwrap();
+    let atm = RefractiveAtmosphere::new(Arc::new(nz.clone()), 550.0).unwrap();
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    let radius = ghostship::units::EARTH_RADIUS_M;
+    let config = render_tracer_config(radius);
+    let top = config.top_m;
+    let rays = CurvedRays::new(&atm, config, 0.0).unwrap();
+    let scales = [8_000.0, 1_000.0];
+    let h0 = 100.0;
+    for elevation_deg in [-0.046, -0.04, -0.029, 0.0, 0.5, 3.0] {
+        let alpha = f64::to_radians(elevation_deg);
+        let got = rays.density_paths_m(h0, alpha, scales).unwrap();
+        let step_m = 100.0;
+        let distances: Vec<f64> = (0..12_000).map(|i| i as f64 * step_m).collect();
+        let reach = reference_heights(&index, radius, top, h0, alpha, &distances);
+        let heights: Vec<f64> = std::iter::once(h0)
+            .chain(reach.iter().skip(1).map_while(|r| r.height_m()))
+            .collect();
+        assert!(
+            heights.len() < distances.len(),
+            "{elevation_deg}°: did not reach the top"
+        );
+        let mut want = [0.0; 2];
+        for w in heights.windows(2) {
+            let mid = 0.5 * (w[0] + w[1]);
+            let ds = (w[1] - w[0]).hypot(step_m * (radius + mid) / radius);
+            for k in 0..2 {
+                want[k] += (-mid / scales[k]).exp() * ds;
+            }
+        }
+        for k in 0..2 {
+            let relative = got[k] / want[k] - 1.0;
+            eprintln!(
+                "{elevation_deg}° H = {} m: {} vs {} m ({relative:+.2e})",
+                scales[k], got[k], want[k]
+            );
+            assert!(
+                relative.abs() < 1e-5,
+                "{elevation_deg}°, H = {} m: {relative:+e}",
+                scales[k]
+            );
+        }
+    }
+}
+
+/// The brightest pixel of `film` (by the sum of its channels).
+fn brightest(film: &Film) -> [f32; 4] {
+    let sum = |p: &[f32; 4]| p[0] + p[1] + p[2];
+    *film
+        .pixels
+        .iter()
+        .max_by(|a, b| sum(a).total_cmp(&sum(b)))
+        .unwrap()
+}
+
+/// The ducted sun of figure 12, whose rays skim ~850 km of the lowest air, against the same sun
+/// at +5° in the same atmosphere (camera pitched up to it): redder (red over blue, red over
+/// green) and dimmer (every channel).
+#[test]
+fn the_ducted_sun_is_redder_and_dimmer_than_the_sun_at_five_degrees() {
+    let scene = load_scene("fig12_novaya_zemlya.toml");
+    let atm = atmosphere(&scene);
+    let ducted = render(&scene, &atm, false);
+    assert!(ducted.stats.sun_rays > 0);
+    let mut high = scene.clone();
+    let five = f64::to_radians(5.0);
+    high.camera.pitch_rad = five;
+    high.sun.as_mut().unwrap().elevation_rad = five;
+    let high = render(&high, &atm, false);
+    let (d, h) = (brightest(&ducted), brightest(&high));
+    eprintln!("ducted sun {d:?}, sun at +5° {h:?}");
+    assert!(
+        d[0] / d[2] > 10.0 * (h[0] / h[2]),
+        "red/blue {d:?} vs {h:?}"
+    );
+    assert!(
+        d[0] / d[1] > 2.0 * (h[0] / h[1]),
+        "red/green {d:?} vs {h:?}"
+    );
+    for c in 0..3 {
+        assert!(d[c] < 0.1 * h[c], "channel {c}: {d:?} vs {h:?}");
+    }
+}
+
 /// Runs of consecutive `true` rows, as (first, last) row pairs.
 fn runs(flags: &[bool]) -> Vec<(u32, u32)> {
     let mut out = Vec::new();
@@ -650,12 +743,12 @@ fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
     }
 }
 
-/// Pixels of `a` and `b` that differ by more than `threshold` (any channel), and pixels of `b`
-/// on an edge (differing by more than `threshold` from a vertical neighbour). Panics if a
+/// Pixels of `a` and `b` that differ by more than `threshold` ([`max_channel_difference`]), and
+/// pixels of `b` on an edge (differing so from a vertical neighbour). Panics if a
 /// differing pixel is not next to an edge (any of its four neighbours differs from it) in `a` or
 /// in `b`: the fan moves edges, it never changes a pixel inside a uniform region.
 fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
-    let differ = |p: [f32; 4], q: [f32; 4]| (0..3).any(|k| (p[k] - q[k]).abs() > threshold);
+    let differ = |p: [f32; 4], q: [f32; 4]| max_channel_difference(p, q) > threshold;
     let mut diff = 0;
     let mut edges = 0;
     for y in 0..b.height {
