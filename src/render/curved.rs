@@ -441,13 +441,18 @@ pub enum PrepareError {
     Options(#[from] super::RenderError),
 }
 
-/// Highest card top in `scene` (m above the surface; 0 without cards).
+/// Highest card top in `scene` (m above the surface; 0 without cards), or the highest terrain
+/// if that is higher (rays climbing above it may stop early).
 pub fn cards_top_m(scene: &Scene) -> f64 {
-    scene
+    let cards = scene
         .cards
         .iter()
         .map(|c| c.base_m + c.height_m)
-        .fold(0.0, f64::max)
+        .fold(0.0, f64::max);
+    scene
+        .terrain
+        .as_ref()
+        .map_or(cards, |t| cards.max(t.max_height_m))
 }
 
 /// The ray tracer for rendering `scene` with `options`:

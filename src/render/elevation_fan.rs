@@ -386,6 +386,36 @@ impl ElevationFan {
         i
     }
 
+    /// The interval i of the fan holding `alpha` (clamped) and the fraction t ∈ [0, 1] of the
+    /// way from ray i to ray i + 1: [`Self::ray_heights`] of both, weighted by t, is what
+    /// [`Self::interpolate`] gives. (0, 0) for a fan of one ray.
+    #[inline]
+    pub fn interval_fraction(&self, alpha: f64) -> (usize, f64) {
+        if self.alphas.len() < 2 {
+            return (0, 0.0);
+        }
+        let i = self.interval(alpha);
+        let (a0, a1) = (self.alphas[i], self.alphas[i + 1]);
+        (i, ((alpha - a0) / (a1 - a0)).clamp(0.0, 1.0))
+    }
+
+    /// The traced heights of ray `i` (one per distance).
+    ///
+    /// # Panics
+    /// If `i` ≥ [`Self::len`].
+    #[inline]
+    pub fn ray_heights(&self, i: usize) -> &[Option<f64>] {
+        &self.heights[i * self.n_distances..(i + 1) * self.n_distances]
+    }
+
+    /// How ray `i` ended.
+    ///
+    /// # Panics
+    /// If `i` ≥ [`Self::len`].
+    pub fn ray_end(&self, i: usize) -> FanEnd {
+        self.ends[i]
+    }
+
     /// Interpolate the ray at elevation `alpha` into `heights` (resized to the number of
     /// distances) and return its end. Heights and end values are interpolated linearly where both
     /// neighbours have them; otherwise (a change of how rays end) the nearer ray's value is used.

@@ -31,6 +31,7 @@ pub mod elevation_fan;
 pub mod ray_model;
 mod shade;
 mod sun;
+pub mod terrain;
 
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -46,6 +47,7 @@ pub use elevation_fan::{ElevationFan, FanSpec};
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
 use sun::SunTransmittance;
+use terrain::{TerrainFrame, TerrainView};
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
@@ -512,6 +514,31 @@ fn card_column_range(
     Some((first, end))
 }
 
+/// Whether a sample of row `y` may meet the terrain: the row's elevations (extreme at the
+/// centre column and the edges) reach into the view's elevation range.
+fn row_may_meet_terrain(view: &TerrainView<'_>, frame: &CameraFrame, y: u32, width: u32) -> bool {
+    let film_y = y as f64 + 0.5;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in [0.5, 0.5 * width as f64, width as f64 - 0.5] {
+        let e = frame.view_direction(x, film_y).elevation_rad;
+        lo = lo.min(e);
+        hi = hi.max(e);
+    }
+    let pad = 1.0 / frame.focal_px;
+    hi + pad >= view.may_hit_rad.0 && lo - pad <= view.may_hit_rad.1
+}
+
+/// Exact mode: the terrain hit of a sample along `dir`, its ray traced to the view's distances.
+fn exact_terrain_hit(
+    view: &TerrainView<'_>,
+    tracer: &dyn RayTracer,
+    camera_height_m: f64,
+    dir: &ViewDirection,
+) -> Option<terrain::TerrainHit> {
+    let ray = tracer.trace(camera_height_m, dir.elevation_rad, &view.distances_m, false);
+    view.hit_traced(dir.azimuth_offset_rad(), &ray.heights_m, ray.end)
+}
+
 /// The final elevations (rad) at which rays may show the sun: its disc and two pixels.
 fn sun_band_rad(sun: &Sun, pixel_rad: f64) -> (f64, f64) {
     let r = 0.5 * sun.angular_diameter_rad + 2.0 * pixel_rad;
@@ -601,6 +628,20 @@ pub fn render_scene(
         });
     }
     let elevations = elevation_range(&frame, width, height, pixel_rad);
+    let terrain = scene.terrain.as_ref().and_then(|t| {
+        let frame = TerrainFrame {
+            camera_height_m: cam.height_m,
+            heading_rad: cam.heading_rad,
+            earth_radius_m: radius,
+            azimuth_span_rad: span,
+            elevation_range_rad: elevations,
+            pixel_rad: cam.min_pixel_angle_rad(),
+            tolerance_px: options.tolerance_px,
+            max_depth: options.max_refine_depth,
+            brightness: scene.sky.brightness,
+        };
+        TerrainView::new(t, tracer, frame, options.exact)
+    });
     let (sky, sea) = (scene.sky, scene.sea);
     // The optical depths once per frame, not once per table entry (same values).
     let depths = sky.optical_depths();
@@ -646,6 +687,12 @@ pub fn render_scene(
     });
     let fan = fan.map(|(fan, from)| {
         clear_sky_from = from;
+        // Samples that may meet the terrain are not clear sky.
+        if let Some(t) = &terrain
+            && t.may_hit_rad.0 <= t.may_hit_rad.1
+        {
+            clear_sky_from = clear_sky_from.max(t.may_hit_rad.1.next_up());
+        }
         stats.fan_rays = fan.len();
         stats.fan_depth = fan.max_depth_reached;
         fan
@@ -729,6 +776,9 @@ pub fn render_scene(
             |scratch, (y, row)| {
                 if let Some(fan) = &fan
                     && n == 1
+                    && terrain
+                        .as_ref()
+                        .is_none_or(|t| !row_may_meet_terrain(t, &frame, y as u32, width))
                     && shade_flat_row(
                         &FlatRow {
                             frame: &frame,
@@ -776,12 +826,29 @@ pub fn render_scene(
                         let alpha = dir.elevation_rad;
                         let c = match &fan {
                             Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
-                            Some(fan) if !may_meet_card => {
-                                shader.background(dir, fan.interpolate_end(alpha))
-                            }
                             Some(fan) => {
-                                let end = fan.interpolate(alpha, heights);
-                                shader.shade(dir, heights, end)
+                                match terrain.as_ref().and_then(|t| {
+                                    Some((t, t.hit(alpha, dir.azimuth_offset_rad())?))
+                                }) {
+                                    Some((t, hit)) => {
+                                        fan.interpolate(alpha, heights);
+                                        terrain::shade_hit(
+                                            &shader,
+                                            t,
+                                            dir,
+                                            heights,
+                                            &distances_m,
+                                            hit,
+                                        )
+                                    }
+                                    None if !may_meet_card => {
+                                        shader.background(dir, fan.interpolate_end(alpha))
+                                    }
+                                    None => {
+                                        let end = fan.interpolate(alpha, heights);
+                                        shader.shade(dir, heights, end)
+                                    }
+                                }
                             }
                             None => {
                                 let mut ray = tracer.trace(
@@ -791,7 +858,19 @@ pub fn render_scene(
                                     need_sky_direction,
                                 );
                                 ray.heights_m.resize(n_dist, None);
-                                shader.shade(dir, &ray.heights_m, ray.end)
+                                match terrain.as_ref().and_then(|t| {
+                                    Some((t, exact_terrain_hit(t, tracer, cam.height_m, dir)?))
+                                }) {
+                                    Some((t, hit)) => terrain::shade_hit(
+                                        &shader,
+                                        t,
+                                        dir,
+                                        &mut ray.heights_m,
+                                        &distances_m,
+                                        hit,
+                                    ),
+                                    None => shader.shade(dir, &ray.heights_m, ray.end),
+                                }
                             }
                         };
                         let c = if c.iter().all(|v| v.is_finite()) {

@@ -52,6 +52,11 @@
 //! angular_diameter_deg = 0.533   # default from 1 392 000 km at 149.6e6 km
 //! limb_darkening = 0.6
 //! intensity = 1.85e5         # disc-centre radiance above the atmosphere, 1 = horizon sky (default 1.85e5)
+//!
+//! [terrain]                  # optional; see scene::terrain
+//! dem = "island.tif"         # SRTM .hgt or geographic GeoTIFF
+//! observer_lat_deg = 78.0
+//! observer_lon_deg = 15.0
 //! ```
 
 /// Default radiance of the sun's disc centre above the atmosphere, in film units (1 = the white
@@ -68,6 +73,7 @@ pub mod camera;
 pub mod card;
 pub mod sea;
 pub mod sky;
+pub mod terrain;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -84,6 +90,7 @@ pub use camera::Camera;
 pub use card::{Card, Texture};
 pub use sea::Sea;
 pub use sky::{AerialPerspective, Sky, Sun};
+pub use terrain::{Dem, DemError, Palette, Terrain};
 
 /// A scene file could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -124,6 +131,15 @@ pub enum SceneError {
         /// The image error.
         #[source]
         source: card::TextureError,
+    },
+    /// The terrain's elevation model could not be read.
+    #[error("invalid scene {path}: terrain.dem: {source}")]
+    Terrain {
+        /// The scene file.
+        path: PathBuf,
+        /// The reader's error (names the model file and the field).
+        #[source]
+        source: Box<terrain::DemError>,
     },
 }
 
@@ -194,6 +210,10 @@ pub struct Scene {
     pub cards: Vec<Card>,
     /// The sun, if the scene has one.
     pub sun: Option<Sun>,
+    /// Terrain from an elevation model, if the scene has one (left out of the hash's record
+    /// when absent, so scenes without terrain keep their hash).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terrain: Option<Terrain>,
     /// sha256 (hex) of the scene file content, the resolved parameters, the atmosphere file's
     /// content (sounding or synthetic) and the card images.
     #[serde(skip)]
@@ -215,6 +235,7 @@ struct RawScene {
     #[serde(default)]
     cards: Vec<RawCard>,
     sun: Option<RawSun>,
+    terrain: Option<RawTerrain>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -300,6 +321,105 @@ struct RawSun {
     angular_diameter_deg: Option<f64>,
     limb_darkening: Option<f64>,
     intensity: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTerrain {
+    dem: PathBuf,
+    observer_lat_deg: f64,
+    observer_lon_deg: f64,
+    snow_line_m: Option<f64>,
+    ice_slope_deg: Option<f64>,
+    rock_rgb: Option<[f64; 3]>,
+    snow_rgb: Option<[f64; 3]>,
+    ice_rgb: Option<[f64; 3]>,
+    light_azimuth_deg: Option<f64>,
+    light_elevation_deg: Option<f64>,
+}
+
+/// The `[terrain]` section checked and its elevation model read, with the model file's sha256.
+fn terrain_section(
+    c: &Checker<'_>,
+    raw: &RawTerrain,
+    dem_path: PathBuf,
+) -> Result<(Terrain, [u8; 32]), SceneError> {
+    let lat = c.range(
+        "terrain.observer_lat_deg",
+        raw.observer_lat_deg,
+        -90.0,
+        90.0,
+        "−90…90°",
+    )?;
+    let lon = c.range(
+        "terrain.observer_lon_deg",
+        raw.observer_lon_deg,
+        -360.0,
+        360.0,
+        "−360…360°",
+    )?;
+    let d = Palette::default_palette();
+    let rgb = |key: &str, v: Option<[f64; 3]>, default: [f64; 3]| {
+        let v = v.unwrap_or(default);
+        for x in v {
+            c.range(key, x, 0.0, 1e6, "each 0…1e6")?;
+        }
+        Ok::<_, SceneError>(v)
+    };
+    let light_az = c.range(
+        "terrain.light_azimuth_deg",
+        raw.light_azimuth_deg.unwrap_or(180.0),
+        -360.0,
+        360.0,
+        "−360…360°",
+    )?;
+    let light_el = c.range(
+        "terrain.light_elevation_deg",
+        raw.light_elevation_deg.unwrap_or(30.0),
+        -90.0,
+        90.0,
+        "−90…90°",
+    )?;
+    let palette = Palette {
+        rock_rgb: rgb("terrain.rock_rgb", raw.rock_rgb, d.rock_rgb)?,
+        snow_rgb: rgb("terrain.snow_rgb", raw.snow_rgb, d.snow_rgb)?,
+        ice_rgb: rgb("terrain.ice_rgb", raw.ice_rgb, d.ice_rgb)?,
+        snow_line_m: c.range(
+            "terrain.snow_line_m",
+            raw.snow_line_m.unwrap_or(d.snow_line_m),
+            -1e5,
+            1e5,
+            "−100000…100000 m",
+        )?,
+        ice_slope_rad: c
+            .range(
+                "terrain.ice_slope_deg",
+                raw.ice_slope_deg.unwrap_or(d.ice_slope_rad.to_degrees()),
+                0.0,
+                90.0,
+                "0…90°",
+            )?
+            .to_radians(),
+        light_azimuth_rad: light_az.to_radians(),
+        light_elevation_rad: light_el.to_radians(),
+        light_enu: terrain::light_direction(light_az.to_radians(), light_el.to_radians()),
+    };
+    let bytes =
+        crate::input::read_limited(&dem_path, terrain::dem::MAX_DEM_BYTES).map_err(|source| {
+            SceneError::Terrain {
+                path: c.path.to_path_buf(),
+                source: Box::new(DemError::Read {
+                    path: dem_path.clone(),
+                    source,
+                }),
+            }
+        })?;
+    let dem = Dem::from_bytes(&dem_path, &bytes).map_err(|source| SceneError::Terrain {
+        path: c.path.to_path_buf(),
+        source: Box::new(source),
+    })?;
+    let digest: [u8; 32] = Sha256::digest(&bytes).into();
+    Ok((Terrain::new(dem_path, dem, (lat, lon), palette), digest))
 }
 
 /// Largest supported card distance (m): beyond a few hundred km the ray model is pointless.
@@ -682,6 +802,14 @@ impl Scene {
             }),
         };
 
+        let (terrain, terrain_digest) = match &raw.terrain {
+            Some(rt) => {
+                let (t, d) = terrain_section(&c, rt, resolve(&rt.dem))?;
+                (Some(t), Some(d))
+            }
+            None => (None, None),
+        };
+
         let mut scene = Scene {
             source_path: None,
             camera,
@@ -691,14 +819,21 @@ impl Scene {
             sea,
             cards,
             sun,
+            terrain,
             hash_hex: String::new(),
         };
-        scene.hash_hex = scene.compute_hash(text, &card_digests);
+        scene.hash_hex = scene.compute_hash(text, &card_digests, terrain_digest);
         Ok(scene)
     }
 
-    /// `card_digests`: the sha256 of each card's image file, in card order.
-    fn compute_hash(&self, text: &str, card_digests: &[[u8; 32]]) -> String {
+    /// `card_digests`: the sha256 of each card's image file, in card order; `terrain_digest`:
+    /// that of the elevation model file, when there is terrain.
+    fn compute_hash(
+        &self,
+        text: &str,
+        card_digests: &[[u8; 32]],
+        terrain_digest: Option<[u8; 32]>,
+    ) -> String {
         let mut h = Sha256::new();
         h.update(b"ghostship-scene-v1\0");
         h.update(text.as_bytes());
@@ -717,6 +852,9 @@ impl Scene {
             AtmosphereSource::Us1976 => AtmosphereSource::Us1976,
         };
         view.source_path = None;
+        if let Some(t) = &mut view.terrain {
+            t.dem_path = file_name(&t.dem_path);
+        }
         h.update(serde_json::to_vec(&view).unwrap_or_default());
         // The atmosphere file enters by content too: editing a layer changes the image, so it
         // must change the hash. An unreadable file (the render will fail to load it anyway)
@@ -734,6 +872,10 @@ impl Scene {
         // decoded linear texels instead costs more than rendering a small frame).
         for digest in card_digests {
             h.update(b"\0card\0");
+            h.update(digest);
+        }
+        if let Some(digest) = terrain_digest {
+            h.update(b"\0terrain\0");
             h.update(digest);
         }
         h.finalize().iter().map(|b| format!("{b:02x}")).collect()

@@ -181,7 +181,8 @@ fn scene_page_documents_exactly_the_keys_the_parser_accepts() {
 fn base_scene(with_sounding: bool) -> toml::Table {
     let mut text = format!(
         "{CAMERA}[atmosphere]\n[earth]\n[sky]\n[sea]\n[[cards]]\nimage = \"../cards/ship.png\"\n\
-         distance_m = 10000.0\nwidth_m = 50.0\nheight_m = 20.0\n[sun]\nelevation_deg = 1.0\n"
+         distance_m = 10000.0\nwidth_m = 50.0\nheight_m = 20.0\n[sun]\nelevation_deg = 1.0\n\
+         [terrain]\ndem = \"terrain/island.tif\"\nobserver_lat_deg = 78.0\nobserver_lon_deg = 15.0\n"
     );
     if with_sounding {
         text = text.replace(

@@ -24,4 +24,5 @@ mod refractivity;
 mod render;
 mod scenes;
 mod stress;
+mod terrain;
 mod tracer;

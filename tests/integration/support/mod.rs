@@ -1,6 +1,7 @@
 //! Shared test support: helpers every integration-test module uses instead of its own copy.
 //!
 //! * [`cli`] — running the `ghostship` binary and checking its exit status.
+//! * [`dem`] — synthetic elevation models (GeoTIFF, SRTM .hgt) written from their samples.
 //! * [`data`] — paths of the repository's test inputs (shipped soundings, fixtures, scenes).
 //! * [`reference`] — an independent ray tracer (not the code under test) for accuracy checks.
 //! * [`fans`] — fitted stress soundings, fold slopes and reference heights with error estimates
@@ -9,6 +10,7 @@
 
 pub mod cli;
 pub mod data;
+pub mod dem;
 pub mod fans;
 pub mod reference;
 

@@ -1,0 +1,495 @@
+//! Scene — digital elevation models. In: an SRTM `.hgt` tile or a GeoTIFF heightmap on a
+//! geographic (latitude/longitude) grid. Out: a [`Dem`]: heights (m) on a regular lat/lon grid
+//! with bilinear sampling and slopes.
+//!
+//! * **SRTM `.hgt`**: big-endian i16, 1201 × 1201 (3″) or 3601 × 3601 (1″) samples, rows from
+//!   north to south, −32768 = void. The tile's name (`N78E015.hgt`) gives the latitude and
+//!   longitude of its south-west corner sample; the tile spans one degree, corner samples shared
+//!   with the neighbours.
+//! * **GeoTIFF**: one band of i8…i32, u8…u32, f32 or f64 samples; `ModelTiepointTag` (33922) and
+//!   `ModelPixelScaleTag` (33550) place the grid, `GeoKeyDirectoryTag` (34735) must say it is
+//!   geographic (`GTModelTypeGeoKey` = 2); projected or geocentric grids are refused. Raster type
+//!   PixelIsArea (the default) puts the tie point on a pixel's corner, PixelIsPoint on its
+//!   centre. `GDAL_NODATA` (42113) and NaN samples are voids.
+//!
+//! Files are read through [`crate::input::read_limited`] ([`MAX_DEM_BYTES`]) and the grid is
+//! capped at [`MAX_DEM_SAMPLES`].
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::tags::Tag;
+
+/// Largest elevation-model file read (a 1″ SRTM tile is 26 MB).
+pub const MAX_DEM_BYTES: u64 = 512 * 1024 * 1024;
+/// Most samples in a grid (a 1″ SRTM tile has 13 M).
+pub const MAX_DEM_SAMPLES: usize = 64 * 1024 * 1024;
+
+/// An elevation model could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DemError {
+    /// The file could not be read.
+    #[error("cannot read elevation model {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file's extension is neither `.hgt` nor `.tif`/`.tiff`.
+    #[error("elevation model {path}: unknown format (expected a .hgt or .tif/.tiff file)")]
+    Format {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A field of the file is missing or wrong.
+    #[error("elevation model {path}: {field}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The field: `file name`, `file size`, a TIFF tag name, `GTModelTypeGeoKey`, …
+        field: &'static str,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The TIFF decoder refused the file.
+    #[error("elevation model {path}: TIFF: {source}")]
+    Tiff {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's error.
+        #[source]
+        source: tiff::TiffError,
+    },
+}
+
+/// Heights on a regular latitude/longitude grid (on the scene's sphere).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dem {
+    /// Rows (north to south).
+    pub rows: usize,
+    /// Columns (west to east).
+    pub cols: usize,
+    /// Latitude of row 0's sample centres (°, the northernmost row).
+    pub north_lat_deg: f64,
+    /// Longitude of column 0's sample centres (°, the westernmost column).
+    pub west_lon_deg: f64,
+    /// Latitude step from one row to the next, southwards (°, > 0).
+    pub lat_step_deg: f64,
+    /// Longitude step from one column to the next, eastwards (°, > 0).
+    pub lon_step_deg: f64,
+    /// Heights (m above the sea), row-major; NaN where void.
+    heights_m: Vec<f32>,
+}
+
+impl Dem {
+    /// A grid from its samples (row-major, north row first, NaN = void). `None` if the sizes
+    /// disagree, a step is not finite and > 0, or the grid is smaller than 2 × 2.
+    pub fn new(
+        rows: usize,
+        cols: usize,
+        (north_lat_deg, west_lon_deg): (f64, f64),
+        (lat_step_deg, lon_step_deg): (f64, f64),
+        heights_m: Vec<f32>,
+    ) -> Option<Self> {
+        let step_ok = |s: f64| s.is_finite() && s > 0.0;
+        let ok = rows >= 2
+            && cols >= 2
+            && rows.checked_mul(cols) == Some(heights_m.len())
+            && step_ok(lat_step_deg)
+            && step_ok(lon_step_deg)
+            && north_lat_deg.is_finite()
+            && west_lon_deg.is_finite();
+        ok.then_some(Self {
+            rows,
+            cols,
+            north_lat_deg,
+            west_lon_deg,
+            lat_step_deg,
+            lon_step_deg,
+            heights_m,
+        })
+    }
+
+    /// Read a `.hgt` or GeoTIFF file (by extension), at most [`MAX_DEM_BYTES`].
+    pub fn from_file(path: &Path) -> Result<Self, DemError> {
+        let bytes =
+            crate::input::read_limited(path, MAX_DEM_BYTES).map_err(|source| DemError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        Self::from_bytes(path, &bytes)
+    }
+
+    /// Decode the bytes of a `.hgt` or GeoTIFF file; `path` gives the format (its extension),
+    /// the SRTM tile's position (its name) and the name in errors.
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self, DemError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("hgt") => read_hgt(path, bytes),
+            Some("tif" | "tiff") => read_geotiff(path, bytes),
+            _ => Err(DemError::Format {
+                path: path.to_path_buf(),
+            }),
+        }
+    }
+
+    /// The stored sample at row `r`, column `c` (NaN = void).
+    ///
+    /// # Panics
+    /// If (`r`, `c`) is outside the grid.
+    pub fn sample(&self, r: usize, c: usize) -> f32 {
+        self.heights_m[r * self.cols + c]
+    }
+
+    /// Latitude and longitude (°) of the sample at row `r`, column `c`.
+    pub fn lat_lon_deg(&self, r: usize, c: usize) -> (f64, f64) {
+        (
+            self.north_lat_deg - r as f64 * self.lat_step_deg,
+            self.west_lon_deg + c as f64 * self.lon_step_deg,
+        )
+    }
+
+    /// The south, north, west and east edges of the sampled area (°, sample centres).
+    pub fn bounds_deg(&self) -> (f64, f64, f64, f64) {
+        let (south, east) = self.lat_lon_deg(self.rows - 1, self.cols - 1);
+        (south, self.north_lat_deg, self.west_lon_deg, east)
+    }
+
+    /// Fractional (row, column) of a point, `None` outside the grid.
+    #[inline]
+    fn grid_position(&self, lat_deg: f64, lon_deg: f64) -> Option<(f64, f64)> {
+        let r = (self.north_lat_deg - lat_deg) / self.lat_step_deg;
+        let c = (lon_deg - self.west_lon_deg) / self.lon_step_deg;
+        // Points on the edge stay on the grid despite rounding (a millionth of a step).
+        let inside = |x: f64, n: usize| x >= -1e-6 && x <= (n - 1) as f64 + 1e-6;
+        let clamp = |x: f64, n: usize| x.clamp(0.0, (n - 1) as f64);
+        (inside(r, self.rows) && inside(c, self.cols))
+            .then_some((clamp(r, self.rows), clamp(c, self.cols)))
+    }
+
+    /// Bilinear height (m) at a point; `None` outside the grid or next to a void.
+    #[inline]
+    pub fn height_at(&self, lat_deg: f64, lon_deg: f64) -> Option<f64> {
+        let (r, c) = self.grid_position(lat_deg, lon_deg)?;
+        let (r0, c0) = (
+            (r as usize).min(self.rows - 2),
+            (c as usize).min(self.cols - 2),
+        );
+        let (tr, tc) = (r - r0 as f64, c - c0 as f64);
+        let at = |i: usize, j: usize| self.heights_m[i * self.cols + j] as f64;
+        let top = at(r0, c0) + (at(r0, c0 + 1) - at(r0, c0)) * tc;
+        let bottom = at(r0 + 1, c0) + (at(r0 + 1, c0 + 1) - at(r0 + 1, c0)) * tc;
+        let h = top + (bottom - top) * tr;
+        h.is_finite().then_some(h)
+    }
+
+    /// Slope (rad from the horizontal) and the upward unit normal (east, north, up) at a point,
+    /// by central differences of [`Self::height_at`] one grid step apart on a sphere of
+    /// `radius_m`; `None` where a height is missing.
+    pub fn slope_at(&self, lat_deg: f64, lon_deg: f64, radius_m: f64) -> Option<(f64, [f64; 3])> {
+        let (dlat, dlon) = (self.lat_step_deg, self.lon_step_deg);
+        let h = |la: f64, lo: f64| {
+            self.height_at(la, lo)
+                .or_else(|| self.height_at(lat_deg, lon_deg))
+        };
+        let north = h(lat_deg + dlat, lon_deg)? - h(lat_deg - dlat, lon_deg)?;
+        let east = h(lat_deg, lon_deg + dlon)? - h(lat_deg, lon_deg - dlon)?;
+        let m_per_deg = radius_m * std::f64::consts::PI / 180.0;
+        let gy = north / (2.0 * dlat * m_per_deg);
+        let gx = east / (2.0 * dlon * m_per_deg * lat_deg.to_radians().cos().max(1e-6));
+        let norm = (gx * gx + gy * gy + 1.0).sqrt();
+        Some((
+            (gx * gx + gy * gy).sqrt().atan(),
+            [-gx / norm, -gy / norm, 1.0 / norm],
+        ))
+    }
+
+    /// The finest grid spacing (m) on a sphere of `radius_m` (the east–west spacing shrinks with
+    /// the cosine of the latitude; taken at the grid's most poleward row).
+    pub fn spacing_m(&self, radius_m: f64) -> f64 {
+        let (south, north, _, _) = self.bounds_deg();
+        let polemost = south.abs().max(north.abs()).min(89.9);
+        let m_per_deg = radius_m * std::f64::consts::PI / 180.0;
+        (self.lat_step_deg * m_per_deg)
+            .min(self.lon_step_deg * m_per_deg * polemost.to_radians().cos())
+    }
+}
+
+fn invalid(path: &Path, field: &'static str, message: String) -> DemError {
+    DemError::Invalid {
+        path: path.to_path_buf(),
+        field,
+        message,
+    }
+}
+
+/// South-west corner (lat, lon) from an SRTM tile name such as `N78E015` or `s03w061`.
+fn hgt_corner(path: &Path) -> Option<(f64, f64)> {
+    let stem = path.file_stem()?.to_str()?.to_ascii_uppercase();
+    let b = stem.as_bytes();
+    if b.len() != 7 {
+        return None;
+    }
+    let sign = |c: u8, pos: u8, neg: u8| match c {
+        _ if c == pos => Some(1.0),
+        _ if c == neg => Some(-1.0),
+        _ => None,
+    };
+    let lat = sign(b[0], b'N', b'S')? * stem.get(1..3)?.parse::<u8>().ok()? as f64;
+    let lon = sign(b[3], b'E', b'W')? * stem.get(4..7)?.parse::<u16>().ok()? as f64;
+    ((-90.0..=89.0).contains(&lat) && (-180.0..=179.0).contains(&lon)).then_some((lat, lon))
+}
+
+/// Decode an SRTM `.hgt` tile named like `N78E015.hgt`.
+fn read_hgt(path: &Path, bytes: &[u8]) -> Result<Dem, DemError> {
+    let (lat, lon) = hgt_corner(path).ok_or_else(|| {
+        invalid(
+            path,
+            "file name",
+            "an SRTM tile must be named like N78E015.hgt (latitude and longitude of its \
+             south-west corner)"
+                .into(),
+        )
+    })?;
+    let n = match bytes.len() {
+        l if l == 2 * 1201 * 1201 => 1201,
+        l if l == 2 * 3601 * 3601 => 3601,
+        l => {
+            return Err(invalid(
+                path,
+                "file size",
+                format!(
+                    "{l} bytes; an SRTM tile has 1201 × 1201 (2884802 bytes) or 3601 × 3601 \
+                     (25934402 bytes) big-endian 16-bit samples (truncated or not a .hgt file?)"
+                ),
+            ));
+        }
+    };
+    let heights: Vec<f32> = bytes
+        .chunks_exact(2)
+        .map(|b| match i16::from_be_bytes([b[0], b[1]]) {
+            -32768 => f32::NAN,
+            v => v as f32,
+        })
+        .collect();
+    let step = 1.0 / (n - 1) as f64;
+    Dem::new(n, n, (lat + 1.0, lon), (step, step), heights)
+        .ok_or_else(|| invalid(path, "grid", "inconsistent grid".into()))
+}
+
+/// GeoTIFF keys this reader uses.
+const GT_MODEL_TYPE: u16 = 1024;
+const GT_RASTER_TYPE: u16 = 1025;
+const MODEL_TYPE_GEOGRAPHIC: u16 = 2;
+const RASTER_PIXEL_IS_POINT: u16 = 2;
+
+/// (model type, raster type) from a GeoKeyDirectoryTag's values.
+fn geo_keys(path: &Path, dir: &[u16]) -> Result<(Option<u16>, Option<u16>), DemError> {
+    if dir.len() < 4 || dir.len() < 4 + 4 * dir[3] as usize {
+        return Err(invalid(
+            path,
+            "GeoKeyDirectoryTag",
+            format!("{} values do not hold its header and keys", dir.len()),
+        ));
+    }
+    let mut model = None;
+    let mut raster = None;
+    for key in dir[4..4 + 4 * dir[3] as usize].chunks_exact(4) {
+        // Key id, location (0: the value is in place), count, value.
+        if key[1] != 0 {
+            continue;
+        }
+        match key[0] {
+            GT_MODEL_TYPE => model = Some(key[3]),
+            GT_RASTER_TYPE => raster = Some(key[3]),
+            _ => {}
+        }
+    }
+    Ok((model, raster))
+}
+
+/// One band of samples as f32 (any integer or float sample type).
+fn samples_f32(path: &Path, image: DecodingResult) -> Result<Vec<f32>, DemError> {
+    Ok(match image {
+        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::I8(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::I16(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::U32(v) => v.into_iter().map(|x| x as f32).collect(),
+        DecodingResult::I32(v) => v.into_iter().map(|x| x as f32).collect(),
+        DecodingResult::F32(v) => v,
+        DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+        _ => {
+            return Err(invalid(
+                path,
+                "SampleFormat",
+                "samples must be 8–32-bit integers or 32/64-bit floats".into(),
+            ));
+        }
+    })
+}
+
+/// Decode a GeoTIFF heightmap on a geographic grid.
+fn read_geotiff(path: &Path, bytes: &[u8]) -> Result<Dem, DemError> {
+    let tiff_err = |source| DemError::Tiff {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = MAX_DEM_SAMPLES * 8;
+    let mut dec = Decoder::new(Cursor::new(bytes))
+        .map_err(tiff_err)?
+        .with_limits(limits);
+    let (w, h) = dec.dimensions().map_err(tiff_err)?;
+    let (cols, rows) = (w as usize, h as usize);
+    if rows.saturating_mul(cols) > MAX_DEM_SAMPLES || rows < 2 || cols < 2 {
+        return Err(invalid(
+            path,
+            "ImageWidth/ImageLength",
+            format!("{cols} × {rows}: a heightmap needs 2…{MAX_DEM_SAMPLES} samples, ≥ 2 a side"),
+        ));
+    }
+    match dec.colortype().map_err(tiff_err)? {
+        tiff::ColorType::Gray(_) => {}
+        other => {
+            return Err(invalid(
+                path,
+                "SamplesPerPixel",
+                format!("a heightmap has one band, got {other:?}"),
+            ));
+        }
+    }
+    let f64_tag = |dec: &mut Decoder<_>, tag: Tag, name: &'static str, n: usize| {
+        let v = dec
+            .find_tag(tag)
+            .map_err(tiff_err)?
+            .ok_or_else(|| invalid(path, name, "missing (the grid is not georeferenced)".into()))?
+            .into_f64_vec()
+            .map_err(tiff_err)?;
+        if v.len() < n || v.iter().any(|x| !x.is_finite()) {
+            return Err(invalid(
+                path,
+                name,
+                format!("needs {n} finite numbers, got {v:?}"),
+            ));
+        }
+        Ok(v)
+    };
+    let keys = dec
+        .find_tag(Tag::GeoKeyDirectoryTag)
+        .map_err(tiff_err)?
+        .ok_or_else(|| {
+            invalid(
+                path,
+                "GeoKeyDirectoryTag",
+                "missing: cannot tell a geographic grid from a projected one".into(),
+            )
+        })?
+        .into_u16_vec()
+        .map_err(tiff_err)?;
+    let (model, raster) = geo_keys(path, &keys)?;
+    if model != Some(MODEL_TYPE_GEOGRAPHIC) {
+        let what = match model {
+            Some(1) => "1 (projected: eastings and northings)".to_string(),
+            Some(3) => "3 (geocentric)".to_string(),
+            Some(m) => m.to_string(),
+            None => "absent".to_string(),
+        };
+        return Err(invalid(
+            path,
+            "GTModelTypeGeoKey",
+            format!(
+                "{what}; only geographic (latitude/longitude) grids are supported: reproject \
+                 the heightmap to EPSG:4326 first"
+            ),
+        ));
+    }
+    let tie = f64_tag(&mut dec, Tag::ModelTiepointTag, "ModelTiepointTag", 6)?;
+    let scale = f64_tag(&mut dec, Tag::ModelPixelScaleTag, "ModelPixelScaleTag", 2)?;
+    let nodata = match dec.find_tag(Tag::GdalNodata).map_err(tiff_err)? {
+        Some(v) => {
+            let s = v.into_string().map_err(tiff_err)?;
+            let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
+            Some(
+                s.parse::<f64>()
+                    .map_err(|_| invalid(path, "GDAL_NODATA", format!("{s:?} is not a number")))?,
+            )
+        }
+        None => None,
+    };
+    let mut heights = samples_f32(path, dec.read_image().map_err(tiff_err)?)?;
+    if heights.len() != rows * cols {
+        return Err(invalid(
+            path,
+            "SamplesPerPixel",
+            format!("{} samples for {cols} × {rows}", heights.len()),
+        ));
+    }
+    if let Some(nd) = nodata {
+        for v in &mut heights {
+            if (*v as f64 - nd).abs() <= 1e-6 * nd.abs().max(1.0) {
+                *v = f32::NAN;
+            }
+        }
+    }
+    // Raster (I, J) ↦ (lon X, lat Y); with PixelIsArea the tie point is a pixel's corner.
+    let centre = if raster == Some(RASTER_PIXEL_IS_POINT) {
+        0.0
+    } else {
+        0.5
+    };
+    let (i, j, x, y) = (tie[0], tie[1], tie[3], tie[4]);
+    let (sx, sy) = (scale[0], scale[1]);
+    let west = x + (centre - i) * sx;
+    let north = y - (centre - j) * sy;
+    let (south, east) = (
+        north - (rows - 1) as f64 * sy,
+        west + (cols - 1) as f64 * sx,
+    );
+    if !(sx > 0.0 && sy > 0.0) || north > 90.0 || south < -90.0 || west < -540.0 || east > 540.0 {
+        return Err(invalid(
+            path,
+            "ModelPixelScaleTag",
+            format!(
+                "scale ({sx}, {sy})° from the tie point ({x}, {y}) gives latitudes \
+                 {south}…{north}°, longitudes {west}…{east}°: not a geographic grid"
+            ),
+        ));
+    }
+    Dem::new(rows, cols, (north, west), (sy, sx), heights)
+        .ok_or_else(|| invalid(path, "grid", "inconsistent grid".into()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tile_names_give_the_south_west_corner() {
+        let c = |s: &str| hgt_corner(Path::new(s));
+        assert_eq!(c("N78E015.hgt"), Some((78.0, 15.0)));
+        assert_eq!(c("dir/s03w061.HGT"), Some((-3.0, -61.0)));
+        assert_eq!(c("N78E15.hgt"), None);
+        assert_eq!(c("X78E015.hgt"), None);
+        assert_eq!(c("N95E015.hgt"), None);
+    }
+
+    #[test]
+    fn bilinear_height_and_slope_of_a_plane() {
+        // h = 10·row + 2·col on a 3 × 4 grid.
+        let h: Vec<f32> = (0..12)
+            .map(|k| (10 * (k / 4) + 2 * (k % 4)) as f32)
+            .collect();
+        let dem = Dem::new(3, 4, (1.0, 0.0), (0.5, 0.25), h).unwrap();
+        let v = dem.height_at(0.75, 0.125).unwrap();
+        assert!((v - (10.0 * 0.5 + 2.0 * 0.5)).abs() < 1e-9, "{v}");
+        assert_eq!(dem.height_at(1.01, 0.1), None);
+        assert!(dem.slope_at(0.5, 0.375, 6.371e6).is_some());
+    }
+}

@@ -1,0 +1,234 @@
+//! Scene — terrain. In: the scene's `[terrain]` section (an elevation model file, where the
+//! observer stands on it, a palette). Out: a [`Terrain`]: the decoded [`Dem`], the observer's
+//! position and the colour rules the renderer shades terrain hits with.
+//!
+//! ```toml
+//! [terrain]
+//! dem = "island.tif"           # SRTM .hgt (named like N78E015.hgt) or a geographic GeoTIFF
+//! observer_lat_deg = 78.0      # the camera's position; its heading is camera.heading_deg
+//! observer_lon_deg = 15.0
+//! snow_line_m = 300.0          # snow at and above this height (default 300)
+//! ice_slope_deg = 35.0         # ice on slopes at least this steep, at any height (default 35)
+//! rock_rgb = [0.10, 0.09, 0.08]    # linear radiance, 1 = the horizon sky (defaults shown)
+//! snow_rgb = [0.85, 0.87, 0.90]
+//! ice_rgb = [0.50, 0.64, 0.75]
+//! light_azimuth_deg = 180.0    # where the light comes from (clockwise from north, default 180)
+//! light_elevation_deg = 30.0   # and how high (default 30)
+//! ```
+//!
+//! The terrain's surface is the sea level of the sphere (`earth.radius_m`); heights at or below
+//! 0 m and voids are sea. The camera's `height_m` stays its height above the sea.
+
+pub mod dem;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use serde::Serialize;
+
+pub use dem::{Dem, DemError};
+
+/// How terrain is coloured: by height and slope, then lit by one directional light.
+///
+/// A point is **ice** where its slope is at least `ice_slope_rad`, else **snow** at or above
+/// `snow_line_m`, else **rock**. The colour is scaled by `ambient + (1 − ambient)·max(0, n·l)`
+/// (n the surface normal, l towards the light), with `ambient` [`Palette::AMBIENT`], and by the
+/// sky's brightness.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Palette {
+    /// Rock colour (linear RGB, horizon-sky units).
+    pub rock_rgb: [f64; 3],
+    /// Snow colour.
+    pub snow_rgb: [f64; 3],
+    /// Ice colour.
+    pub ice_rgb: [f64; 3],
+    /// Height from which the ground is snow (m).
+    pub snow_line_m: f64,
+    /// Slope from which the ground is ice (rad).
+    pub ice_slope_rad: f64,
+    /// Azimuth the light comes from (rad, clockwise from north).
+    pub light_azimuth_rad: f64,
+    /// Elevation of the light (rad).
+    pub light_elevation_rad: f64,
+    /// Unit vector (east, north, up) towards the light (from the two angles).
+    #[serde(skip)]
+    pub light_enu: [f64; 3],
+}
+
+impl Palette {
+    /// Fraction of the light that reaches surfaces facing away from it (sky light).
+    pub const AMBIENT: f64 = 0.35;
+
+    /// The palette's defaults: rock below 300 m, snow above, ice from 35°, light from the south
+    /// at 30°.
+    pub fn default_palette() -> Self {
+        Self {
+            rock_rgb: [0.10, 0.09, 0.08],
+            snow_rgb: [0.85, 0.87, 0.90],
+            ice_rgb: [0.50, 0.64, 0.75],
+            snow_line_m: 300.0,
+            ice_slope_rad: 35f64.to_radians(),
+            light_azimuth_rad: 180f64.to_radians(),
+            light_elevation_rad: 30f64.to_radians(),
+            light_enu: light_direction(180f64.to_radians(), 30f64.to_radians()),
+        }
+    }
+
+    /// Unlit colour of ground at `height_m` with slope `slope_rad`.
+    pub fn albedo(&self, height_m: f64, slope_rad: f64) -> [f64; 3] {
+        if slope_rad >= self.ice_slope_rad {
+            self.ice_rgb
+        } else if height_m >= self.snow_line_m {
+            self.snow_rgb
+        } else {
+            self.rock_rgb
+        }
+    }
+
+    /// Lit colour of ground at `height_m` with slope `slope_rad` and upward unit normal
+    /// `normal_enu`.
+    pub fn colour(&self, height_m: f64, slope_rad: f64, normal_enu: [f64; 3]) -> [f64; 3] {
+        let l = self.light_enu;
+        let lambert = (normal_enu[0] * l[0] + normal_enu[1] * l[1] + normal_enu[2] * l[2]).max(0.0);
+        let light = Self::AMBIENT + (1.0 - Self::AMBIENT) * lambert;
+        self.albedo(height_m, slope_rad).map(|c| c * light)
+    }
+}
+
+/// Unit vector (east, north, up) towards a light at `azimuth_rad` (clockwise from north) and
+/// `elevation_rad`.
+pub fn light_direction(azimuth_rad: f64, elevation_rad: f64) -> [f64; 3] {
+    let (se, ce) = elevation_rad.sin_cos();
+    let (sa, ca) = azimuth_rad.sin_cos();
+    [ce * sa, ce * ca, se]
+}
+
+/// Terrain in a scene: an elevation model, the observer on it, and its palette.
+#[derive(Debug, Clone, Serialize)]
+pub struct Terrain {
+    /// The elevation model file.
+    pub dem_path: PathBuf,
+    /// Observer (camera) latitude (°).
+    pub observer_lat_deg: f64,
+    /// Observer (camera) longitude (°).
+    pub observer_lon_deg: f64,
+    /// How hits are coloured.
+    #[serde(flatten)]
+    pub palette: Palette,
+    /// Highest terrain height in the model (m; 0 if it is all sea).
+    pub max_height_m: f64,
+    /// The decoded model.
+    #[serde(skip)]
+    pub dem: Arc<Dem>,
+}
+
+impl Terrain {
+    /// Terrain from a decoded model (the file is named for errors and the scene's record).
+    pub fn new(
+        dem_path: PathBuf,
+        dem: Dem,
+        (observer_lat_deg, observer_lon_deg): (f64, f64),
+        palette: Palette,
+    ) -> Self {
+        let mut max_height_m = 0.0f64;
+        for r in 0..dem.rows {
+            for c in 0..dem.cols {
+                let h = dem.sample(r, c) as f64;
+                if h.is_finite() {
+                    max_height_m = max_height_m.max(h);
+                }
+            }
+        }
+        Self {
+            dem_path,
+            observer_lat_deg,
+            observer_lon_deg,
+            palette,
+            max_height_m,
+            dem: Arc::new(dem),
+        }
+    }
+
+    /// Latitude and longitude (°) of the point at ground distance `distance_m` along
+    /// `azimuth_rad` (clockwise from north) from the observer, on a sphere of `radius_m`
+    /// (the great circle through the observer in that direction).
+    #[inline]
+    pub fn destination_deg(&self, azimuth_rad: f64, distance_m: f64, radius_m: f64) -> (f64, f64) {
+        let (p1, l1) = (
+            self.observer_lat_deg.to_radians(),
+            self.observer_lon_deg.to_radians(),
+        );
+        let delta = distance_m / radius_m;
+        let (sd, cd) = delta.sin_cos();
+        let (sp, cp) = p1.sin_cos();
+        let sp2 = (sp * cd + cp * sd * azimuth_rad.cos()).clamp(-1.0, 1.0);
+        let p2 = sp2.asin();
+        let l2 = l1 + (azimuth_rad.sin() * sd * cp).atan2(cd - sp * sp2);
+        (p2.to_degrees(), l2.to_degrees())
+    }
+
+    /// Ground distance (m) from the observer to a point, on a sphere of `radius_m` (haversine).
+    pub fn distance_to_m(&self, lat_deg: f64, lon_deg: f64, radius_m: f64) -> f64 {
+        let (p1, p2) = (self.observer_lat_deg.to_radians(), lat_deg.to_radians());
+        let dp = p2 - p1;
+        let dl = (lon_deg - self.observer_lon_deg).to_radians();
+        let a = (0.5 * dp).sin().powi(2) + p1.cos() * p2.cos() * (0.5 * dl).sin().powi(2);
+        2.0 * radius_m * a.sqrt().min(1.0).asin()
+    }
+
+    /// Height (m) of the terrain at ground distance `distance_m` along `azimuth_rad`; `None` for
+    /// sea (≤ 0 m), voids and points off the model.
+    #[inline]
+    pub fn height_along(&self, azimuth_rad: f64, distance_m: f64, radius_m: f64) -> Option<f64> {
+        let (lat, lon) = self.destination_deg(azimuth_rad, distance_m, radius_m);
+        let lon = self.wrap_lon(lon);
+        self.dem.height_at(lat, lon).filter(|&h| h > 0.0)
+    }
+
+    /// `lon_deg` shifted by whole turns to the model's longitudes when that puts it on the model.
+    #[inline]
+    pub fn wrap_lon(&self, lon_deg: f64) -> f64 {
+        let (_, _, west, _) = self.dem.bounds_deg();
+        if lon_deg < west {
+            lon_deg + 360.0 * ((west - lon_deg) / 360.0).ceil()
+        } else if lon_deg > west + 360.0 {
+            lon_deg - 360.0 * ((lon_deg - west) / 360.0).floor()
+        } else {
+            lon_deg
+        }
+    }
+
+    /// The nearest and farthest ground distances (m) of land (height > 0) in the model from the
+    /// observer, on a sphere of `radius_m`, with the grid spacing (m) used to find them; `None`
+    /// if the model holds no land.
+    pub fn land_distance_range_m(&self, radius_m: f64) -> Option<(f64, f64)> {
+        let dem = &self.dem;
+        // At most ~1M samples visited; the range is widened by the stride's diagonal.
+        let stride = ((dem.rows * dem.cols) as f64 / 1.0e6)
+            .sqrt()
+            .ceil()
+            .max(1.0) as usize;
+        let mut lo = f64::INFINITY;
+        let mut hi = 0.0f64;
+        for r in (0..dem.rows).step_by(stride) {
+            for c in (0..dem.cols).step_by(stride) {
+                let rr = (r + stride).min(dem.rows);
+                let cc = (c + stride).min(dem.cols);
+                let land = (r..rr).any(|i| (c..cc).any(|j| dem.sample(i, j) > 0.0));
+                if !land {
+                    continue;
+                }
+                let (lat, lon) = dem.lat_lon_deg(r, c);
+                let d = self.distance_to_m(lat, lon, radius_m);
+                lo = lo.min(d);
+                hi = hi.max(d);
+            }
+        }
+        if !lo.is_finite() {
+            return None;
+        }
+        let m_per_deg = radius_m * std::f64::consts::PI / 180.0;
+        let pad = 1.5 * stride as f64 * m_per_deg * dem.lat_step_deg.max(dem.lon_step_deg);
+        Some(((lo - pad).max(0.0), hi + pad))
+    }
+}

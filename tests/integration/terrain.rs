@@ -1,0 +1,286 @@
+//! Terrain: the elevation-model readers against files written from known samples, and rendered
+//! ridges of known geometry against line–sphere geometry (straight rays and the
+//! constant-curvature model's effective radius R/(1−k)), the hidden base included.
+
+use std::path::Path;
+
+use ghostship::render::{ConstantCurvatureRays, Film, RenderOptions, render_scene};
+use ghostship::scene::{Dem, Scene};
+
+use crate::support::dem::{Grid, hgt_bytes, write_geotiff};
+
+const R: f64 = 6_371_000.0;
+/// Metres per degree of latitude on the scene's sphere.
+const M_PER_DEG: f64 = R * std::f64::consts::PI / 180.0;
+const OBSERVER: (f64, f64) = (45.0, 10.0);
+
+fn quiet() -> RenderOptions {
+    RenderOptions {
+        quiet: true,
+        ..RenderOptions::default()
+    }
+}
+
+#[test]
+fn hgt_reader_gives_known_samples_at_their_latitude_and_longitude() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = |r: usize, c: usize| -> i16 {
+        if (r, c) == (600, 601) {
+            -32768
+        } else {
+            ((r * 7 + c * 3) % 3000) as i16 - 100
+        }
+    };
+    let path = dir.path().join("N10W020.hgt");
+    std::fs::write(&path, hgt_bytes(f)).unwrap();
+    let dem = Dem::from_file(&path).unwrap();
+    assert_eq!((dem.rows, dem.cols), (1201, 1201));
+    // Row r lies at 11° − r/1200°, column c at −20° + c/1200°.
+    for (r, c) in [(0, 0), (1200, 1200), (17, 1103), (599, 3), (1000, 600)] {
+        let (lat, lon) = (11.0 - r as f64 / 1200.0, -20.0 + c as f64 / 1200.0);
+        let h = dem.height_at(lat, lon).unwrap();
+        assert!((h - f(r, c) as f64).abs() < 1e-6, "({r}, {c}): {h}");
+    }
+    // Halfway between two samples of a row: their mean.
+    let mid = dem
+        .height_at(11.0 - 5.0 / 1200.0, -20.0 + 5.5 / 1200.0)
+        .unwrap();
+    assert!((mid - 0.5 * (f(5, 5) + f(5, 6)) as f64).abs() < 1e-6);
+    // The void and what borders it have no height; off the tile neither.
+    assert_eq!(dem.height_at(11.0 - 0.5, -20.0 + 601.0 / 1200.0), None);
+    assert_eq!(dem.height_at(11.01, -19.5), None);
+}
+
+#[test]
+fn hgt_reader_refuses_wrong_sizes_and_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = hgt_bytes(|_, _| 5);
+    for (name, bytes, field) in [
+        ("N10E020.hgt", &good[..good.len() - 2], "file size"),
+        ("N10E020.hgt", &good[..1000], "file size"),
+        ("tile.hgt", &good[..], "file name"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let err = Dem::from_file(&path).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(field), "{err}");
+    }
+}
+
+/// A 30 × 20 f32 grid from 46.0° N, 9.0° E in steps of 0.01° × 0.02°, height 10·row + col.
+fn small_grid(heights: &[f32]) -> Grid<'_> {
+    Grid {
+        rows: 30,
+        cols: 20,
+        north_lat_deg: 46.0,
+        west_lon_deg: 9.0,
+        lat_step_deg: 0.01,
+        lon_step_deg: 0.02,
+        heights_m: heights,
+    }
+}
+
+#[test]
+fn geotiff_reader_gives_known_samples_and_refuses_projected_or_unplaced_grids() {
+    let dir = tempfile::tempdir().unwrap();
+    let heights: Vec<f32> = (0..600).map(|k| (10 * (k / 20) + k % 20) as f32).collect();
+    let grid = small_grid(&heights);
+    let path = dir.path().join("grid.tif");
+    write_geotiff(&path, &grid, 2, true);
+    let dem = Dem::from_file(&path).unwrap();
+    for (r, c) in [(0usize, 0usize), (29, 19), (12, 7)] {
+        let (lat, lon) = (46.0 - 0.01 * r as f64, 9.0 + 0.02 * c as f64);
+        let h = dem.height_at(lat, lon).unwrap();
+        assert!((h - (10 * r + c) as f64).abs() < 1e-4, "({r}, {c}): {h}");
+    }
+    let projected = dir.path().join("utm.tif");
+    write_geotiff(&projected, &grid, 1, true);
+    let err = Dem::from_file(&projected).unwrap_err().to_string();
+    assert!(
+        err.contains("utm.tif") && err.contains("GTModelTypeGeoKey") && err.contains("projected"),
+        "{err}"
+    );
+    let unplaced = dir.path().join("unplaced.tif");
+    write_geotiff(&unplaced, &grid, 2, false);
+    let err = Dem::from_file(&unplaced).unwrap_err().to_string();
+    assert!(
+        err.contains("unplaced.tif") && err.contains("ModelTiepointTag"),
+        "{err}"
+    );
+    let bytes = std::fs::read(&path).unwrap();
+    let truncated = dir.path().join("cut.tif");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let err = Dem::from_file(&truncated).unwrap_err().to_string();
+    assert!(err.contains("cut.tif"), "{err}");
+}
+
+/// An east–west ridge north of the observer: ground rising from 0 at `distance_m` − 10 m to
+/// `height_m` at `distance_m`, flat for 1 km, then sea; 10 m grid north–south, 0.001° east–west.
+fn ridge_scene(dir: &Path, distance_m: f64, height_m: f64, camera: &str) -> Scene {
+    ridge_scene_with(dir, distance_m, height_m, camera, "")
+}
+
+/// [`ridge_scene`] with more scene text (cards) after the terrain section.
+fn ridge_scene_with(
+    dir: &Path,
+    distance_m: f64,
+    height_m: f64,
+    camera: &str,
+    extra: &str,
+) -> Scene {
+    let rows = 150u32;
+    let cols = 41u32;
+    let first = distance_m - 200.0; // distance of the southernmost row
+    let north_d = first + 10.0 * (rows - 1) as f64;
+    let mut heights = Vec::new();
+    for r in 0..rows {
+        let d = north_d - 10.0 * r as f64;
+        let z = if (distance_m..=distance_m + 1000.0).contains(&d) {
+            height_m
+        } else {
+            0.0
+        };
+        heights.extend(std::iter::repeat_n(z as f32, cols as usize));
+    }
+    let grid = Grid {
+        rows,
+        cols,
+        north_lat_deg: OBSERVER.0 + north_d / M_PER_DEG,
+        west_lon_deg: OBSERVER.1 - 0.02,
+        lat_step_deg: 10.0 / M_PER_DEG,
+        lon_step_deg: 0.001,
+        heights_m: &heights,
+    };
+    write_geotiff(&dir.join("ridge.tif"), &grid, 2, true);
+    // Pure red rock lit from the zenith: a flat top shows [1, 0, 0].
+    let text = format!(
+        "[camera]\n{camera}\nhfov_deg = 0.5\nwidth = 400\nheight = 200\n\
+         [terrain]\ndem = \"ridge.tif\"\nobserver_lat_deg = {}\nobserver_lon_deg = {}\n\
+         rock_rgb = [1.0, 0.0, 0.0]\nsnow_line_m = 1e5\nice_slope_deg = 90\n\
+         light_elevation_deg = 90\n{extra}",
+        OBSERVER.0, OBSERVER.1
+    );
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    Scene::from_file(&path).unwrap()
+}
+
+fn is_terrain(p: [f32; 4]) -> bool {
+    p[0] > 0.3 && p[1] < 0.1 && p[2] < 0.1
+}
+
+/// Rows of the centre column showing terrain.
+fn terrain_rows(film: &Film) -> Vec<u32> {
+    (0..film.height)
+        .filter(|&y| is_terrain(film.pixel(film.width / 2, y)))
+        .collect()
+}
+
+/// Apparent elevation of the point at height `h` and ground distance `d` from a camera at `h0`,
+/// straight rays over a sphere of radius `r`: from (r+h)·cos(θ+α) = (r+h0)·cos α, θ = d/r.
+fn geometric_elevation(h0: f64, h: f64, d: f64, r: f64) -> f64 {
+    let theta = d / r;
+    (((r + h) * theta.cos() - (r + h0)) / ((r + h) * theta.sin())).atan()
+}
+
+/// First film row (centre column, pitch `pitch`) whose centre lies at or below elevation `alpha`.
+fn first_row_below(scene: &Scene, alpha: f64) -> i64 {
+    let f = scene.camera.frame().focal_px;
+    let boundary = 0.5 * scene.camera.height as f64 - f * (alpha - scene.camera.pitch_rad).tan();
+    (boundary - 0.5).ceil() as i64
+}
+
+#[test]
+fn a_ridge_top_appears_at_its_geometric_elevation() {
+    for k in [0.0, 0.17] {
+        let dir = tempfile::tempdir().unwrap();
+        let (d, h, h0) = (15_000.0, 60.0, 10.0);
+        let scene = ridge_scene(
+            dir.path(),
+            d,
+            h,
+            &format!("height_m = {h0}\npitch_deg = 0.1"),
+        );
+        let tracer = ConstantCurvatureRays::new(k, R).unwrap();
+        let film = render_scene(&scene, &tracer, &quiet()).unwrap();
+        let rows = terrain_rows(&film);
+        let top = *rows.first().expect("ridge not visible") as i64;
+        let predicted = first_row_below(&scene, geometric_elevation(h0, h, d, R / (1.0 - k)));
+        assert!(
+            (top - predicted).abs() <= 1,
+            "k = {k}: ridge top at row {top}, geometry puts it at {predicted}"
+        );
+    }
+}
+
+#[test]
+fn the_part_of_a_ridge_below_the_horizon_is_hidden() {
+    // From 10 m the sea horizon is 11.3 km away and hides the lowest (30 − 11.3)²/2R ≈ 27 m
+    // of anything at 30 km (straight rays).
+    let (d, h0) = (30_000.0, 10.0);
+    let dip = -(R / (R + h0)).acos();
+    for (h, visible) in [(100.0, true), (20.0, false)] {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = ridge_scene(dir.path(), d, h, &format!("height_m = {h0}"));
+        let tracer = ConstantCurvatureRays::new(0.0, R).unwrap();
+        let film = render_scene(&scene, &tracer, &quiet()).unwrap();
+        let rows = terrain_rows(&film);
+        if !visible {
+            assert!(rows.is_empty(), "{h} m ridge shows in rows {rows:?}");
+            continue;
+        }
+        let top = *rows.first().expect("ridge not visible") as i64;
+        let bottom = *rows.last().unwrap() as i64;
+        let top_predicted = first_row_below(&scene, geometric_elevation(h0, h, d, R));
+        let first_sea = first_row_below(&scene, dip);
+        assert!((top - top_predicted).abs() <= 1, "{top} vs {top_predicted}");
+        // The ridge stands on the horizon: its lowest row is the last above the sea.
+        assert!(
+            (bottom + 1 - first_sea).abs() <= 1,
+            "ridge bottom at row {bottom}, the sea starts at {first_sea}"
+        );
+        assert!(rows.windows(2).all(|w| w[1] == w[0] + 1), "{rows:?}");
+    }
+}
+
+#[test]
+fn cards_and_terrain_compose_in_depth_order() {
+    // A green card 60 m tall in front of the 60 m ridge at 15 km hides it; the same card 5 km
+    // behind the ridge is hidden where the ridge stands and shows above it.
+    let (d, h, h0) = (15_000.0, 60.0, 10.0);
+    let is_green = |p: [f32; 4]| p[1] > 0.5 && p[0] < 0.1;
+    for (card_m, in_front) in [(10_000.0, true), (20_000.0, false)] {
+        let dir = tempfile::tempdir().unwrap();
+        let green = image::RgbaImage::from_pixel(8, 8, image::Rgba([0, 255, 0, 255]));
+        green.save(dir.path().join("green.png")).unwrap();
+        let card = format!(
+            "[[cards]]\nimage = \"green.png\"\ndistance_m = {card_m}\nwidth_m = 500\n\
+             height_m = 200\n"
+        );
+        let scene = ridge_scene_with(
+            dir.path(),
+            d,
+            h,
+            &format!("height_m = {h0}\npitch_deg = 0.1"),
+            &card,
+        );
+        let tracer = ConstantCurvatureRays::new(0.0, R).unwrap();
+        let film = render_scene(&scene, &tracer, &quiet()).unwrap();
+        let ridge_top = first_row_below(&scene, geometric_elevation(h0, h, d, R));
+        let x = film.width / 2;
+        let below = film.pixel(x, (ridge_top + 3) as u32);
+        let above = film.pixel(x, (ridge_top - 3) as u32);
+        assert!(
+            is_green(above),
+            "card {card_m} m: above the ridge {above:?}"
+        );
+        if in_front {
+            assert!(is_green(below), "card {card_m} m: over the ridge {below:?}");
+        } else {
+            assert!(
+                is_terrain(below),
+                "card {card_m} m: over the ridge {below:?}"
+            );
+        }
+    }
+}
