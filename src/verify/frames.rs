@@ -604,14 +604,21 @@ struct Recording<'t> {
     calls: Mutex<Vec<Call>>,
 }
 
+impl Recording<'_> {
+    /// `f`, its time added to the tracer time.
+    fn timed<T>(&self, f: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        let out = f();
+        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.nanos.fetch_add(ns, Ordering::Relaxed);
+        out
+    }
+}
+
 impl RayTracer for Recording<'_> {
     /// Passed on and timed with the traces (the sun's path integrals are tracer time too).
     fn density_paths_m(&self, h: f64, elevation_rad: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
-        let start = Instant::now();
-        let paths = self.inner.density_paths_m(h, elevation_rad, scales);
-        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        self.nanos.fetch_add(ns, Ordering::Relaxed);
-        paths
+        self.timed(|| self.inner.density_paths_m(h, elevation_rad, scales))
     }
 
     /// Passed on and timed with the traces.
@@ -622,13 +629,10 @@ impl RayTracer for Recording<'_> {
         distances_m: &[f64],
         scales: [f64; 2],
     ) -> Option<RayDensityPaths> {
-        let start = Instant::now();
-        let paths = self
-            .inner
-            .density_paths_along(h, elevation_rad, distances_m, scales);
-        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        self.nanos.fetch_add(ns, Ordering::Relaxed);
-        paths
+        self.timed(|| {
+            self.inner
+                .density_paths_along(h, elevation_rad, distances_m, scales)
+        })
     }
 
     fn trace(
