@@ -20,6 +20,8 @@
 
 use std::sync::{Arc, OnceLock};
 
+use rayon::prelude::*;
+
 use super::RefractivityError;
 use super::ciddor::{CiddorDispersion, DEFAULT_CO2_PPM};
 use super::dual::Dual;
@@ -415,12 +417,20 @@ impl StratifiedIndex for RefractiveAtmosphere {
 /// and a ray that meets a non-finite value there ends as non-finite. In height order, so the
 /// error names the lowest invalid height.
 fn validate_column(
-    exact: &dyn Fn(f64) -> Result<(f64, f64), RefractivityError>,
+    exact: &(dyn Fn(f64) -> Result<(f64, f64), RefractivityError> + Sync),
     step_m: f64,
     top_m: f64,
 ) -> Result<(), RefractivityError> {
     let steps = (top_m / step_m).ceil() as usize;
-    (0..=steps).try_for_each(|i| exact((i as f64 * step_m).min(top_m)).map(|_| ()))
+    // In parallel; the error reported is the lowest height's, whatever the thread count.
+    let first_bad = (0..=steps)
+        .into_par_iter()
+        .filter_map(|i| exact((i as f64 * step_m).min(top_m)).err().map(|e| (i, e)))
+        .min_by_key(|(i, _)| *i);
+    match first_bad {
+        Some((_, e)) => Err(e),
+        None => Ok(()),
+    }
 }
 
 /// Half-width (m) of the differences that measure a break's jumps.
