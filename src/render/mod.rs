@@ -40,6 +40,7 @@ use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
+use crate::scene::sky::SunDisc;
 use crate::scene::{Scene, Sun, samples_per_pixel_root};
 use air_paths::AirPaths;
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
@@ -724,7 +725,7 @@ pub fn render_scene(
         sea_table: AngleTable::new(0.0, sea_hi, |g| {
             sea.radiance_with_sky_depths(g, &sky, depths)
         }),
-        sun: scene.sun,
+        sun: scene.sun.as_ref().map(SunDisc::new),
         sun_transmittance: scene
             .sun
             .map(|_| AngleTable::new(elevations.0, elevations.1, |e| sky.transmittance(e))),

@@ -11,8 +11,8 @@ use super::air_paths::{AirPaths, Meets};
 use super::ray_model::FanEnd;
 use super::sun::SunTransmittance;
 use crate::scene::camera::ViewDirection;
-use crate::scene::sky::Extinction;
-use crate::scene::{Sun, Texture};
+use crate::scene::Texture;
+use crate::scene::sky::{Extinction, SunDisc};
 
 /// The aerial perspective of a frame: extinction and the geometry of the chords.
 pub(super) struct AerialShading {
@@ -126,7 +126,7 @@ pub(super) struct Shader<'a> {
     pub(super) cards: Vec<ViewCard<'a>>,
     pub(super) sky_table: AngleTable,
     pub(super) sea_table: AngleTable,
-    pub(super) sun: Option<Sun>,
+    pub(super) sun: Option<SunDisc>,
     /// The sky's transmittance towards the sun by apparent elevation (with a sun only).
     pub(super) sun_transmittance: Option<AngleTable>,
     /// The transmittance towards the sun along each ray's own path, where the tracer could
@@ -227,9 +227,7 @@ impl Shader<'_> {
     #[inline]
     pub(super) fn may_meet_sun(&self, end: FanEnd) -> bool {
         match (end, &self.sun) {
-            (FanEnd::Sky { elevation_rad }, Some(sun)) => {
-                (elevation_rad - sun.elevation_rad).abs() <= 0.5 * sun.angular_diameter_rad
-            }
+            (FanEnd::Sky { elevation_rad }, Some(sun)) => sun.may_meet(elevation_rad),
             _ => false,
         }
     }
@@ -278,7 +276,7 @@ impl Shader<'_> {
             return sky;
         };
         let azimuth = self.heading_rad + dir.azimuth_offset_rad();
-        let disc = sun.disc(azimuth, elevation_rad);
+        let disc = sun.radiance(azimuth, elevation_rad);
         if disc > 0.0 {
             let t = match &self.sun_path {
                 Some(path) => path.at(alpha),

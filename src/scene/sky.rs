@@ -303,23 +303,75 @@ impl Sun {
     /// direction (`azimuth_rad`, `elevation_rad`); 0 outside the disc.
     #[inline]
     pub fn disc(&self, azimuth_rad: f64, elevation_rad: f64) -> f64 {
-        let radius = 0.5 * self.angular_diameter_rad;
+        SunDisc::new(self).radiance(azimuth_rad, elevation_rad)
+    }
+}
+
+/// A [`Sun`]'s disc with the per-frame constants of [`Sun::disc`] computed once (the renderer
+/// asks for every sample whose ray leaves in the sun's band of elevations).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SunDisc {
+    elevation_rad: f64,
+    azimuth_rad: f64,
+    cos_elevation: f64,
+    sin_elevation: f64,
+    radius_rad: f64,
+    /// sin²(radius / 2): the haversine of the disc's edge.
+    edge_haversine: f64,
+    intensity: f64,
+    limb_darkening: f64,
+}
+
+impl SunDisc {
+    /// The disc of `sun`.
+    pub fn new(sun: &Sun) -> Self {
+        let radius_rad = 0.5 * sun.angular_diameter_rad;
+        SunDisc {
+            elevation_rad: sun.elevation_rad,
+            azimuth_rad: sun.azimuth_rad,
+            cos_elevation: sun.elevation_rad.cos(),
+            sin_elevation: sun.elevation_rad.sin(),
+            radius_rad,
+            edge_haversine: (0.5 * radius_rad).sin().powi(2),
+            intensity: sun.intensity,
+            limb_darkening: sun.limb_darkening,
+        }
+    }
+
+    /// Whether a direction at `elevation_rad` is within the disc's band of elevations.
+    #[inline]
+    pub fn may_meet(&self, elevation_rad: f64) -> bool {
+        (elevation_rad - self.elevation_rad).abs() <= self.radius_rad
+    }
+
+    /// [`Sun::disc`]: the haversine of the angular distance from the centre against that of the
+    /// edge, so a direction outside costs no arcsine.
+    #[inline]
+    pub fn radiance(&self, azimuth_rad: f64, elevation_rad: f64) -> f64 {
         if !(elevation_rad.is_finite() && azimuth_rad.is_finite()) {
             return 0.0;
         }
         // Quick reject on elevation (cheap), then the haversine distance on the sphere.
-        if (elevation_rad - self.elevation_rad).abs() > radius {
+        let rise = elevation_rad - self.elevation_rad;
+        if rise.abs() > self.radius_rad {
             return 0.0;
         }
-        let dlat = 0.5 * (elevation_rad - self.elevation_rad);
-        let dlon = 0.5 * (azimuth_rad - self.azimuth_rad);
-        let a = dlat.sin().powi(2)
-            + elevation_rad.cos() * self.elevation_rad.cos() * dlon.sin().powi(2);
-        let distance = 2.0 * a.sqrt().min(1.0).asin();
-        if distance >= radius {
+        let half_rise_sin = (0.5 * rise).sin();
+        // cos(e) = cos(e☉ + rise), from the half-angle's sine and cosine.
+        let half_rise_cos = (1.0 - half_rise_sin * half_rise_sin).sqrt();
+        let (rise_sin, rise_cos) = (
+            2.0 * half_rise_sin * half_rise_cos,
+            1.0 - 2.0 * half_rise_sin * half_rise_sin,
+        );
+        let cos_elevation = self.cos_elevation * rise_cos - self.sin_elevation * rise_sin;
+        let half_lon_sin = (0.5 * (azimuth_rad - self.azimuth_rad)).sin();
+        let haversine = half_rise_sin * half_rise_sin
+            + cos_elevation * self.cos_elevation * half_lon_sin * half_lon_sin;
+        if haversine >= self.edge_haversine {
             return 0.0;
         }
-        let s = distance / radius;
+        let distance = 2.0 * haversine.sqrt().min(1.0).asin();
+        let s = (distance / self.radius_rad).min(1.0);
         let mu = (1.0 - s * s).sqrt();
         self.intensity * (1.0 - self.limb_darkening * (1.0 - mu))
     }
