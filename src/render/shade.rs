@@ -137,6 +137,10 @@ pub(super) struct Shader<'a> {
     pub(super) fallback: [f64; 3],
     /// Aerial perspective towards cards and the sea (`None`: none).
     pub(super) aerial: Option<AerialShading>,
+    /// The card distances (m), indexed like a ray's heights.
+    pub(super) distances_m: Vec<f64>,
+    /// The sea's reflections of the cards and the sun (`None`: the sky reflection alone).
+    pub(super) reflection: Option<super::reflection::Reflection>,
 }
 
 #[inline]
@@ -147,6 +151,40 @@ pub(super) fn wrap_pi(x: f64) -> f64 {
 }
 
 impl Shader<'_> {
+    /// Ground distance (m) of the cards with distance index `k`.
+    #[inline]
+    pub(super) fn card_distance_m(&self, k: usize) -> f64 {
+        self.distances_m[k]
+    }
+
+    /// Whether a ray that ended with `end` may show the sun's glitter or mirror image on the
+    /// sea (then the colour depends on the azimuth).
+    #[inline]
+    pub(super) fn may_meet_glint(&self, end: FanEnd) -> bool {
+        match (end, &self.reflection) {
+            (
+                FanEnd::Ground {
+                    grazing_rad,
+                    distance_m,
+                },
+                Some(r),
+            ) => r.may_show_sun(grazing_rad, distance_m),
+            _ => false,
+        }
+    }
+
+    /// Whether the sea a ray that ended with `end` meets may mirror a card (a card lies
+    /// beyond the hit point and the sea fan exists): then its colour depends on the azimuth.
+    #[inline]
+    pub(super) fn may_reflect_card(&self, end: FanEnd, distance_index: usize) -> bool {
+        match (end, &self.reflection) {
+            (FanEnd::Ground { distance_m, .. }, Some(r)) => {
+                r.fan.is_some() && self.card_distance_m(distance_index) > distance_m
+            }
+            _ => false,
+        }
+    }
+
     /// Radiance of a sample looking along `dir` along a ray with `heights` at the card distances
     /// and end `end`.
     #[inline]
@@ -239,13 +277,31 @@ impl Shader<'_> {
     /// shaded by this alone ([`Self::shade`] adds nothing to it).
     #[inline]
     pub(super) fn background(&self, dir: &ViewDirection, end: FanEnd) -> [f64; 3] {
+        self.background_with(dir, end, true)
+    }
+
+    /// [`Self::background`]; without `reflections` the sea shows only its tabulated sky
+    /// reflection (no mirrored cards, no sun): what a flat band shares across its columns.
+    #[inline]
+    pub(super) fn background_with(
+        &self,
+        dir: &ViewDirection,
+        end: FanEnd,
+        reflections: bool,
+    ) -> [f64; 3] {
         let alpha = dir.elevation_rad;
         match end {
             FanEnd::Ground {
                 grazing_rad,
                 distance_m,
             } => {
-                let sea = self.sea_table.at(grazing_rad);
+                let mut sea = self.sea_table.at(grazing_rad);
+                if reflections && self.reflection.is_some() {
+                    let extra = self.sea_reflections(dir, grazing_rad, distance_m, true);
+                    for c in 0..3 {
+                        sea[c] += extra[c];
+                    }
+                }
                 match &self.aerial {
                     Some(aerial) => aerial.seen(sea, 1.0, alpha, Meets::Sea, 0.0, distance_m),
                     None => sea,
