@@ -402,7 +402,7 @@ fn shade_flat_row(
         }
         let mut reflects = false;
         for card in &ctx.shader.cards {
-            let mirrored = ctx.shader.may_reflect_card(fan_end, card.distance_index);
+            let mirrored = ctx.shader.may_reflect_card(fan_end, card);
             reflects |= mirrored;
             if mirrored
                 || heights[card.distance_index]
@@ -594,6 +594,8 @@ struct SeaReflectionInputs<'a> {
     elevations: (f64, f64),
     pixel_rad: f64,
     camera_height_m: f64,
+    /// The card distances in view (m).
+    distances_m: &'a [f64],
     /// The farthest card in view (m), if any.
     farthest_card_m: Option<f64>,
 }
@@ -607,21 +609,23 @@ fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflectio
     if !sea.reflections {
         return None;
     }
-    // The steepest grazing angle in the frame: the fan's, or a pixel grid's in exact mode.
+    // The steepest grazing angle in the frame: the fan's, or in exact mode that of the frame's
+    // lowest ray (Bouguer's invariant n(h)(R + h) cos e fixes cos g = n_c (R + h_c) cos α /
+    // (n_0 R): the steepest launch meets the sea steepest).
     let max_grazing = match inp.fan {
         Some(fan) => fan.max_grazing_rad(),
-        None => traced_grid(
-            inp.tracer,
-            inp.camera_height_m,
-            inp.elevations,
-            inp.pixel_rad,
-        )
-        .iter()
-        .filter_map(|(_, end)| match end {
-            FanEnd::Ground { grazing_rad, .. } => Some(*grazing_rad),
-            _ => None,
-        })
-        .reduce(f64::max),
+        None => {
+            let ray = inp.tracer.trace(
+                inp.camera_height_m,
+                inp.elevations.0,
+                inp.distances_m,
+                false,
+            );
+            match ray.end {
+                FanEnd::Ground { grazing_rad, .. } if grazing_rad.is_finite() => Some(grazing_rad),
+                _ => None,
+            }
+        }
     }?;
     let half_pi = std::f64::consts::FRAC_PI_2;
     let sigma_along = sea.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2;
@@ -629,9 +633,13 @@ fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflectio
         .min(half_pi)
         .max(inp.pixel_rad);
     let mirror = sea.wave_slope_rad == 0.0;
+    // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
+    // elevation, so interpolation is exact for them); an eighth of the facet slope spread
+    // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
+    let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
     let fan = inp.farthest_card_m.and_then(|d| {
         let need_sky = mirror && scene.sun.is_some();
-        reflection::SeaFan::build(inp.tracer, e_hi, inp.pixel_rad, d, need_sky)
+        reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky)
     });
     let sky = scene.sky;
     let depths = sky.optical_depths();
@@ -653,6 +661,7 @@ fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflectio
         earth_radius_m: scene.earth_radius_m,
         fan,
         sky_table: AngleTable::new(0.0, e_hi, |e| sky.radiance_with_depths(e, depths)),
+        facets: reflection::FacetTable::new(&sea, max_grazing),
         glint,
         mirror_sun: scene.sun.filter(|_| mirror),
     })
@@ -819,6 +828,7 @@ pub fn render_scene(
         elevations,
         pixel_rad,
         camera_height_m: cam.height_m,
+        distances_m: &distances_m,
         farthest_card_m: distances_m.last().copied(),
     });
     stats.sea_fan_rays = reflection

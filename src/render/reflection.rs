@@ -18,15 +18,22 @@ use rayon::prelude::*;
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
 use crate::scene::camera::ViewDirection;
+use crate::scene::sea::FacetNode;
 use crate::scene::{Sea, Sky, Sun};
 
 /// Facet classes per sample for the cards' mirror images (the sky uses more, in its table).
 pub(super) const CARD_FACET_NODES: usize = 8;
 
+/// Facet classes whose share of the reflected light (weight × Fresnel reflectance) is below this
+/// are not traced to the cards: they change a pixel by less than 1e-3 of the card's radiance,
+/// a quarter of an 8-bit step.
+pub(super) const MIN_NODE_SHARE: f64 = 1e-3;
+
 /// Most elevations in a sea fan.
 const MAX_SEA_FAN_RAYS: usize = 2048;
-/// Most ranges on a sea fan's grid.
-const MAX_SEA_FAN_RANGES: usize = 1024;
+/// Most ranges on a sea fan's grid (linear interpolation between them errs by about
+/// Δr²·κ/8, κ the ray's curvature relative to the surface: millimetres at 250 m steps).
+const MAX_SEA_FAN_RANGES: usize = 256;
 /// Finest range step (m).
 const MIN_RANGE_STEP_M: f64 = 25.0;
 
@@ -45,25 +52,26 @@ pub(super) struct SeaFan {
 }
 
 impl SeaFan {
-    /// Trace the sea fan over elevations [0, `e_hi`] (spacing ≈ a quarter of `pixel_rad`, at
-    /// most [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is
-    /// nothing to cover.
+    /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
+    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is nothing to
+    /// cover.
     pub(super) fn build(
         tracer: &dyn RayTracer,
         e_hi: f64,
-        pixel_rad: f64,
+        step_rad: f64,
         max_range_m: f64,
         need_sky_direction: bool,
     ) -> Option<Self> {
         if !(e_hi > 0.0 && e_hi.is_finite() && max_range_m > 0.0 && max_range_m.is_finite()) {
             return None;
         }
-        let n_e = ((e_hi / (0.25 * pixel_rad)).ceil() as usize + 1).clamp(2, MAX_SEA_FAN_RAYS);
+        let n_e = ((e_hi / step_rad).ceil() as usize + 1).clamp(2, MAX_SEA_FAN_RAYS);
         let n_r =
             ((max_range_m / MIN_RANGE_STEP_M).ceil() as usize + 1).clamp(2, MAX_SEA_FAN_RANGES);
         let step_e = e_hi / (n_e - 1) as f64;
         let step_r = max_range_m / (n_r - 1) as f64;
-        let ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
+        let mut ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
+        ranges[n_r - 1] = max_range_m;
         let rays: Vec<(Vec<f32>, f64)> = (0..n_e)
             .into_par_iter()
             .map(|i| {
@@ -139,6 +147,51 @@ impl SeaFan {
     }
 }
 
+/// [`Sea::facet_nodes`] with [`CARD_FACET_NODES`] classes, tabulated by grazing angle over
+/// [0, `g_hi`] and interpolated linearly (node by node: the classes move continuously with the
+/// grazing angle), so a sample pays a lookup, not eight exponentials.
+pub(super) struct FacetTable {
+    inv_step: f64,
+    nodes: Vec<[FacetNode; CARD_FACET_NODES]>,
+}
+
+impl FacetTable {
+    /// Entries in the table.
+    const ENTRIES: usize = 2048;
+
+    pub(super) fn new(sea: &Sea, g_hi: f64) -> Self {
+        let g_hi = if g_hi > 0.0 && g_hi.is_finite() {
+            g_hi.min(std::f64::consts::FRAC_PI_2)
+        } else {
+            std::f64::consts::FRAC_PI_2
+        };
+        let step = g_hi / (Self::ENTRIES - 1) as f64;
+        Self {
+            inv_step: 1.0 / step,
+            nodes: (0..Self::ENTRIES)
+                .map(|i| sea.facet_nodes::<CARD_FACET_NODES>(i as f64 * step))
+                .collect(),
+        }
+    }
+
+    /// The facet classes at grazing angle `grazing_rad` (clamped to the table).
+    #[inline]
+    pub(super) fn at(&self, grazing_rad: f64) -> [FacetNode; CARD_FACET_NODES] {
+        let last = (self.nodes.len() - 1) as f64;
+        let p = (grazing_rad * self.inv_step).clamp(0.0, last);
+        let p = if p.is_nan() { 0.0 } else { p };
+        let i = (p as usize).min(self.nodes.len() - 2);
+        let t = p - i as f64;
+        let (a, b) = (&self.nodes[i], &self.nodes[i + 1]);
+        std::array::from_fn(|j| FacetNode {
+            reflected_elevation_rad: a[j].reflected_elevation_rad
+                + (b[j].reflected_elevation_rad - a[j].reflected_elevation_rad) * t,
+            weight: a[j].weight + (b[j].weight - a[j].weight) * t,
+            reflectance: a[j].reflectance + (b[j].reflectance - a[j].reflectance) * t,
+        })
+    }
+}
+
 /// The sun's glitter on a rough sea, resolved once per frame.
 pub(super) struct Glint {
     pub(super) sun: Sun,
@@ -159,6 +212,8 @@ pub(super) struct Reflection {
     pub(super) fan: Option<SeaFan>,
     /// Sky radiance by the reflected rays' elevation.
     pub(super) sky_table: AngleTable,
+    /// The facet classes by grazing angle.
+    pub(super) facets: FacetTable,
     /// Rough-sea sun glitter (a sun and σ > 0).
     pub(super) glint: Option<Glint>,
     /// The sun, for its mirror image on a mirror sea (σ = 0).
@@ -294,8 +349,8 @@ impl Shader<'_> {
         if !self.cards.iter().any(|c| beyond(c) && in_range(c, az)) {
             return out;
         }
-        for node in refl.sea.facet_nodes::<CARD_FACET_NODES>(grazing_rad) {
-            if node.weight == 0.0 {
+        for node in refl.facets.at(grazing_rad) {
+            if node.weight * node.reflectance < MIN_NODE_SHARE {
                 continue;
             }
             let e = node.reflected_elevation_rad;

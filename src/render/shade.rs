@@ -173,16 +173,34 @@ impl Shader<'_> {
         }
     }
 
-    /// Whether the sea a ray that ended with `end` meets may mirror a card (a card lies
-    /// beyond the hit point and the sea fan exists): then its colour depends on the azimuth.
+    /// Whether the sea a ray that ended with `end` mirrors `card` (some facet class that
+    /// counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray within the card's
+    /// height range at its range): then the colour depends on the azimuth in its columns.
     #[inline]
-    pub(super) fn may_reflect_card(&self, end: FanEnd, distance_index: usize) -> bool {
-        match (end, &self.reflection) {
-            (FanEnd::Ground { distance_m, .. }, Some(r)) => {
-                r.fan.is_some() && self.card_distance_m(distance_index) > distance_m
-            }
-            _ => false,
+    pub(super) fn may_reflect_card(&self, end: FanEnd, card: &ViewCard<'_>) -> bool {
+        let (
+            FanEnd::Ground {
+                grazing_rad,
+                distance_m,
+            },
+            Some(r),
+        ) = (end, &self.reflection)
+        else {
+            return false;
+        };
+        let Some(fan) = &r.fan else {
+            return false;
+        };
+        let range_m = self.card_distance_m(card.distance_index) - distance_m;
+        if range_m <= 0.0 {
+            return false;
         }
+        r.facets.at(grazing_rad).iter().any(|node| {
+            node.weight * node.reflectance >= super::reflection::MIN_NODE_SHARE
+                && fan
+                    .height(node.reflected_elevation_rad, range_m)
+                    .is_some_and(|h| h >= card.base_m && h <= card.top_m)
+        })
     }
 
     /// Radiance of a sample looking along `dir` along a ray with `heights` at the card distances
