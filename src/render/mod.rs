@@ -603,7 +603,11 @@ struct SeaReflectionInputs<'a> {
 /// The sea's reflections for a frame: a sea fan when a card is in view (over the reflected
 /// elevations the frame's grazing angles and the wave facets reach), the sun's glitter or mirror
 /// image. `None` when the scene turns reflections off or the frame shows no sea.
-fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflection> {
+/// `reflected_sky`: the sky by elevation over [0, π/2].
+fn sea_reflection(
+    reflected_sky: AngleTable,
+    inp: &SeaReflectionInputs<'_>,
+) -> Option<reflection::Reflection> {
     let scene = inp.scene;
     let sea = scene.sea;
     if !sea.reflections {
@@ -642,7 +646,6 @@ fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflectio
         reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky)
     });
     let sky = scene.sky;
-    let depths = sky.optical_depths();
     let glint = scene.sun.filter(|_| !mirror).map(|sun| {
         let refraction_rad = reflection::sea_level_refraction_rad(inp.tracer, sun.elevation_rad);
         let t = sky.transmittance(sun.elevation_rad + refraction_rad);
@@ -660,7 +663,7 @@ fn sea_reflection(inp: &SeaReflectionInputs<'_>) -> Option<reflection::Reflectio
         sky,
         earth_radius_m: scene.earth_radius_m,
         fan,
-        sky_table: AngleTable::new(0.0, e_hi, |e| sky.radiance_with_depths(e, depths)),
+        sky_table: reflected_sky,
         facets: reflection::FacetTable::new(&sea, max_grazing),
         glint,
         mirror_sun: scene.sun.filter(|_| mirror),
@@ -821,16 +824,27 @@ pub fn render_scene(
         let band = sun_band_rad(&sun, pixel_rad);
         SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
     });
-    let reflection = sea_reflection(&SeaReflectionInputs {
-        scene,
-        tracer,
-        fan: fan.as_ref(),
-        elevations,
-        pixel_rad,
-        camera_height_m: cam.height_m,
-        distances_m: &distances_m,
-        farthest_card_m: distances_m.last().copied(),
+    // The sky by the elevation of a reflected ray, from the sea table's facet classes and the
+    // sea's reflections alike.
+    let reflected_sky = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
+        sky.radiance_with_depths(e, depths)
     });
+    let sea_table = AngleTable::new(0.0, sea_hi, |g| {
+        sea.radiance_reflecting(g, |e| reflected_sky.at(e))
+    });
+    let reflection = sea_reflection(
+        reflected_sky,
+        &SeaReflectionInputs {
+            scene,
+            tracer,
+            fan: fan.as_ref(),
+            elevations,
+            pixel_rad,
+            camera_height_m: cam.height_m,
+            distances_m: &distances_m,
+            farthest_card_m: distances_m.last().copied(),
+        },
+    );
     stats.sea_fan_rays = reflection
         .as_ref()
         .and_then(|r| r.fan.as_ref())
@@ -840,9 +854,7 @@ pub fn render_scene(
         reflection,
         cards,
         sky_table,
-        sea_table: AngleTable::new(0.0, sea_hi, |g| {
-            sea.radiance_with_sky_depths(g, &sky, depths)
-        }),
+        sea_table,
         sun: scene.sun,
         sun_transmittance: scene
             .sun

@@ -216,7 +216,7 @@ impl Sea {
         let view = [-g.cos(), 0.0, g.sin()];
         let h = [sun[0] + view[0], sun[1] + view[1], sun[2] + view[2]];
         let norm = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
-        if !(norm > 0.0) || h[2] <= 0.0 {
+        if norm.is_nan() || norm <= 0.0 || h[2] <= 0.0 {
             return 0.0;
         }
         let cos_tilt = h[2] / norm;
