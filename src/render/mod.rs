@@ -18,6 +18,11 @@
 //! the sun, or that would need more than a few bands, are shaded pixel by pixel (the disc
 //! depends on each pixel's own elevation and azimuth).
 //!
+//! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
+//! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
+//! band whose sea mirrors a card shades that card's columns pixel by pixel, and rows whose sea
+//! may show the sun's glitter are shaded pixel by pixel like rows that meet the sun.
+//!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
 //!

@@ -1,7 +1,7 @@
 //! Render — shading. In: one sample's apparent elevation and direction, and its ray (interpolated
 //! from the elevation fan or traced): heights at the card distances and how it ended. Out: linear
 //! RGB radiance from the cards it meets (front to back, alpha respected), then the sky, sun or sea
-//! behind them. Tables of sky and sea radiance by angle make each sample a few lookups. With
+//! behind them (the sea with its reflections of the cards and the sun, `super::reflection`). Tables of sky and sea radiance by angle make each sample a few lookups. With
 //! the sky's aerial perspective ([`crate::scene::sky::Extinction`]) a card or the sea is seen
 //! through the optical depth of the chord from the camera to the point the ray meets it.
 

@@ -723,6 +723,11 @@ impl Scene {
                 "1…3",
             )?,
             wave_slope_rad: sea_wave_slope_rad(&c, &raw.sea)?,
+            wind_speed_m_s: raw
+                .sea
+                .wave_slope_deg
+                .is_none()
+                .then_some(raw.sea.wind_speed_m_s.unwrap_or(0.0)),
             reflections: raw.sea.reflections.unwrap_or(d.reflections),
         };
 

@@ -54,6 +54,9 @@ pub struct Sea {
     /// Root-mean-square slope of the wave facets as an angle, atan σ (rad; σ² the Cox–Munk mean
     /// square slope, summed over both directions); 0 is a mirror-flat sea.
     pub wave_slope_rad: f64,
+    /// The wind speed (m/s) `wave_slope_rad` was derived from by Cox–Munk; `None` when the slope
+    /// was given directly.
+    pub wind_speed_m_s: Option<f64>,
     /// Whether the renderer shows the cards' mirror images and the sun's glitter on the sea
     /// (`false`: the sky reflection alone, the cheaper model before they existed).
     pub reflections: bool,
@@ -65,6 +68,7 @@ impl Default for Sea {
             water_rgb: [0.004, 0.012, 0.018],
             refractive_index: 1.333,
             wave_slope_rad: cox_munk_rms_slope_rad(0.0),
+            wind_speed_m_s: Some(0.0),
             reflections: true,
         }
     }
