@@ -591,6 +591,9 @@ fn traced_grid(
         .collect()
 }
 
+/// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
+const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
+
 /// What [`sea_reflection`] needs of the frame.
 struct SeaReflectionInputs<'a> {
     scene: &'a Scene,
@@ -646,10 +649,13 @@ fn sea_reflection(
     // elevation, so interpolation is exact for them); an eighth of the facet slope spread
     // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
     let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
-    let fan = inp.farthest_card_m.and_then(|d| {
-        let need_sky = mirror && scene.sun.is_some();
-        reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky)
-    });
+    // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
+    let need_sky = mirror && scene.sun.is_some();
+    let max_range_m = inp
+        .farthest_card_m
+        .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
+    let fan = max_range_m
+        .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky));
     let sky = scene.sky;
     let glint = scene.sun.filter(|_| !mirror).map(|sun| {
         let refraction_rad = reflection::sea_level_refraction_rad(inp.tracer, sun.elevation_rad);

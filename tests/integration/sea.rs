@@ -191,14 +191,19 @@ fn glitter_is_centred_under_the_sun_and_below_the_horizon() {
     // The glitter stands out: its column is far brighter than one 8° away from the sun.
     let away = film.width as usize / 2 - (5.0 / pixel_deg) as usize;
     assert!(column_sums[column] > 3.0 * column_sums[away]);
-    // Without wind-roughened facets (a mirror) the sun out of frame leaves no glitter.
+    // On a mirror sea there is no glitter: only the disc's mirror image, at ≈ −8° (the frame's
+    // bottom edge); above −7° the sea is the reflected sky.
     let (_dir2, calm) = scene(camera, "wave_slope_deg = 0.0", &sun);
     let calm_film = render(&calm, false);
-    let calm_max = calm_film
-        .pixels
-        .iter()
-        .map(|p| luminance(*p))
-        .fold(0.0, f32::max);
+    let mut calm_max = 0.0f32;
+    for y in 0..calm_film.height {
+        for x in 0..calm_film.width {
+            let d = frame.view_direction(x as f64 + 0.5, y as f64 + 0.5);
+            if d.elevation_rad > -7f64.to_radians() {
+                calm_max = calm_max.max(luminance(calm_film.pixel(x, y)));
+            }
+        }
+    }
     assert!(calm_max < 4.0, "{calm_max}");
 }
 
@@ -223,4 +228,45 @@ fn reflections_do_not_depend_on_the_thread_count() {
             "{sea}: pixels differ between 1 and 2 threads"
         );
     }
+}
+
+#[test]
+fn a_mirror_sea_shows_the_sun_disc_mirrored_below_the_horizon() {
+    // Sun 0.3° up, 0.2° right; a mirror sea; no cards. Straight rays from 10 m: the image of a
+    // point at infinity at elevation e lies at −e − 2d/R ≈ −e (d = 10 m / e ≈ 2 km: 0.6 mrad).
+    let (e_s, a_s) = (0.3f64.to_radians(), 0.2f64.to_radians());
+    let sun = format!(
+        "[sun]\nelevation_deg = {}\nazimuth_deg = {}\n",
+        e_s.to_degrees(),
+        a_s.to_degrees()
+    );
+    let camera = "pitch_deg = -0.2\nhfov_deg = 2.0\nwidth = 400\nheight = 200";
+    let (_dir, s) = scene(camera, "wave_slope_deg = 0.0", &sun);
+    let film = render(&s, false);
+    let frame = s.camera.frame();
+    let luminance = |p: [f32; 4]| p[0] + p[1] + p[2];
+    let mut best = (0u32, 0u32, f32::MIN);
+    for y in 0..film.height {
+        for x in 0..film.width {
+            let d = frame.view_direction(x as f64 + 0.5, y as f64 + 0.5);
+            let l = luminance(film.pixel(x, y));
+            if d.elevation_rad < -1e-3 && l > best.2 {
+                best = (x, y, l);
+            }
+        }
+    }
+    let d = frame.view_direction(best.0 as f64 + 0.5, best.1 as f64 + 0.5);
+    let radius = 0.5 * 0.533f64.to_radians();
+    let expected = -e_s - 2.0 * (CAMERA_M / e_s) / R;
+    assert!(best.2 > 100.0, "no bright mirror image: {}", best.2);
+    assert!(
+        (d.elevation_rad - expected).abs() < radius,
+        "{} vs {expected}",
+        d.elevation_rad
+    );
+    assert!(
+        (d.azimuth_offset_rad() - a_s).abs() < radius,
+        "{}",
+        d.azimuth_offset_rad()
+    );
 }
