@@ -18,6 +18,11 @@
 //! the sun, or that would need more than a few bands, are shaded pixel by pixel (the disc
 //! depends on each pixel's own elevation and azimuth).
 //!
+//! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
+//! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
+//! band whose sea mirrors a card shades that card's columns pixel by pixel, and rows whose sea
+//! may show the sun's glitter are shaded pixel by pixel like rows that meet the sun.
+//!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
 //!
@@ -29,6 +34,7 @@ mod air_paths;
 pub mod curved;
 pub mod elevation_fan;
 pub mod ray_model;
+mod reflection;
 mod shade;
 mod sun;
 pub mod terrain;
@@ -132,6 +138,9 @@ pub struct RenderStats {
     /// Rays whose paths to the cards and the sea were integrated for the aerial perspective (0
     /// without `visibility_km`, or for straight rays, whose chord is their path).
     pub air_path_rays: usize,
+    /// Rays traced from the sea surface for its reflections of the cards (0 without cards beyond
+    /// the sea in view, or with `[sea] reflections = false`).
+    pub sea_fan_rays: usize,
 }
 
 /// A rendered image: linear RGBA f32, row-major, row 0 at the top.
@@ -308,6 +317,11 @@ struct FlatBand {
     background: [f64; 3],
     /// Whether every sample of the band sees only sky (no fan lookup was needed).
     clear_sky: bool,
+    /// How the band's ray ended.
+    fan_end: FanEnd,
+    /// Whether the sea it meets may mirror a card (its card columns then shade the sea's
+    /// reflections pixel by pixel).
+    reflects: bool,
 }
 
 /// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
@@ -383,16 +397,22 @@ fn shade_flat_row(
                 alpha,
                 background: ctx.shader.sky_table.at(alpha),
                 clear_sky: true,
+                fan_end: FanEnd::Lost,
+                reflects: false,
             });
             continue;
         }
         let fan_end = ctx.fan.interpolate(alpha, heights);
-        if ctx.shader.may_meet_sun(fan_end) {
+        if ctx.shader.may_meet_sun(fan_end) || ctx.shader.may_meet_glint(fan_end) {
             return false;
         }
+        let mut reflects = false;
         for card in &ctx.shader.cards {
-            if let Some(h) = heights[card.distance_index]
-                && !(h < card.base_m || h > card.top_m)
+            let mirrored = ctx.shader.may_reflect_card(fan_end, card);
+            reflects |= mirrored;
+            if mirrored
+                || heights[card.distance_index]
+                    .is_some_and(|h| !(h < card.base_m || h > card.top_m))
             {
                 let range = card_column_range(card, ctx.frame, ctx.y, width);
                 columns.push((k, range.unwrap_or((0, width as usize))));
@@ -405,8 +425,10 @@ fn shade_flat_row(
             start,
             end,
             alpha,
-            background: ctx.shader.background(&dir, fan_end),
+            background: ctx.shader.background_with(&dir, fan_end, false),
             clear_sky: false,
+            fan_end,
+            reflects,
         });
     }
     shade_bands(ctx, row, &bands, band_heights, columns, non_finite);
@@ -463,7 +485,12 @@ fn shade_bands(
                 .frame
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
             let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
-            pixel(finite(ctx.shader.composite(&dir, heights, band.background)))
+            let background = if band.reflects {
+                ctx.shader.background(&dir, band.fan_end)
+            } else {
+                band.background
+            };
+            pixel(finite(ctx.shader.composite(&dir, heights, background)))
         } else {
             if !band.background.iter().all(|v| v.is_finite()) {
                 non_finite.fetch_add(1, Ordering::Relaxed);
@@ -563,6 +590,96 @@ fn traced_grid(
             (alpha, tracer.trace(camera_height_m, alpha, &[], true).end)
         })
         .collect()
+}
+
+/// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
+const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
+
+/// What [`sea_reflection`] needs of the frame.
+struct SeaReflectionInputs<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    fan: Option<&'a ElevationFan>,
+    elevations: (f64, f64),
+    pixel_rad: f64,
+    camera_height_m: f64,
+    /// The card distances in view (m).
+    distances_m: &'a [f64],
+    /// The farthest card in view (m), if any.
+    farthest_card_m: Option<f64>,
+}
+
+/// The sea's reflections for a frame: a sea fan when a card is in view (over the reflected
+/// elevations the frame's grazing angles and the wave facets reach), the sun's glitter or mirror
+/// image. `None` when the scene turns reflections off or the frame shows no sea.
+/// `reflected_sky`: the sky by elevation over [0, π/2].
+fn sea_reflection(
+    reflected_sky: AngleTable,
+    inp: &SeaReflectionInputs<'_>,
+) -> Option<reflection::Reflection> {
+    let scene = inp.scene;
+    let sea = scene.sea;
+    if !sea.reflections {
+        return None;
+    }
+    // The steepest grazing angle in the frame: the fan's, or in exact mode that of the frame's
+    // lowest ray (Bouguer's invariant n(h)(R + h) cos e fixes cos g = n_c (R + h_c) cos α /
+    // (n_0 R): the steepest launch meets the sea steepest).
+    let max_grazing = match inp.fan {
+        Some(fan) => fan.max_grazing_rad(),
+        None => {
+            let ray = inp.tracer.trace(
+                inp.camera_height_m,
+                inp.elevations.0,
+                inp.distances_m,
+                false,
+            );
+            match ray.end {
+                FanEnd::Ground { grazing_rad, .. } if grazing_rad.is_finite() => Some(grazing_rad),
+                _ => None,
+            }
+        }
+    }?;
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    let sigma_along = sea.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2;
+    let e_hi = (max_grazing + 8.0 * sigma_along)
+        .min(half_pi)
+        .max(inp.pixel_rad);
+    let mirror = sea.wave_slope_rad == 0.0;
+    // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
+    // elevation, so interpolation is exact for them); an eighth of the facet slope spread
+    // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
+    let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
+    // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
+    let need_sky = mirror && scene.sun.is_some();
+    let max_range_m = inp
+        .farthest_card_m
+        .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
+    let fan = max_range_m
+        .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky));
+    let sky = scene.sky;
+    let glint = scene.sun.filter(|_| !mirror).map(|sun| {
+        let refraction_rad = reflection::sea_level_refraction_rad(inp.tracer, sun.elevation_rad);
+        let t = sky.transmittance(sun.elevation_rad + refraction_rad);
+        let r = 0.5 * sun.angular_diameter_rad;
+        let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
+        reflection::Glint {
+            sun,
+            refraction_rad,
+            irradiance: t.map(|t| sun.intensity * solid_angle * t),
+            radiance_cap: t.map(|t| sun.intensity * t),
+        }
+    });
+    Some(reflection::Reflection {
+        sea,
+        sky,
+        earth_radius_m: scene.earth_radius_m,
+        fan,
+        sky_table: reflected_sky,
+        facets: reflection::FacetTable::new(&sea, max_grazing),
+        glint,
+        mirror_sun: scene.sun.filter(|_| mirror),
+    })
 }
 
 /// Render `scene` through `tracer`.
@@ -719,12 +836,37 @@ pub fn render_scene(
         let band = sun_band_rad(&sun, pixel_rad);
         SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
     });
+    // The sky by the elevation of a reflected ray, from the sea table's facet classes and the
+    // sea's reflections alike.
+    let reflected_sky = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
+        sky.radiance_with_depths(e, depths)
+    });
+    let sea_table = AngleTable::new(0.0, sea_hi, |g| {
+        sea.radiance_reflecting(g, |e| reflected_sky.at(e))
+    });
+    let reflection = sea_reflection(
+        reflected_sky,
+        &SeaReflectionInputs {
+            scene,
+            tracer,
+            fan: fan.as_ref(),
+            elevations,
+            pixel_rad,
+            camera_height_m: cam.height_m,
+            distances_m: &distances_m,
+            farthest_card_m: distances_m.last().copied(),
+        },
+    );
+    stats.sea_fan_rays = reflection
+        .as_ref()
+        .and_then(|r| r.fan.as_ref())
+        .map_or(0, reflection::SeaFan::len);
     let shader = Shader {
+        distances_m: distances_m.clone(),
+        reflection,
         cards,
         sky_table,
-        sea_table: AngleTable::new(0.0, sea_hi, |g| {
-            sea.radiance_with_sky_depths(g, &sky, depths)
-        }),
+        sea_table,
         sun: scene.sun.as_ref().map(SunDisc::new),
         sun_transmittance: scene
             .sun

@@ -1,7 +1,7 @@
 //! Render — shading. In: one sample's apparent elevation and direction, and its ray (interpolated
 //! from the elevation fan or traced): heights at the card distances and how it ended. Out: linear
 //! RGB radiance from the cards it meets (front to back, alpha respected), then the sky, sun or sea
-//! behind them. Tables of sky and sea radiance by angle make each sample a few lookups. With
+//! behind them (the sea with its reflections of the cards and the sun, `super::reflection`). Tables of sky and sea radiance by angle make each sample a few lookups. With
 //! the sky's aerial perspective ([`crate::scene::sky::Extinction`]) a card or the sea is seen
 //! through the optical depth of the chord from the camera to the point the ray meets it.
 
@@ -10,8 +10,8 @@ use rayon::prelude::*;
 use super::air_paths::{AirPaths, Meets};
 use super::ray_model::FanEnd;
 use super::sun::SunTransmittance;
-use crate::scene::camera::ViewDirection;
 use crate::scene::Texture;
+use crate::scene::camera::ViewDirection;
 use crate::scene::sky::{Extinction, SunDisc};
 
 /// The aerial perspective of a frame: extinction and the geometry of the chords.
@@ -137,6 +137,10 @@ pub(super) struct Shader<'a> {
     pub(super) fallback: [f64; 3],
     /// Aerial perspective towards cards and the sea (`None`: none).
     pub(super) aerial: Option<AerialShading>,
+    /// The card distances (m), indexed like a ray's heights.
+    pub(super) distances_m: Vec<f64>,
+    /// The sea's reflections of the cards and the sun (`None`: the sky reflection alone).
+    pub(super) reflection: Option<super::reflection::Reflection>,
 }
 
 #[inline]
@@ -147,6 +151,58 @@ pub(super) fn wrap_pi(x: f64) -> f64 {
 }
 
 impl Shader<'_> {
+    /// Ground distance (m) of the cards with distance index `k`.
+    #[inline]
+    pub(super) fn card_distance_m(&self, k: usize) -> f64 {
+        self.distances_m[k]
+    }
+
+    /// Whether a ray that ended with `end` may show the sun's glitter or mirror image on the
+    /// sea (then the colour depends on the azimuth).
+    #[inline]
+    pub(super) fn may_meet_glint(&self, end: FanEnd) -> bool {
+        match (end, &self.reflection) {
+            (
+                FanEnd::Ground {
+                    grazing_rad,
+                    distance_m,
+                },
+                Some(r),
+            ) => r.may_show_sun(grazing_rad, distance_m),
+            _ => false,
+        }
+    }
+
+    /// Whether the sea a ray that ended with `end` mirrors `card` (some facet class that
+    /// counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray within the card's
+    /// height range at its range): then the colour depends on the azimuth in its columns.
+    #[inline]
+    pub(super) fn may_reflect_card(&self, end: FanEnd, card: &ViewCard<'_>) -> bool {
+        let (
+            FanEnd::Ground {
+                grazing_rad,
+                distance_m,
+            },
+            Some(r),
+        ) = (end, &self.reflection)
+        else {
+            return false;
+        };
+        let Some(fan) = &r.fan else {
+            return false;
+        };
+        let range_m = self.card_distance_m(card.distance_index) - distance_m;
+        if range_m <= 0.0 {
+            return false;
+        }
+        r.facets.at(grazing_rad).iter().any(|node| {
+            node.weight * node.reflectance >= super::reflection::MIN_NODE_SHARE
+                && fan
+                    .height(node.reflected_elevation_rad, range_m)
+                    .is_some_and(|h| h >= card.base_m && h <= card.top_m)
+        })
+    }
+
     /// Radiance of a sample looking along `dir` along a ray with `heights` at the card distances
     /// and end `end`.
     #[inline]
@@ -237,13 +293,31 @@ impl Shader<'_> {
     /// shaded by this alone ([`Self::shade`] adds nothing to it).
     #[inline]
     pub(super) fn background(&self, dir: &ViewDirection, end: FanEnd) -> [f64; 3] {
+        self.background_with(dir, end, true)
+    }
+
+    /// [`Self::background`]; without `reflections` the sea shows only its tabulated sky
+    /// reflection (no mirrored cards, no sun): what a flat band shares across its columns.
+    #[inline]
+    pub(super) fn background_with(
+        &self,
+        dir: &ViewDirection,
+        end: FanEnd,
+        reflections: bool,
+    ) -> [f64; 3] {
         let alpha = dir.elevation_rad;
         match end {
             FanEnd::Ground {
                 grazing_rad,
                 distance_m,
             } => {
-                let sea = self.sea_table.at(grazing_rad);
+                let mut sea = self.sea_table.at(grazing_rad);
+                if reflections && self.reflection.is_some() {
+                    let extra = self.sea_reflections(dir, grazing_rad, distance_m, true);
+                    for c in 0..3 {
+                        sea[c] += extra[c];
+                    }
+                }
                 match &self.aerial {
                     Some(aerial) => aerial.seen(sea, 1.0, alpha, Meets::Sea, 0.0, distance_m),
                     None => sea,

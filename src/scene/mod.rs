@@ -36,7 +36,8 @@
 //! [sea]                      # see scene::sea
 //! water_rgb = [0.004, 0.012, 0.018]
 //! refractive_index = 1.333
-//! wave_slope_deg = 3.0
+//! wind_speed_m_s = 0.0       # Cox–Munk wave slopes (or wave_slope_deg = 3.0, not both)
+//! reflections = true         # mirror images of the cards and the sun's glitter
 //!
 //! [[cards]]
 //! image = "../cards/ship.png"
@@ -297,6 +298,8 @@ struct RawSea {
     water_rgb: Option<[f64; 3]>,
     refractive_index: Option<f64>,
     wave_slope_deg: Option<f64>,
+    wind_speed_m_s: Option<f64>,
+    reflections: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -420,6 +423,30 @@ fn terrain_section(
     })?;
     let digest: [u8; 32] = Sha256::digest(&bytes).into();
     Ok((Terrain::new(dem_path, dem, (lat, lon), palette), digest))
+}
+
+/// The sea's rms facet slope (rad): `wave_slope_deg` if given, else Cox–Munk at
+/// `wind_speed_m_s` (default 0 m/s); giving both is an error.
+fn sea_wave_slope_rad(c: &Checker<'_>, raw: &RawSea) -> Result<f64, SceneError> {
+    match (raw.wave_slope_deg, raw.wind_speed_m_s) {
+        (Some(_), Some(_)) => Err(c.invalid(
+            "sea.wind_speed_m_s",
+            "give either sea.wave_slope_deg or sea.wind_speed_m_s, not both".to_string(),
+        )),
+        (Some(deg), None) => Ok(c
+            .range("sea.wave_slope_deg", deg, 0.0, 45.0, "0…45°")?
+            .to_radians()),
+        (None, wind) => {
+            let u = c.range(
+                "sea.wind_speed_m_s",
+                wind.unwrap_or(0.0),
+                0.0,
+                50.0,
+                "0…50 m/s",
+            )?;
+            Ok(sea::cox_munk_rms_slope_rad(u))
+        }
+    }
 }
 
 /// Largest supported card distance (m): beyond a few hundred km the ray model is pointless.
@@ -695,17 +722,13 @@ impl Scene {
                 3.0,
                 "1…3",
             )?,
-            wave_slope_rad: c
-                .range(
-                    "sea.wave_slope_deg",
-                    raw.sea
-                        .wave_slope_deg
-                        .unwrap_or(d.wave_slope_rad.to_degrees()),
-                    0.0,
-                    45.0,
-                    "0…45°",
-                )?
-                .to_radians(),
+            wave_slope_rad: sea_wave_slope_rad(&c, &raw.sea)?,
+            wind_speed_m_s: raw
+                .sea
+                .wave_slope_deg
+                .is_none()
+                .then_some(raw.sea.wind_speed_m_s.unwrap_or(0.0)),
+            reflections: raw.sea.reflections.unwrap_or(d.reflections),
         };
 
         let mut cards = Vec::with_capacity(raw.cards.len());

@@ -1,19 +1,23 @@
-//! Scene — the sea surface. In: the grazing angle at which a ray meets the sea, and the sky.
-//! Out: linear RGB radiance of the sea there.
+//! Scene — the sea surface. In: the grazing angle at which a ray meets the sea, what the
+//! reflected rays see (the renderer supplies it), and the sun. Out: linear RGB radiance of the
+//! sea there: Fresnel-weighted reflection plus the water colour.
 //!
-//! Model (plausible, not a wave simulation): the sea reflects the sky with the unpolarised Fresnel
-//! reflectance of water, and lets the dark water colour through the rest:
+//! Model: wave facets with the isotropic Gaussian slope distribution of Cox & Munk (1954), mean
+//! square slope σ² = 0.003 + 5.12·10⁻³ U (U: wind speed, m/s; [`cox_munk_mean_square_slope`]).
 //!
-//! ```text
-//! g'  = √(g² + s²)                     effective grazing angle (s: typical wave-facet slope)
-//! L   = F(g') · L_sky(g') + (1 − F(g')) · L_water
-//! ```
-//!
-//! Wave facets are tilted by about s (Cox–Munk rms slopes are 0.1–0.2 rad in moderate wind; the
-//! default 3° is a calm arctic sea), so the reflection is never exactly grazing: the sea stays a
-//! little darker than the sky right up to the horizon, which keeps the horizon visible. The
-//! reflected ray is not traced again (it would see the sky at elevation g'); reflections of cards
-//! and of the sun (glitter) are not modelled.
+//! * **Mirror images and sky** ([`Sea::facet_nodes`]): a ray meeting the sea at grazing angle g
+//!   sees facets tilted towards it by s along its vertical plane (s ~ N(0, σ²/2), only facets
+//!   with g + s > 0 are visible, weighted by their projected area ∝ sin(g + s)). A facet
+//!   reflects the ray upwards at elevation g + 2s (clamped to ≥ 0: a ray sent back into the sea
+//!   is taken to skim it) with the Fresnel reflectance at its own grazing angle g + s. The sea is
+//!   `Σ wᵢ (Fᵢ Lᵢ + (1 − Fᵢ) L_water)` over a few such facet classes, Lᵢ being what the reflected
+//!   ray sees (sky, sun, cards). σ = 0 is a mirror: one class, the reflected ray at g.
+//! * **Sun glitter** ([`Sea::glint_per_irradiance`], σ > 0): the sun is too small to be found by
+//!   a few reflected rays, so its reflection is the Cox–Munk glint radiance
+//!   `L = E ρ(ω) p(z_x, z_y) / (4 cos θ_v cos⁴ β)` (E: solar irradiance normal to the beam, β the
+//!   tilt of the facet that mirrors the sun into the ray, ω the incidence angle on it, θ_v the
+//!   ray's zenith angle at the sea), capped at ρ × the sun's own radiance (no facet shows the sun
+//!   brighter than a mirror would). Shadowing of facets by waves is not modelled.
 
 use serde::Serialize;
 
@@ -47,8 +51,15 @@ pub struct Sea {
     pub water_rgb: [f64; 3],
     /// Refractive index of sea water (1.333 in the visible; 1.34 for salt water).
     pub refractive_index: f64,
-    /// Typical slope of the wave facets (rad); 0 is a mirror-flat sea.
+    /// Root-mean-square slope of the wave facets as an angle, atan σ (rad; σ² the Cox–Munk mean
+    /// square slope, summed over both directions); 0 is a mirror-flat sea.
     pub wave_slope_rad: f64,
+    /// The wind speed (m/s) `wave_slope_rad` was derived from by Cox–Munk; `None` when the slope
+    /// was given directly.
+    pub wind_speed_m_s: Option<f64>,
+    /// Whether the renderer shows the cards' mirror images and the sun's glitter on the sea
+    /// (`false`: the sky reflection alone, the cheaper model before they existed).
+    pub reflections: bool,
 }
 
 impl Default for Sea {
@@ -56,13 +67,48 @@ impl Default for Sea {
         Self {
             water_rgb: [0.004, 0.012, 0.018],
             refractive_index: 1.333,
-            wave_slope_rad: 3f64.to_radians(),
+            wave_slope_rad: cox_munk_rms_slope_rad(0.0),
+            wind_speed_m_s: Some(0.0),
+            reflections: true,
         }
     }
 }
 
+/// Cox & Munk (1954) clean-sea mean square slope σ² = 0.003 + 5.12·10⁻³ U for a wind speed U
+/// (m/s, at 12.5 m above the sea; negative speeds count as 0), summed over the up- and
+/// cross-wind directions.
+pub fn cox_munk_mean_square_slope(wind_speed_m_s: f64) -> f64 {
+    0.003 + 5.12e-3 * wind_speed_m_s.max(0.0)
+}
+
+/// The Cox–Munk rms slope at `wind_speed_m_s` as an angle, atan √σ² (rad).
+pub fn cox_munk_rms_slope_rad(wind_speed_m_s: f64) -> f64 {
+    cox_munk_mean_square_slope(wind_speed_m_s).sqrt().atan()
+}
+
+/// The isotropic Cox–Munk slope density p(z_x, z_y) = exp(−(z_x² + z_y²)/σ²) / (π σ²) at a facet
+/// of tilt β (`tan2_tilt` = tan² β = z_x² + z_y²), for mean square slope `mean_square_slope`.
+pub fn cox_munk_pdf(tan2_tilt: f64, mean_square_slope: f64) -> f64 {
+    if mean_square_slope <= 0.0 {
+        return 0.0;
+    }
+    (-tan2_tilt / mean_square_slope).exp() / (std::f64::consts::PI * mean_square_slope)
+}
+
+/// One class of wave facets seen by a ray meeting the sea ([`Sea::facet_nodes`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FacetNode {
+    /// Elevation of the reflected ray above the local horizontal (rad, ≥ 0).
+    pub reflected_elevation_rad: f64,
+    /// Share of the visible sea surface (the weights of a set sum to 1; 0: unused node).
+    pub weight: f64,
+    /// Fresnel reflectance at the facet.
+    pub reflectance: f64,
+}
+
 impl Sea {
-    /// Radiance of the sea for a ray arriving at `grazing_rad`, reflecting `sky`.
+    /// Radiance of the sea for a ray arriving at `grazing_rad`, reflecting `sky` (no sun, no
+    /// cards).
     pub fn radiance(&self, grazing_rad: f64, sky: &super::sky::Sky) -> [f64; 3] {
         self.radiance_with_sky_depths(grazing_rad, sky, sky.optical_depths())
     }
@@ -70,17 +116,137 @@ impl Sea {
     /// [`Sea::radiance`] with `sky`'s optical depths `depths` (from
     /// [`Sky::optical_depths`](super::sky::Sky::optical_depths)) computed once by the caller:
     /// the same result, cheaper per call.
-    #[inline]
     pub fn radiance_with_sky_depths(
         &self,
         grazing_rad: f64,
         sky: &super::sky::Sky,
         depths: [f64; 3],
     ) -> [f64; 3] {
-        let g = grazing_rad.hypot(self.wave_slope_rad);
-        let f = fresnel_reflectance(g, self.refractive_index);
-        let s = sky.radiance_with_depths(g, depths);
-        [0, 1, 2].map(|c| f * s[c] + (1.0 - f) * self.water_rgb[c])
+        self.radiance_reflecting(grazing_rad, |e| sky.radiance_with_depths(e, depths))
+    }
+
+    /// Radiance of the sea for a ray arriving at `grazing_rad` when a reflected ray leaving at
+    /// elevation e sees `seen(e)` (the facet classes of [`Sea::facet_nodes`], 24 of them).
+    pub fn radiance_reflecting(
+        &self,
+        grazing_rad: f64,
+        seen: impl Fn(f64) -> [f64; 3],
+    ) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for node in self.facet_nodes::<24>(grazing_rad) {
+            if node.weight == 0.0 {
+                continue;
+            }
+            let l = seen(node.reflected_elevation_rad);
+            let f = node.reflectance;
+            for c in 0..3 {
+                out[c] += node.weight * (f * l[c] + (1.0 - f) * self.water_rgb[c]);
+            }
+        }
+        out
+    }
+
+    /// `K` classes of the facets a ray meeting the sea at `grazing_rad` sees (see the module
+    /// docs): along-ray slopes s at the midpoints of K equal cells over [max(−g, −4σ′), 4σ′]
+    /// (σ′ = σ/√2), weighted by sin(g + s)·exp(−s²/2σ′²) and normalised. A mirror sea (σ = 0),
+    /// or a non-finite grazing angle (taken as 0), gives one node at g with weight 1.
+    pub fn facet_nodes<const K: usize>(&self, grazing_rad: f64) -> [FacetNode; K] {
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        let g = if grazing_rad.is_finite() {
+            grazing_rad.clamp(0.0, half_pi)
+        } else {
+            0.0
+        };
+        let n = self.refractive_index;
+        let mut nodes = [FacetNode::default(); K];
+        let sigma_along = self.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2;
+        if K == 0 {
+            return nodes;
+        }
+        if !(sigma_along > 0.0 && sigma_along.is_finite()) {
+            nodes[0] = FacetNode {
+                reflected_elevation_rad: g,
+                weight: 1.0,
+                reflectance: fresnel_reflectance(g, n),
+            };
+            return nodes;
+        }
+        let (lo, hi) = ((-g).max(-4.0 * sigma_along), 4.0 * sigma_along);
+        let step = (hi - lo) / K as f64;
+        let mut total = 0.0;
+        for (i, node) in nodes.iter_mut().enumerate() {
+            let s = lo + (i as f64 + 0.5) * step;
+            let facet_grazing = (g + s).clamp(0.0, half_pi);
+            let w = facet_grazing.sin() * (-0.5 * (s / sigma_along).powi(2)).exp();
+            total += w;
+            *node = FacetNode {
+                reflected_elevation_rad: (g + 2.0 * s).clamp(0.0, half_pi),
+                weight: w,
+                reflectance: fresnel_reflectance(facet_grazing, n),
+            };
+        }
+        if total > 0.0 {
+            for node in &mut nodes {
+                node.weight /= total;
+            }
+        } else {
+            // Exactly grazing: no facet area faces the ray; the limit is the first class.
+            nodes[0].weight = 1.0;
+        }
+        nodes
+    }
+
+    /// Cox–Munk sun glint (see the module docs) per unit solar irradiance normal to the beam:
+    /// the radiance the sea sends along a ray that meets it at `grazing_rad`, from a sun at
+    /// elevation `sun_elevation_rad` above the local horizontal and azimuth `sun_azimuth_rad`
+    /// relative to the ray's own horizontal direction (0: the sun straight ahead of the ray). 0
+    /// for a mirror sea (its sun is a mirror image), a sun below the local horizon, or a grazing
+    /// angle ≤ 0.
+    pub fn glint_per_irradiance(
+        &self,
+        grazing_rad: f64,
+        sun_elevation_rad: f64,
+        sun_azimuth_rad: f64,
+    ) -> f64 {
+        let sigma2 = self.wave_slope_rad.tan().powi(2);
+        let g = grazing_rad;
+        if !(sigma2 > 0.0 && g > 0.0 && sun_elevation_rad > 0.0) {
+            return 0.0;
+        }
+        let (se, ce) = sun_elevation_rad.sin_cos();
+        let (sa, ca) = sun_azimuth_rad.sin_cos();
+        // Towards the sun, and back along the ray towards the camera: (forward, right, up).
+        let sun = [ce * ca, ce * sa, se];
+        let view = [-g.cos(), 0.0, g.sin()];
+        let h = [sun[0] + view[0], sun[1] + view[1], sun[2] + view[2]];
+        let norm = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+        if norm.is_nan() || norm <= 0.0 || h[2] <= 0.0 {
+            return 0.0;
+        }
+        let cos_tilt = h[2] / norm;
+        let tan2 = (h[0] * h[0] + h[1] * h[1]) / (h[2] * h[2]);
+        let cos_incidence = (h[0] * sun[0] + h[1] * sun[1] + h[2] * sun[2]) / norm;
+        let rho = fresnel_reflectance(cos_incidence.clamp(-1.0, 1.0).asin(), self.refractive_index);
+        rho * cox_munk_pdf(tan2, sigma2) / (4.0 * g.sin() * cos_tilt.powi(4))
+    }
+
+    /// Whether a ray meeting the sea at `grazing_rad` can show a glint of relative size above
+    /// e⁻⁴⁰ from a sun at local elevation within `sun_elevation_rad` (lo, hi): the facet that
+    /// mirrors it, tilted at least |e − g|/2, is within ≈ 9σ′ of level.
+    pub fn may_glint(&self, grazing_rad: f64, sun_elevation_rad: (f64, f64)) -> bool {
+        let sigma2 = self.wave_slope_rad.tan().powi(2);
+        if !(sigma2 > 0.0 && grazing_rad > 0.0 && sun_elevation_rad.1 > 0.0) {
+            return false;
+        }
+        let (lo, hi) = sun_elevation_rad;
+        let gap = if grazing_rad < lo {
+            lo - grazing_rad
+        } else if grazing_rad > hi {
+            grazing_rad - hi
+        } else {
+            0.0
+        };
+        (0.5 * gap).tan().powi(2) / sigma2 < 40.0
     }
 }
 
@@ -139,5 +305,90 @@ mod tests {
         let steep = sea.radiance(0.5, &sky);
         assert!(near[1] > steep[1]);
         assert!(near[1] < sky.radiance(0.0)[1]);
+    }
+
+    #[test]
+    fn cox_munk_slopes_follow_the_published_formula() {
+        // Cox & Munk (1954), clean surface: σ² = 0.003 + 5.12e-3 U ± 0.004, U in m/s at 12.5 m.
+        for (u, sigma2) in [(0.0, 0.003), (5.0, 0.0286), (10.0, 0.0542), (14.0, 0.07468)] {
+            assert!(
+                (cox_munk_mean_square_slope(u) - sigma2).abs() < 1e-12,
+                "{u}"
+            );
+            let angle = cox_munk_rms_slope_rad(u);
+            assert!((angle.tan().powi(2) - sigma2).abs() < 1e-12, "{u}");
+        }
+        assert_eq!(cox_munk_mean_square_slope(-3.0), 0.003);
+        // The isotropic density integrates to 1 over the slope plane (midpoint rule on ±6σ).
+        let sigma2 = cox_munk_mean_square_slope(7.0);
+        let (n, half) = (600, 6.0 * sigma2.sqrt());
+        let step = 2.0 * half / n as f64;
+        let mut total = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let zx = -half + (i as f64 + 0.5) * step;
+                let zy = -half + (j as f64 + 0.5) * step;
+                total += cox_munk_pdf(zx * zx + zy * zy, sigma2) * step * step;
+            }
+        }
+        assert!((total - 1.0).abs() < 1e-6, "{total}");
+        // Each slope component has variance σ²/2.
+        let mut second = 0.0;
+        for i in 0..n {
+            let zx = -half + (i as f64 + 0.5) * step;
+            for j in 0..n {
+                let zy = -half + (j as f64 + 0.5) * step;
+                second += zx * zx * cox_munk_pdf(zx * zx + zy * zy, sigma2) * step * step;
+            }
+        }
+        assert!((second / (0.5 * sigma2) - 1.0).abs() < 1e-4, "{second}");
+    }
+
+    #[test]
+    fn facet_nodes_are_normalised_and_a_mirror_reflects_at_the_grazing_angle() {
+        let mirror = Sea {
+            wave_slope_rad: 0.0,
+            ..Sea::default()
+        };
+        let n = mirror.facet_nodes::<8>(0.01);
+        assert_eq!(n[0].reflected_elevation_rad, 0.01);
+        assert_eq!(n[0].weight, 1.0);
+        assert!(n[1..].iter().all(|n| n.weight == 0.0));
+        assert_eq!(n[0].reflectance, fresnel_reflectance(0.01, 1.333));
+        let rough = Sea::default();
+        for g in [0.0, 0.001, 0.05, 0.5, 1.5] {
+            let n = rough.facet_nodes::<24>(g);
+            let total: f64 = n.iter().map(|n| n.weight).sum();
+            assert!((total - 1.0).abs() < 1e-12, "{g}");
+            assert!(n.iter().all(|n| n.reflected_elevation_rad >= 0.0));
+        }
+        // Far from grazing the mean reflected elevation is the mirror direction.
+        let n = rough.facet_nodes::<24>(0.5);
+        let mean: f64 = n.iter().map(|n| n.weight * n.reflected_elevation_rad).sum();
+        assert!((mean - 0.5).abs() < 0.02, "{mean}");
+    }
+
+    #[test]
+    fn glint_peaks_at_the_specular_direction() {
+        // Sun straight ahead of the ray at 20°: where the ray meets the sea at 20° a level
+        // facet mirrors the sun, and the glint is symmetric in the sun's azimuth.
+        let sea = Sea {
+            wave_slope_rad: cox_munk_rms_slope_rad(2.0),
+            ..Sea::default()
+        };
+        let e = 20f64.to_radians();
+        // At the specular point the Cox–Munk radiance is ρ(incidence) p(0) / (4 cos θ_v).
+        let rho = fresnel_reflectance(e, 1.333);
+        let expected =
+            rho / (std::f64::consts::PI * cox_munk_mean_square_slope(2.0)) / (4.0 * e.sin());
+        assert!((sea.glint_per_irradiance(e, e, 0.0) / expected - 1.0).abs() < 1e-9);
+        let (l, r) = (
+            sea.glint_per_irradiance(0.3, e, 0.1),
+            sea.glint_per_irradiance(0.3, e, -0.1),
+        );
+        assert!((l - r).abs() <= 1e-12 * l);
+        assert!(sea.glint_per_irradiance(0.3, e, 0.1) < sea.glint_per_irradiance(0.3, e, 0.0));
+        assert!(sea.may_glint(e, (e, e)));
+        assert!(!sea.may_glint(0.01, (1.5, 1.5)));
     }
 }

@@ -23,6 +23,7 @@ mod reference_tracer;
 mod refractivity;
 mod render;
 mod scenes;
+mod sea;
 mod stress;
 mod terrain;
 mod tracer;

@@ -738,10 +738,16 @@ fn card_alpha_lets_farther_cards_show_through() {
 struct Recorder {
     inner: StraightRays,
     calls: std::sync::Mutex<Vec<(Vec<f64>, bool)>>,
+    /// Rays launched from the sea surface (the sea fan of its reflections): their distances.
+    sea_calls: std::sync::Mutex<Vec<Vec<f64>>>,
 }
 
 impl RayTracer for Recorder {
     fn trace(&self, h0: f64, alpha: f64, distances: &[f64], need: bool) -> FanRay {
+        if h0 == 0.0 {
+            self.sea_calls.lock().unwrap().push(distances.to_vec());
+            return self.inner.trace(h0, alpha, distances, need);
+        }
         self.calls.lock().unwrap().push((distances.to_vec(), need));
         self.inner.trace(h0, alpha, distances, need)
     }
@@ -761,10 +767,21 @@ fn the_tracer_is_asked_only_for_what_the_scene_needs() {
         let rec = Recorder {
             inner: StraightRays::new(R).unwrap(),
             calls: Default::default(),
+            sea_calls: Default::default(),
         };
         let opts = RenderOptions { exact, ..quiet() };
         let film = render_scene(&scene, &rec, &opts).unwrap();
         assert_eq!(film.stats.cards_in_view, 1);
+        // The sea's reflections trace their own fan from the sea surface, to ranges up to the
+        // card in view (not the one outside), once per frame.
+        let sea_calls = rec.sea_calls.into_inner().unwrap();
+        assert_eq!(sea_calls.len(), film.stats.sea_fan_rays, "exact={exact}");
+        assert!(!sea_calls.is_empty());
+        assert!(
+            sea_calls
+                .iter()
+                .all(|d| d.last() == Some(&5000.0) && d[0] == 0.0)
+        );
         let calls = rec.calls.into_inner().unwrap();
         assert!(!calls.is_empty());
         assert!(
@@ -772,7 +789,8 @@ fn the_tracer_is_asked_only_for_what_the_scene_needs() {
             "exact={exact}"
         );
         if exact {
-            assert_eq!(calls.len(), 40 * 20);
+            // Every sample, and the frame's lowest ray for the sea's steepest grazing angle.
+            assert_eq!(calls.len(), 40 * 20 + 1);
         } else {
             // The fan traces per elevation (≈ one ray per pixel row, plus refinement), never per
             // column.

@@ -1,0 +1,417 @@
+//! Render — the sea's reflections. In: a ray that met the sea (grazing angle g, ground distance
+//! d from the camera, azimuth), the cards, the sky and the sun. Out: the radiance the sea sends
+//! back along it beyond the sky reflection already tabulated by grazing angle: the cards' mirror
+//! images and the sun's glitter (calm: its mirror image).
+//!
+//! In a spherically stratified atmosphere a reflected ray is a ray launched from the sea surface
+//! (height 0) at elevation e = the reflected angle, in the same vertical plane, so one **sea
+//! fan** ([`SeaFan`]) traced from height 0 once per frame serves every sample: it records each
+//! ray's height on a uniform grid of ranges (from the reflection point) and is interpolated
+//! bilinearly. A reflected ray from a hit at distance d meets a card at distance D > d at range
+//! D − d. The wave facets ([`Sea::facet_nodes`]) spread the reflected rays over a few elevations;
+//! their card images are Fresnel-weighted, and seen through the air from the card to the sea
+//! (the chord) when the sky has aerial perspective (the renderer then attenuates the whole sea
+//! radiance from the sea to the camera). Exact mode uses the same sea fan.
+
+use rayon::prelude::*;
+
+use super::ray_model::{FanEnd, RayTracer};
+use super::shade::{AngleTable, Shader};
+use crate::scene::camera::ViewDirection;
+use crate::scene::sea::FacetNode;
+use crate::scene::{Sea, Sky, Sun};
+
+/// Facet classes per sample for the cards' mirror images (the sky uses more, in its table).
+pub(super) const CARD_FACET_NODES: usize = 8;
+
+/// Facet classes whose share of the reflected light (weight × Fresnel reflectance) is below this
+/// are not traced to the cards: they change a pixel by less than 1e-3 of the card's radiance,
+/// a quarter of an 8-bit step.
+pub(super) const MIN_NODE_SHARE: f64 = 1e-3;
+
+/// Most elevations in a sea fan.
+const MAX_SEA_FAN_RAYS: usize = 2048;
+/// Most ranges on a sea fan's grid (linear interpolation between them errs by about
+/// Δr²·κ/8, κ the ray's curvature relative to the surface: millimetres at 250 m steps).
+const MAX_SEA_FAN_RANGES: usize = 256;
+/// Finest range step (m).
+const MIN_RANGE_STEP_M: f64 = 25.0;
+
+/// Rays launched from the sea surface at elevations 0 … `e_hi`, uniformly spaced, with their
+/// heights on a uniform grid of ranges and their final sky elevations.
+pub(super) struct SeaFan {
+    inv_step_e: f64,
+    n_e: usize,
+    inv_step_r: f64,
+    n_r: usize,
+    /// Row-major by elevation: height (m) at each range, NaN where the ray had ended.
+    heights: Vec<f32>,
+    /// Final elevation (rad, relative to the reflection point's horizontal), NaN unless the ray
+    /// left into the sky.
+    sky_elevation: Vec<f64>,
+}
+
+impl SeaFan {
+    /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
+    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is nothing to
+    /// cover.
+    pub(super) fn build(
+        tracer: &dyn RayTracer,
+        e_hi: f64,
+        step_rad: f64,
+        max_range_m: f64,
+        need_sky_direction: bool,
+    ) -> Option<Self> {
+        if !(e_hi > 0.0 && e_hi.is_finite() && max_range_m > 0.0 && max_range_m.is_finite()) {
+            return None;
+        }
+        let n_e = ((e_hi / step_rad).ceil() as usize + 1).clamp(2, MAX_SEA_FAN_RAYS);
+        let n_r =
+            ((max_range_m / MIN_RANGE_STEP_M).ceil() as usize + 1).clamp(2, MAX_SEA_FAN_RANGES);
+        let step_e = e_hi / (n_e - 1) as f64;
+        let step_r = max_range_m / (n_r - 1) as f64;
+        let mut ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
+        ranges[n_r - 1] = max_range_m;
+        let rays: Vec<(Vec<f32>, f64)> = (0..n_e)
+            .into_par_iter()
+            .map(|i| {
+                let ray = tracer.trace(0.0, i as f64 * step_e, &ranges, need_sky_direction);
+                let mut h: Vec<f32> = ray
+                    .heights_m
+                    .iter()
+                    .map(|h| h.map_or(f32::NAN, |v| v as f32))
+                    .collect();
+                h.resize(n_r, f32::NAN);
+                let sky = match ray.end {
+                    FanEnd::Sky { elevation_rad } => elevation_rad,
+                    _ => f64::NAN,
+                };
+                (h, sky)
+            })
+            .collect();
+        let mut heights = Vec::with_capacity(n_e * n_r);
+        let mut sky_elevation = Vec::with_capacity(n_e);
+        for (h, s) in rays {
+            heights.extend(h);
+            sky_elevation.push(s);
+        }
+        Some(Self {
+            inv_step_e: 1.0 / step_e,
+            n_e,
+            inv_step_r: 1.0 / step_r,
+            n_r,
+            heights,
+            sky_elevation,
+        })
+    }
+
+    /// Rays in the fan.
+    pub(super) fn len(&self) -> usize {
+        self.n_e
+    }
+
+    /// Cell and fraction of `x` (already scaled to grid units) on a grid of `n` nodes.
+    #[inline]
+    fn cell(x: f64, n: usize) -> Option<(usize, f64)> {
+        let last = (n - 1) as f64;
+        if !(x >= 0.0 && x <= last) {
+            return None;
+        }
+        let i = (x as usize).min(n - 2);
+        Some((i, x - i as f64))
+    }
+
+    /// Height (m) at range `range_m` of the ray launched from the sea at `elevation_rad`:
+    /// bilinear in the fan, `None` outside it or where a neighbour had ended.
+    #[inline]
+    pub(super) fn height(&self, elevation_rad: f64, range_m: f64) -> Option<f64> {
+        let (i, t) = Self::cell(elevation_rad * self.inv_step_e, self.n_e)?;
+        let (m, u) = Self::cell(range_m * self.inv_step_r, self.n_r)?;
+        let at = |i: usize, m: usize| self.heights[i * self.n_r + m] as f64;
+        let (a, b) = (at(i, m), at(i, m + 1));
+        let (c, d) = (at(i + 1, m), at(i + 1, m + 1));
+        let low = a + (b - a) * u;
+        let high = c + (d - c) * u;
+        let h = low + (high - low) * t;
+        h.is_finite().then_some(h)
+    }
+
+    /// Final elevation (rad, relative to the reflection point's horizontal) of the ray launched
+    /// from the sea at `elevation_rad`, where it and its neighbour left into the sky.
+    #[inline]
+    pub(super) fn sky_elevation(&self, elevation_rad: f64) -> Option<f64> {
+        let (i, t) = Self::cell(elevation_rad * self.inv_step_e, self.n_e)?;
+        let (a, b) = (self.sky_elevation[i], self.sky_elevation[i + 1]);
+        let e = a + (b - a) * t;
+        e.is_finite().then_some(e)
+    }
+}
+
+/// [`Sea::facet_nodes`] with [`CARD_FACET_NODES`] classes, tabulated by grazing angle over
+/// [0, `g_hi`] and interpolated linearly (node by node: the classes move continuously with the
+/// grazing angle), so a sample pays a lookup, not eight exponentials.
+pub(super) struct FacetTable {
+    inv_step: f64,
+    nodes: Vec<[FacetNode; CARD_FACET_NODES]>,
+}
+
+impl FacetTable {
+    /// Entries in the table.
+    const ENTRIES: usize = 2048;
+
+    pub(super) fn new(sea: &Sea, g_hi: f64) -> Self {
+        let g_hi = if g_hi > 0.0 && g_hi.is_finite() {
+            g_hi.min(std::f64::consts::FRAC_PI_2)
+        } else {
+            std::f64::consts::FRAC_PI_2
+        };
+        let step = g_hi / (Self::ENTRIES - 1) as f64;
+        Self {
+            inv_step: 1.0 / step,
+            nodes: (0..Self::ENTRIES)
+                .map(|i| sea.facet_nodes::<CARD_FACET_NODES>(i as f64 * step))
+                .collect(),
+        }
+    }
+
+    /// The facet classes at grazing angle `grazing_rad` (clamped to the table).
+    #[inline]
+    pub(super) fn at(&self, grazing_rad: f64) -> [FacetNode; CARD_FACET_NODES] {
+        let last = (self.nodes.len() - 1) as f64;
+        let p = (grazing_rad * self.inv_step).clamp(0.0, last);
+        let p = if p.is_nan() { 0.0 } else { p };
+        let i = (p as usize).min(self.nodes.len() - 2);
+        let t = p - i as f64;
+        let (a, b) = (&self.nodes[i], &self.nodes[i + 1]);
+        std::array::from_fn(|j| FacetNode {
+            reflected_elevation_rad: a[j].reflected_elevation_rad
+                + (b[j].reflected_elevation_rad - a[j].reflected_elevation_rad) * t,
+            weight: a[j].weight + (b[j].weight - a[j].weight) * t,
+            reflectance: a[j].reflectance + (b[j].reflectance - a[j].reflectance) * t,
+        })
+    }
+}
+
+/// The sun's glitter on a rough sea, resolved once per frame.
+pub(super) struct Glint {
+    pub(super) sun: Sun,
+    /// Apparent minus true elevation of the sun seen from the sea surface (rad).
+    pub(super) refraction_rad: f64,
+    /// Solar irradiance normal to the beam at the sea, per channel (film units × sr).
+    pub(super) irradiance: [f64; 3],
+    /// The sun's attenuated disc-centre radiance at the sea (the glint's cap before ρ).
+    pub(super) radiance_cap: [f64; 3],
+}
+
+/// Everything the sea's reflections need, per frame.
+pub(super) struct Reflection {
+    pub(super) sea: Sea,
+    pub(super) sky: Sky,
+    pub(super) earth_radius_m: f64,
+    /// Rays from the sea surface (absent without cards beyond the nearest sea).
+    pub(super) fan: Option<SeaFan>,
+    /// Sky radiance by the reflected rays' elevation.
+    pub(super) sky_table: AngleTable,
+    /// The facet classes by grazing angle.
+    pub(super) facets: FacetTable,
+    /// Rough-sea sun glitter (a sun and σ > 0).
+    pub(super) glint: Option<Glint>,
+    /// The sun, for its mirror image on a mirror sea (σ = 0).
+    pub(super) mirror_sun: Option<Sun>,
+}
+
+/// The sun's apparent elevation seen from the sea surface minus its true elevation (rad):
+/// bisection on the launch elevation of rays from height 0 whose final direction is the sun's
+/// (0 when the sun is below every such ray's reach or the rays do not leave).
+pub(super) fn sea_level_refraction_rad(tracer: &dyn RayTracer, sun_elevation_rad: f64) -> f64 {
+    let end = |e: f64| match tracer.trace(0.0, e, &[], true).end {
+        FanEnd::Sky { elevation_rad } => Some(elevation_rad),
+        _ => None,
+    };
+    let (mut lo, mut hi) = (0.0f64, 0.5f64);
+    match (end(lo), end(hi)) {
+        (Some(a), Some(b)) if a <= sun_elevation_rad && sun_elevation_rad <= b => {}
+        _ => return 0.0,
+    }
+    for _ in 0..30 {
+        let mid = 0.5 * (lo + hi);
+        match end(mid) {
+            Some(e) if e < sun_elevation_rad => lo = mid,
+            Some(_) => hi = mid,
+            None => lo = mid,
+        }
+    }
+    0.5 * (lo + hi) - sun_elevation_rad
+}
+
+impl Reflection {
+    /// The sun's elevation above the local horizontal of a sea point at ground distance
+    /// `distance_m` along `azimuth_rad` (the true direction tilted by the Earth's curvature, plus
+    /// the sea-level refraction), and its azimuth relative to the ray there.
+    #[inline]
+    fn local_sun(&self, glint: &Glint, azimuth_rad: f64, distance_m: f64) -> (f64, f64) {
+        let phi = glint.sun.azimuth_rad - azimuth_rad;
+        let tilt = distance_m / self.earth_radius_m;
+        (
+            glint.sun.elevation_rad + glint.refraction_rad + tilt * phi.cos(),
+            phi,
+        )
+    }
+
+    /// Whether a ray meeting the sea at `grazing_rad`, `distance_m` may show the sun's glitter
+    /// or mirror image (then the sea's colour depends on the azimuth).
+    pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
+        let tilt = distance_m / self.earth_radius_m;
+        if let Some(g) = &self.glint {
+            let e = g.sun.elevation_rad + g.refraction_rad;
+            return self
+                .sea
+                .may_glint(grazing_rad, (e - tilt.abs(), e + tilt.abs()));
+        }
+        match (&self.mirror_sun, &self.fan) {
+            (Some(sun), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
+                (e - tilt - sun.elevation_rad).abs()
+                    <= 0.5 * sun.angular_diameter_rad + 2.0 * tilt.abs() + 1e-4
+            }),
+            _ => false,
+        }
+    }
+
+    /// The sun's glitter (rough sea) or mirror image (mirror sea) along a ray meeting the sea at
+    /// `grazing_rad`, `distance_m` towards absolute azimuth `azimuth_rad`.
+    pub(super) fn sun(&self, grazing_rad: f64, distance_m: f64, azimuth_rad: f64) -> [f64; 3] {
+        if let Some(g) = &self.glint {
+            let (e, phi) = self.local_sun(g, azimuth_rad, distance_m);
+            let k = self.sea.glint_per_irradiance(grazing_rad, e, phi);
+            if k <= 0.0 {
+                return [0.0; 3];
+            }
+            let rho = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
+            return [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]));
+        }
+        let (Some(sun), Some(fan)) = (&self.mirror_sun, &self.fan) else {
+            return [0.0; 3];
+        };
+        let Some(end) = fan.sky_elevation(grazing_rad) else {
+            return [0.0; 3];
+        };
+        // The reflection point's vertical is tilted by d/R towards the ray's azimuth.
+        let elevation = end - distance_m / self.earth_radius_m;
+        let disc = sun.disc(azimuth_rad, elevation);
+        if disc <= 0.0 {
+            return [0.0; 3];
+        }
+        let f = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
+        let t = self.sky.transmittance(grazing_rad);
+        t.map(|t| f * disc * t)
+    }
+}
+
+impl Shader<'_> {
+    /// What the sea adds along `dir` to its tabulated sky reflection, for a ray that met it at
+    /// `grazing_rad` and `distance_m`: the sun's glitter (when `with_sun`) and the cards'
+    /// mirror images (Fresnel-weighted, over the facet classes, each in front of the sky it
+    /// hides, which is taken out again).
+    pub(super) fn sea_reflections(
+        &self,
+        dir: &ViewDirection,
+        grazing_rad: f64,
+        distance_m: f64,
+        with_sun: bool,
+    ) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        let Some(refl) = &self.reflection else {
+            return out;
+        };
+        let mut azimuth_cache: Option<f64> = None;
+        let mut azimuth = || *azimuth_cache.get_or_insert_with(|| dir.azimuth_offset_rad());
+        if with_sun && refl.may_show_sun(grazing_rad, distance_m) {
+            out = refl.sun(grazing_rad, distance_m, self.heading_rad + azimuth());
+        }
+        let Some(fan) = &refl.fan else {
+            return out;
+        };
+        // Only cards beyond the hit point, in whose azimuth range the sample lies.
+        let in_range = |card: &super::shade::ViewCard<'_>, az: f64| {
+            let mut offset = az - card.offset_rad;
+            if offset.abs() > std::f64::consts::PI {
+                offset = super::shade::wrap_pi(offset);
+            }
+            offset.abs() <= card.half_width_rad
+        };
+        let beyond = |card: &super::shade::ViewCard<'_>| {
+            self.card_distance_m(card.distance_index) > distance_m
+        };
+        if !self.cards.iter().any(beyond) {
+            return out;
+        }
+        let az = azimuth();
+        if !self.cards.iter().any(|c| beyond(c) && in_range(c, az)) {
+            return out;
+        }
+        for node in refl.facets.at(grazing_rad) {
+            if node.weight * node.reflectance < MIN_NODE_SHARE {
+                continue;
+            }
+            let e = node.reflected_elevation_rad;
+            let (acc, covered) =
+                self.reflected_cards(fan, e, distance_m, az, |c, a| beyond(c) && in_range(c, a));
+            if covered == 0.0 {
+                continue;
+            }
+            let sky = refl.sky_table.at(e);
+            let wf = node.weight * node.reflectance;
+            for c in 0..3 {
+                out[c] += wf * (acc[c] - covered * sky[c]);
+            }
+        }
+        out
+    }
+
+    /// The cards a reflected ray launched at `elevation_rad` from the sea at `distance_m` meets
+    /// (`visible` filters them), front to back: premultiplied radiance and the coverage of what
+    /// is behind them.
+    fn reflected_cards(
+        &self,
+        fan: &SeaFan,
+        elevation_rad: f64,
+        distance_m: f64,
+        azimuth: f64,
+        visible: impl Fn(&super::shade::ViewCard<'_>, f64) -> bool,
+    ) -> ([f64; 3], f64) {
+        let mut acc = [0.0f64; 3];
+        let mut transmit = 1.0f64;
+        for card in &self.cards {
+            if !visible(card, azimuth) {
+                continue;
+            }
+            let range_m = self.card_distance_m(card.distance_index) - distance_m;
+            let Some(h) = fan.height(elevation_rad, range_m) else {
+                continue;
+            };
+            if h < card.base_m || h > card.top_m {
+                continue;
+            }
+            let offset = super::shade::wrap_pi(azimuth - card.offset_rad);
+            let u = 0.5 + 0.5 * offset / card.half_width_rad;
+            let v = (card.top_m - h) / card.height_m;
+            let t = card.texture.sample(u, v);
+            let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
+            if let (Some(aerial), Some(refl)) = (&self.aerial, &self.reflection) {
+                let tau =
+                    aerial
+                        .extinction
+                        .chord_optical_depth(refl.earth_radius_m, 0.0, h, range_m);
+                rgb = aerial.extinction.attenuate(rgb, t[3] as f64, tau);
+            }
+            for c in 0..3 {
+                acc[c] += transmit * rgb[c];
+            }
+            transmit *= 1.0 - t[3] as f64;
+            if transmit < 1e-6 {
+                break;
+            }
+        }
+        (acc, 1.0 - transmit)
+    }
+}

@@ -1,0 +1,272 @@
+//! The sea's reflections: on a mirror sea (calm) the mirror image of a card under straight rays
+//! ends where the sphere's reflection geometry puts it (computed here by bisection on the law of
+//! reflection, independently of the renderer's sea fan), in the fan and the exact render alike;
+//! the sun's Cox–Munk glitter on a wind-roughened sea is centred under the sun and below the
+//! horizon; and frames with reflections do not depend on the thread count.
+
+use ghostship::render::{Film, RenderOptions, StraightRays, render_scene};
+use ghostship::scene::Scene;
+
+use crate::render::max_channel_difference;
+use crate::support::bisect;
+
+const R: f64 = 6_371_000.0;
+const CAMERA_M: f64 = 10.0;
+const CARD_M: f64 = 5_000.0;
+const CARD_TOP_M: f64 = 15.0;
+
+/// A straight-ray scene from `CAMERA_M`: `camera` and `sea` are the bodies of those tables,
+/// `rest` more tables (cards, sun); a red 8×8 card image `red.png` is available.
+fn scene(camera: &str, sea: &str, rest: &str) -> (tempfile::TempDir, Scene) {
+    let dir = tempfile::tempdir().unwrap();
+    let image = image::RgbaImage::from_pixel(8, 8, image::Rgba([255, 0, 0, 255]));
+    image.save(dir.path().join("red.png")).unwrap();
+    let text = format!(
+        "[camera]\nheight_m = {CAMERA_M}\n{camera}\n[atmosphere]\nstraight = true\n\
+         [earth]\nradius_m = {R}\n[sea]\n{sea}\n{rest}\n"
+    );
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    let scene = Scene::from_file(&path).unwrap();
+    (dir, scene)
+}
+
+fn render(scene: &Scene, exact: bool) -> Film {
+    let options = RenderOptions {
+        quiet: true,
+        exact,
+        samples_per_pixel: Some(1),
+        ..RenderOptions::default()
+    };
+    let film = render_scene(scene, &StraightRays::new(R).unwrap(), &options).unwrap();
+    assert_eq!(film.stats.non_finite_samples, 0);
+    film
+}
+
+/// Apparent elevation (rad) at the camera of the mirror image of a point at height `top_m`
+/// and ground distance `distance_m`, on a sphere of radius R with straight rays: the sea point
+/// at angle θ where the camera and the point make equal angles with the surface normal
+/// (bisection on θ), seen from the camera.
+fn mirror_elevation_rad(top_m: f64, distance_m: f64) -> f64 {
+    let camera = [0.0, R + CAMERA_M];
+    let phi = distance_m / R;
+    let target = [(R + top_m) * phi.sin(), (R + top_m) * phi.cos()];
+    let angle_to_normal = |theta: f64, q: [f64; 2]| {
+        let p = [R * theta.sin(), R * theta.cos()];
+        let (vx, vy) = (q[0] - p[0], q[1] - p[1]);
+        let n = [theta.sin(), theta.cos()];
+        ((vx * n[0] + vy * n[1]) / vx.hypot(vy)).acos()
+    };
+    // The camera's angle to the normal grows with θ, the target's shrinks: one crossing.
+    let (lo, hi) = bisect(0.0, phi, 200, |theta| {
+        angle_to_normal(theta, camera) > angle_to_normal(theta, target)
+    });
+    let theta = 0.5 * (lo + hi);
+    let p = [R * theta.sin(), R * theta.cos()];
+    // Camera horizontal is +x, vertical +y.
+    (p[1] - camera[1]).atan2(p[0] - camera[0])
+}
+
+/// The lowest row of column `x` whose pixel is the red card (green < half the reflected sky's
+/// just below it): the bottom of the mirror image.
+fn lowest_red_row(film: &Film, x: u32) -> u32 {
+    let sea_g = film.pixel(x, film.height - 1)[1];
+    (0..film.height)
+        .rev()
+        .find(|&y| {
+            let p = film.pixel(x, y);
+            p[1] < 0.5 * sea_g && p[0] > 2.0 * p[1]
+        })
+        .expect("no red card pixel in the column")
+}
+
+#[test]
+fn calm_mirror_image_of_a_card_lies_where_the_sphere_geometry_puts_it() {
+    let card = format!(
+        "[[cards]]\nimage = \"red.png\"\ndistance_m = {CARD_M}\nwidth_m = 20\n\
+         height_m = {CARD_TOP_M}\nbase_m = 0\n"
+    );
+    let camera = "pitch_deg = -0.12\nhfov_deg = 1.0\nwidth = 400\nheight = 200";
+    let (_dir, calm) = scene(camera, "wave_slope_deg = 0.0", &card);
+    let expected = mirror_elevation_rad(CARD_TOP_M, CARD_M);
+    // Sanity of the reference: about −(h_c + H)/D, below the direct waterline.
+    assert!(
+        (expected + (CAMERA_M + CARD_TOP_M) / CARD_M).abs() < 2e-4,
+        "{expected}"
+    );
+    let frame = calm.camera.frame();
+    let pixel_rad = 1.0 / frame.focal_px;
+    for exact in [false, true] {
+        let film = render(&calm, exact);
+        let x = film.width / 2;
+        let y = lowest_red_row(&film, x);
+        // The edge lies between the centres of row y (red) and y + 1 (sky reflection).
+        let e_red = frame
+            .view_direction(x as f64 + 0.5, y as f64 + 0.5)
+            .elevation_rad;
+        let e_sky = frame
+            .view_direction(x as f64 + 0.5, y as f64 + 1.5)
+            .elevation_rad;
+        assert!(
+            e_sky - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
+            "exact={exact}: image edge between {e_sky} and {e_red}, geometry {expected}"
+        );
+        // Well below the direct waterline (≈ −h_c/D): a mirror image, not the card itself.
+        assert!(e_red < -1.5 * CAMERA_M / CARD_M, "{e_red}");
+        // Fresnel-weighted: darker than the card itself (red 1.0 in linear units) by F < 1,
+        // brighter than the water (0.004).
+        let mirrored = film.pixel(x, y - 2);
+        assert!(mirrored[0] < 1.0 && mirrored[0] > 0.5, "{mirrored:?}");
+    }
+    // Without reflections the same pixel is sea.
+    let (_dir2, off) = scene(camera, "wave_slope_deg = 0.0\nreflections = false", &card);
+    let film = render(&off, false);
+    let y = lowest_red_row(&render(&calm, false), film.width / 2);
+    let p = film.pixel(film.width / 2, y - 2);
+    assert!(p[0] < 2.0 * p[1], "no mirror image expected: {p:?}");
+}
+
+#[test]
+fn fan_and_exact_renders_agree_with_reflections() {
+    let card = format!(
+        "[[cards]]\nimage = \"red.png\"\ndistance_m = {CARD_M}\nwidth_m = 20\n\
+         height_m = {CARD_TOP_M}\nbase_m = 0\n"
+    );
+    let camera = "pitch_deg = -0.12\nhfov_deg = 1.0\nwidth = 200\nheight = 100";
+    for sea in [
+        "wave_slope_deg = 0.0",
+        "wave_slope_deg = 0.2",
+        "wind_speed_m_s = 0.0",
+    ] {
+        let (_dir, s) = scene(camera, sea, &card);
+        let (fan, exact) = (render(&s, false), render(&s, true));
+        let mut off = 0;
+        for (a, b) in fan.pixels.iter().zip(&exact.pixels) {
+            if max_channel_difference(*a, *b) > 0.02 {
+                off += 1;
+            }
+        }
+        // Only pixels on an edge may differ (a sub-pixel shift there): one or two rows.
+        assert!(off <= 2 * fan.width as usize, "{sea}: {off} pixels differ");
+    }
+}
+
+#[test]
+fn glitter_is_centred_under_the_sun_and_below_the_horizon() {
+    let sun_azimuth_deg = 3.0;
+    let sun = format!("[sun]\nelevation_deg = 8.0\nazimuth_deg = {sun_azimuth_deg}\n");
+    // A 20° frame from +2° to −8°: the sun (8°) is out of it, its glitter in it.
+    let camera = "pitch_deg = -3.0\nhfov_deg = 20.0\nwidth = 400\nheight = 200";
+    let (_dir, s) = scene(camera, "wind_speed_m_s = 5.0", &sun);
+    let film = render(&s, false);
+    let frame = s.camera.frame();
+    let luminance = |p: [f32; 4]| p[0] + p[1] + p[2];
+    let mut best = (0u32, 0u32, f32::MIN);
+    let mut column_sums = vec![0.0f64; film.width as usize];
+    for y in 0..film.height {
+        for x in 0..film.width {
+            let l = luminance(film.pixel(x, y));
+            column_sums[x as usize] += l as f64;
+            if l > best.2 {
+                best = (x, y, l);
+            }
+        }
+    }
+    let (bx, by, _) = best;
+    let brightest = frame.view_direction(bx as f64 + 0.5, by as f64 + 0.5);
+    assert!(brightest.elevation_rad < 0.0, "{}", brightest.elevation_rad);
+    let column = (0..film.width as usize)
+        .max_by(|&a, &b| column_sums[a].total_cmp(&column_sums[b]))
+        .unwrap();
+    let horizon_row = film.height / 5; // 2° of 10° from the top: the horizon
+    let az = frame
+        .view_direction(column as f64 + 0.5, (horizon_row + 20) as f64)
+        .azimuth_offset_rad()
+        .to_degrees();
+    let pixel_deg = 20.0 / film.width as f64;
+    assert!(
+        (az - sun_azimuth_deg).abs() <= 1.5 * pixel_deg,
+        "glitter column at {az}°, sun at {sun_azimuth_deg}°"
+    );
+    // The glitter stands out: its column is far brighter than one 8° away from the sun.
+    let away = film.width as usize / 2 - (5.0 / pixel_deg) as usize;
+    assert!(column_sums[column] > 3.0 * column_sums[away]);
+    // On a mirror sea there is no glitter: only the disc's mirror image, at ≈ −8° (the frame's
+    // bottom edge); above −7° the sea is the reflected sky.
+    let (_dir2, calm) = scene(camera, "wave_slope_deg = 0.0", &sun);
+    let calm_film = render(&calm, false);
+    let mut calm_max = 0.0f32;
+    for y in 0..calm_film.height {
+        for x in 0..calm_film.width {
+            let d = frame.view_direction(x as f64 + 0.5, y as f64 + 0.5);
+            if d.elevation_rad > -7f64.to_radians() {
+                calm_max = calm_max.max(luminance(calm_film.pixel(x, y)));
+            }
+        }
+    }
+    assert!(calm_max < 4.0, "{calm_max}");
+}
+
+#[test]
+fn reflections_do_not_depend_on_the_thread_count() {
+    let card = format!(
+        "[[cards]]\nimage = \"red.png\"\ndistance_m = {CARD_M}\nwidth_m = 20\n\
+         height_m = {CARD_TOP_M}\nbase_m = 0\n[sun]\nelevation_deg = 0.2\nazimuth_deg = 0.3\n"
+    );
+    let camera = "pitch_deg = -0.12\nhfov_deg = 1.0\nwidth = 200\nheight = 100";
+    for sea in ["wave_slope_deg = 0.0", "wind_speed_m_s = 3.0"] {
+        let (_dir, s) = scene(camera, sea, &card);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| render(&s, false).pixels)
+        };
+        assert!(
+            run(1) == run(2),
+            "{sea}: pixels differ between 1 and 2 threads"
+        );
+    }
+}
+
+#[test]
+fn a_mirror_sea_shows_the_sun_disc_mirrored_below_the_horizon() {
+    // Sun 0.3° up, 0.2° right; a mirror sea; no cards. Straight rays from 10 m: the image of a
+    // point at infinity at elevation e lies at −e − 2d/R ≈ −e (d = 10 m / e ≈ 2 km: 0.6 mrad).
+    let (e_s, a_s) = (0.3f64.to_radians(), 0.2f64.to_radians());
+    let sun = format!(
+        "[sun]\nelevation_deg = {}\nazimuth_deg = {}\n",
+        e_s.to_degrees(),
+        a_s.to_degrees()
+    );
+    let camera = "pitch_deg = -0.2\nhfov_deg = 2.0\nwidth = 400\nheight = 200";
+    let (_dir, s) = scene(camera, "wave_slope_deg = 0.0", &sun);
+    let film = render(&s, false);
+    let frame = s.camera.frame();
+    let luminance = |p: [f32; 4]| p[0] + p[1] + p[2];
+    let mut best = (0u32, 0u32, f32::MIN);
+    for y in 0..film.height {
+        for x in 0..film.width {
+            let d = frame.view_direction(x as f64 + 0.5, y as f64 + 0.5);
+            let l = luminance(film.pixel(x, y));
+            if d.elevation_rad < -1e-3 && l > best.2 {
+                best = (x, y, l);
+            }
+        }
+    }
+    let d = frame.view_direction(best.0 as f64 + 0.5, best.1 as f64 + 0.5);
+    let radius = 0.5 * 0.533f64.to_radians();
+    let expected = -e_s - 2.0 * (CAMERA_M / e_s) / R;
+    assert!(best.2 > 100.0, "no bright mirror image: {}", best.2);
+    assert!(
+        (d.elevation_rad - expected).abs() < radius,
+        "{} vs {expected}",
+        d.elevation_rad
+    );
+    assert!(
+        (d.azimuth_offset_rad() - a_s).abs() < radius,
+        "{}",
+        d.azimuth_offset_rad()
+    );
+}
