@@ -1,6 +1,7 @@
 //! The sea's reflections: on a mirror sea (calm) the mirror image of a card under straight rays
 //! ends where the sphere's reflection geometry puts it (computed here by bisection on the law of
-//! reflection, independently of the renderer's sea fan), in the fan and the exact render alike;
+//! reflection, independently of the renderer's sea fan), in the fan and the exact render alike,
+//! and through the Novaya Zemlya inversion where the independent reference tracer's rays put it;
 //! the sun's Cox–Munk glitter on a wind-roughened sea is centred under the sun and below the
 //! horizon; and frames with reflections do not depend on the thread count.
 
@@ -269,4 +270,103 @@ fn a_mirror_sea_shows_the_sun_disc_mirrored_below_the_horizon() {
         "{}",
         d.azimuth_offset_rad()
     );
+}
+
+/// Through a refracting atmosphere (the Novaya Zemlya inversion, whose rays bend almost with the
+/// Earth), the calm sea's mirror image of a card's top lies where the independent reference
+/// tracer puts it. By the mirror symmetry of a spherically stratified field, the ray reflected
+/// at ground distance d rises as the camera ray came down, mirrored about d: its height at
+/// distance D is the camera ray's height at 2d − D when 2d ≥ D, else the height at D − 2d of the
+/// camera ray continued backwards, which is the camera's ray launched at −α. So the expected
+/// image comes from rays traced from the camera alone, not from the renderer's sea fan.
+#[test]
+fn calm_mirror_image_through_a_refracting_atmosphere_lies_where_the_reference_rays_put_it() {
+    use crate::support::data::data_dir;
+    use crate::support::reference::{BreakSource, RefReach, atmosphere_index, reference_heights};
+    use ghostship::profile::SyntheticAtmosphere;
+    use ghostship::refractivity::RefractiveAtmosphere;
+    use std::sync::Arc;
+
+    let r = ghostship::units::EARTH_RADIUS_M;
+    let (camera_m, card_m, top_m) = (10.0, 20_000.0, 15.0);
+    let path = data_dir().join("novaya_zemlya.toml");
+    let nz = SyntheticAtmosphere::from_file(&path).unwrap();
+    let atm = RefractiveAtmosphere::new(Arc::new(nz.clone()), 550.0).unwrap();
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    let height_at =
+        |alpha: f64, x: f64| reference_heights(&index, r, 40e3, camera_m, alpha, &[x])[0];
+    // Where the camera ray at `alpha` meets the sea (bisection on the ground distance).
+    let sea_hit_m = |alpha: f64| {
+        let (lo, hi) = bisect(0.0, 60_000.0, 40, |x| {
+            matches!(height_at(alpha, x), RefReach::GroundBefore)
+        });
+        0.5 * (lo + hi)
+    };
+    let mirrored_height_m = |alpha: f64| {
+        let d = sea_hit_m(alpha);
+        let reach = if 2.0 * d >= card_m {
+            height_at(alpha, 2.0 * d - card_m)
+        } else {
+            height_at(-alpha, card_m - 2.0 * d)
+        };
+        reach.height_m().expect("the mirrored ray reaches the card")
+    };
+    // Steeper rays meet the sea nearer and their reflections pass the card higher.
+    let (lo, hi) = bisect(-0.003, -0.0006, 40, |alpha| {
+        mirrored_height_m(alpha) < top_m
+    });
+    let expected = 0.5 * (lo + hi);
+    assert_eq!((camera_m, r), (CAMERA_M, R));
+    let straight = mirror_elevation_rad(top_m, card_m);
+
+    let dir = tempfile::tempdir().unwrap();
+    let image = image::RgbaImage::from_pixel(8, 8, image::Rgba([255, 0, 0, 255]));
+    image.save(dir.path().join("red.png")).unwrap();
+    let text = format!(
+        "[camera]\nheight_m = {camera_m}\npitch_deg = -0.12\nhfov_deg = 1.0\nwidth = 400\n\
+         height = 200\n[atmosphere]\nsynthetic = {path:?}\n[earth]\nradius_m = {r}\n\
+         [sea]\nwave_slope_deg = 0.0\n[[cards]]\nimage = \"red.png\"\ndistance_m = {card_m}\n\
+         width_m = 20\nheight_m = {top_m}\nbase_m = 0\n"
+    );
+    let scene_path = dir.path().join("scene.toml");
+    std::fs::write(&scene_path, text).unwrap();
+    let scene = Scene::from_file(&scene_path).unwrap();
+    let frame = scene.camera.frame();
+    let pixel_rad = 1.0 / frame.focal_px;
+    eprintln!(
+        "mirror image of the card top: {expected:.7} rad through the inversion, {straight:.7} rad \
+         with straight rays ({:.1} px apart)",
+        (expected - straight) / pixel_rad
+    );
+    // The test means something only if refraction moves the image by several pixels.
+    assert!((expected - straight).abs() > 3.0 * pixel_rad);
+    let loaded = scene.atmosphere.load().unwrap();
+    for exact in [false, true] {
+        let options = RenderOptions {
+            quiet: true,
+            exact,
+            samples_per_pixel: Some(1),
+            ..RenderOptions::default()
+        };
+        let tracer = ghostship::render::prepare_tracer(
+            &scene,
+            loaded.as_ref().map(|a| &a.refractive),
+            &options,
+        )
+        .unwrap();
+        let film = render_scene(&scene, tracer.as_ref(), &options).unwrap();
+        let x = film.width / 2;
+        let y = lowest_red_row(&film, x);
+        let e_red = frame
+            .view_direction(x as f64 + 0.5, y as f64 + 0.5)
+            .elevation_rad;
+        let e_sky = frame
+            .view_direction(x as f64 + 0.5, y as f64 + 1.5)
+            .elevation_rad;
+        eprintln!("exact={exact}: image edge between {e_sky:.7} and {e_red:.7}");
+        assert!(
+            e_sky - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
+            "exact={exact}: image edge between {e_sky} and {e_red}, reference rays {expected}"
+        );
+    }
 }
