@@ -81,6 +81,26 @@ fn lowest_red_row(film: &Film, x: u32) -> u32 {
         .expect("no red card pixel in the column")
 }
 
+/// The image edge at column `x` lies between the centres of row `y` (red) and `y + 1` (the sky's
+/// reflection); assert that `expected` (rad) is there, within half a pixel, and return the two
+/// rows' elevations (below, above).
+fn assert_edge_at(
+    frame: &ghostship::scene::camera::CameraFrame,
+    x: u32,
+    y: u32,
+    expected: f64,
+    what: &str,
+) -> (f64, f64) {
+    let pixel_rad = 1.0 / frame.focal_px;
+    let at = |row: f64| frame.view_direction(x as f64 + 0.5, row).elevation_rad;
+    let (e_sky, e_red) = (at(y as f64 + 1.5), at(y as f64 + 0.5));
+    assert!(
+        e_sky - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
+        "{what}: image edge between {e_sky} and {e_red}, expected {expected}"
+    );
+    (e_sky, e_red)
+}
+
 #[test]
 fn calm_mirror_image_of_a_card_lies_where_the_sphere_geometry_puts_it() {
     let card = format!(
@@ -96,22 +116,11 @@ fn calm_mirror_image_of_a_card_lies_where_the_sphere_geometry_puts_it() {
         "{expected}"
     );
     let frame = calm.camera.frame();
-    let pixel_rad = 1.0 / frame.focal_px;
     for exact in [false, true] {
         let film = render(&calm, exact);
         let x = film.width / 2;
         let y = lowest_red_row(&film, x);
-        // The edge lies between the centres of row y (red) and y + 1 (sky reflection).
-        let e_red = frame
-            .view_direction(x as f64 + 0.5, y as f64 + 0.5)
-            .elevation_rad;
-        let e_sky = frame
-            .view_direction(x as f64 + 0.5, y as f64 + 1.5)
-            .elevation_rad;
-        assert!(
-            e_sky - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
-            "exact={exact}: image edge between {e_sky} and {e_red}, geometry {expected}"
-        );
+        let (_, e_red) = assert_edge_at(&frame, x, y, expected, &format!("exact={exact}"));
         // Well below the direct waterline (≈ −h_c/D): a mirror image, not the card itself.
         assert!(e_red < -1.5 * CAMERA_M / CARD_M, "{e_red}");
         // Fresnel-weighted: darker than the card itself (red 1.0 in linear units) by F < 1,
@@ -357,16 +366,7 @@ fn calm_mirror_image_through_a_refracting_atmosphere_lies_where_the_reference_ra
         let film = render_scene(&scene, tracer.as_ref(), &options).unwrap();
         let x = film.width / 2;
         let y = lowest_red_row(&film, x);
-        let e_red = frame
-            .view_direction(x as f64 + 0.5, y as f64 + 0.5)
-            .elevation_rad;
-        let e_sky = frame
-            .view_direction(x as f64 + 0.5, y as f64 + 1.5)
-            .elevation_rad;
+        let (e_sky, e_red) = assert_edge_at(&frame, x, y, expected, &format!("exact={exact}"));
         eprintln!("exact={exact}: image edge between {e_sky:.7} and {e_red:.7}");
-        assert!(
-            e_sky - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
-            "exact={exact}: image edge between {e_sky} and {e_red}, reference rays {expected}"
-        );
     }
 }
