@@ -678,7 +678,10 @@ fn sea_reflection(
         sky_table: reflected_sky,
         facets: reflection::FacetTable::new(&sea, max_grazing),
         glint,
-        mirror_sun: scene.sun.filter(|_| mirror),
+        mirror_sun: scene
+            .sun
+            .filter(|_| mirror)
+            .map(|sun| (sun, SunDisc::new(&sun))),
     })
 }
 

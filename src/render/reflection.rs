@@ -19,6 +19,7 @@ use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
 use crate::scene::camera::ViewDirection;
 use crate::scene::sea::FacetNode;
+use crate::scene::sky::SunDisc;
 use crate::scene::{Sea, Sky, Sun};
 
 /// Facet classes per sample for the cards' mirror images (the sky uses more, in its table).
@@ -216,8 +217,8 @@ pub(super) struct Reflection {
     pub(super) facets: FacetTable,
     /// Rough-sea sun glitter (a sun and σ > 0).
     pub(super) glint: Option<Glint>,
-    /// The sun, for its mirror image on a mirror sea (σ = 0).
-    pub(super) mirror_sun: Option<Sun>,
+    /// The sun, for its mirror image on a mirror sea (σ = 0), and its disc prepared once.
+    pub(super) mirror_sun: Option<(Sun, SunDisc)>,
 }
 
 /// The sun's apparent elevation seen from the sea surface minus its true elevation (rad):
@@ -269,7 +270,7 @@ impl Reflection {
                 .may_glint(grazing_rad, (e - tilt.abs(), e + tilt.abs()));
         }
         match (&self.mirror_sun, &self.fan) {
-            (Some(sun), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
+            (Some((sun, _)), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
                 (e - tilt - sun.elevation_rad).abs()
                     <= 0.5 * sun.angular_diameter_rad + 2.0 * tilt.abs() + 1e-4
             }),
@@ -289,7 +290,7 @@ impl Reflection {
             let rho = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
             return [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]));
         }
-        let (Some(sun), Some(fan)) = (&self.mirror_sun, &self.fan) else {
+        let (Some((_, disc)), Some(fan)) = (&self.mirror_sun, &self.fan) else {
             return [0.0; 3];
         };
         let Some(end) = fan.sky_elevation(grazing_rad) else {
@@ -297,7 +298,7 @@ impl Reflection {
         };
         // The reflection point's vertical is tilted by d/R towards the ray's azimuth.
         let elevation = end - distance_m / self.earth_radius_m;
-        let disc = sun.disc(azimuth_rad, elevation);
+        let disc = disc.radiance(azimuth_rad, elevation);
         if disc <= 0.0 {
             return [0.0; 3];
         }
