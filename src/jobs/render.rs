@@ -10,6 +10,7 @@ use super::{AtmosphereCache, JobError, Product};
 use crate::atmosphere::{AtmosphereSource, LoadedAtmosphere};
 use crate::output::exr::ExrMetadata;
 use crate::output::film::{ImageFormat, encode_film};
+use crate::render::spectral::{SpectralError, render_spectral};
 use crate::render::{Film, RenderOptions, check_tracer_tolerance, prepare_tracer, render_scene};
 use crate::scene::{Scene, samples_per_pixel_root};
 
@@ -245,18 +246,27 @@ pub fn render_film(
         .source_path
         .as_deref()
         .map_or_else(|| "scene".into(), |p| p.display().to_string());
-    let tracer =
-        prepare_tracer(scene, atmosphere.map(|a| &a.refractive), options).map_err(|source| {
-            JobError::Prepare {
-                scene: name.clone(),
-                source,
-            }
-        })?;
-    let film =
-        render_scene(scene, tracer.as_ref(), options).map_err(|source| JobError::Render {
-            scene: name.clone(),
-            source,
-        })?;
+    let prepare = |source| JobError::Prepare {
+        scene: name.clone(),
+        source,
+    };
+    let render = |source| JobError::Render {
+        scene: name.clone(),
+        source,
+    };
+    let refractive = atmosphere.map(|a| &a.refractive);
+    let film = match scene.spectral_bands {
+        Some(bands) => render_spectral(scene, refractive, options, bands)
+            .map_err(|e| match e {
+                SpectralError::Prepare(source) => prepare(source),
+                SpectralError::Render(source) => render(source),
+            })?
+            .film,
+        None => {
+            let tracer = prepare_tracer(scene, refractive, options).map_err(prepare)?;
+            render_scene(scene, tracer.as_ref(), options).map_err(render)?
+        }
+    };
     if film.stats.non_finite_samples > 0 {
         // Never silent: these pixels are not what the physics says.
         eprintln!(

@@ -171,6 +171,17 @@ impl RefractiveAtmosphere {
         Self::build(self.column, self.wavelength_nm, co2_ppm, self.spec)
     }
 
+    /// The same air column, CO₂ content and table layout at another wavelength (nm, 300–1700):
+    /// what a spectral render traces each band through (the table is built lazily again).
+    pub fn at_wavelength_nm(&self, wavelength_nm: f64) -> Result<Self, RefractivityError> {
+        Self::build(
+            Arc::clone(&self.column),
+            wavelength_nm,
+            self.dispersion.co2_ppm,
+            self.spec,
+        )
+    }
+
     /// The same atmosphere with another table layout; rebuilds the table.
     pub fn with_table_spec(self, spec: TableSpec) -> Result<Self, RefractivityError> {
         Self::build(

@@ -439,6 +439,9 @@ pub enum PrepareError {
     /// A render option is out of range (the tracer tolerance).
     #[error(transparent)]
     Options(#[from] super::RenderError),
+    /// The refractive atmosphere could not be rebuilt at a spectral band's wavelength.
+    #[error("the refractive atmosphere at a spectral band's wavelength: {0}")]
+    Refractivity(#[from] crate::refractivity::RefractivityError),
 }
 
 /// Highest card top in `scene` (m above the surface; 0 without cards), or the highest terrain

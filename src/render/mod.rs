@@ -36,6 +36,7 @@ pub mod elevation_fan;
 pub mod ray_model;
 mod reflection;
 mod shade;
+pub mod spectral;
 mod sun;
 pub mod terrain;
 

@@ -54,6 +54,10 @@
 //! limb_darkening = 0.6
 //! intensity = 1.85e5         # disc-centre radiance above the atmosphere, 1 = horizon sky (default 1.85e5)
 //!
+//! [render]                   # optional
+//! spectral_bands = 8         # 0/absent: RGB; 8…60: trace and shade per wavelength band
+//!                            # across 400–700 nm, then CIE 1931 → Rec.709 (render::spectral)
+//!
 //! [terrain]                  # optional; see scene::terrain
 //! dem = "island.tif"         # SRTM .hgt or geographic GeoTIFF
 //! observer_lat_deg = 78.0
@@ -68,6 +72,11 @@
 /// ducted Novaya Zemlya ray, see `sky`) then leaves a dim red sun where it should. EXR files
 /// carry the linear values as rendered; the PNG compresses highlights keeping their hue.
 pub const DEFAULT_SUN_INTENSITY: f64 = 1.85e5;
+
+/// Fewest wavelength bands of a spectral render (`[render] spectral_bands`).
+pub const MIN_SPECTRAL_BANDS: u32 = 8;
+/// Most wavelength bands of a spectral render (5 nm wide across 400–700 nm).
+pub const MAX_SPECTRAL_BANDS: u32 = 60;
 
 pub mod assets;
 pub mod camera;
@@ -215,6 +224,11 @@ pub struct Scene {
     /// when absent, so scenes without terrain keep their hash).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub terrain: Option<Terrain>,
+    /// `[render] spectral_bands`: render in this many wavelength bands across 400–700 nm
+    /// ([`crate::render::spectral`]); `None` (absent or 0): the RGB path. Left out of the hash's
+    /// record when absent, so other scenes keep their hash.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spectral_bands: Option<u32>,
     /// sha256 (hex) of the scene file content, the resolved parameters, the atmosphere file's
     /// content (sounding or synthetic) and the card images.
     #[serde(skip)]
@@ -237,6 +251,14 @@ struct RawScene {
     cards: Vec<RawCard>,
     sun: Option<RawSun>,
     terrain: Option<RawTerrain>,
+    #[serde(default)]
+    render: RawRender,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRender {
+    spectral_bands: Option<u32>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -702,6 +724,7 @@ impl Scene {
                 "0…10",
             )?,
             aerial: None,
+            channel_wavelengths_nm: sky::CHANNEL_WAVELENGTHS_NM,
         };
         let sky = Sky {
             aerial: aerial_perspective(&c, &raw.sky, sky.rayleigh_optical_depth)?,
@@ -833,6 +856,18 @@ impl Scene {
             None => (None, None),
         };
 
+        let spectral_bands = match raw.render.spectral_bands {
+            None | Some(0) => None,
+            Some(n) if (MIN_SPECTRAL_BANDS..=MAX_SPECTRAL_BANDS).contains(&n) => Some(n),
+            Some(n) => {
+                return Err(c.invalid(
+                    "render.spectral_bands",
+                    format!(
+                        "give 0 (RGB) or {MIN_SPECTRAL_BANDS}…{MAX_SPECTRAL_BANDS} bands, got {n}"
+                    ),
+                ));
+            }
+        };
         let mut scene = Scene {
             source_path: None,
             camera,
@@ -843,6 +878,7 @@ impl Scene {
             cards,
             sun,
             terrain,
+            spectral_bands,
             hash_hex: String::new(),
         };
         scene.hash_hex = scene.compute_hash(text, &card_digests, terrain_digest);

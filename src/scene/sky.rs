@@ -68,6 +68,11 @@ pub struct Sky {
     /// without extinction (and the scene hash is unchanged from before the setting existed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub aerial: Option<AerialPerspective>,
+    /// The wavelengths (nm) the R, G, B channels stand for: [`CHANNEL_WAVELENGTHS_NM`], except
+    /// in one band of a spectral render, where all three are the band's wavelength (not part of
+    /// the scene file, so not of its hash).
+    #[serde(skip)]
+    pub channel_wavelengths_nm: [f64; 3],
 }
 
 /// Rayleigh scale height (m) of the extinction profile used by the aerial perspective.
@@ -206,6 +211,7 @@ impl Default for Sky {
             rayleigh_optical_depth: 0.0975,
             aerosol_optical_depth: 0.02,
             aerial: None,
+            channel_wavelengths_nm: CHANNEL_WAVELENGTHS_NM,
         }
     }
 }
@@ -213,7 +219,7 @@ impl Default for Sky {
 impl Sky {
     /// Optical depth τ_c of each channel (zenith path).
     pub fn optical_depths(&self) -> [f64; 3] {
-        CHANNEL_WAVELENGTHS_NM.map(|l| {
+        self.channel_wavelengths_nm.map(|l| {
             let r = 550.0 / l;
             self.rayleigh_optical_depth * r.powi(4)
                 + self.aerosol_optical_depth * r.powf(AEROSOL_ANGSTROM_EXPONENT)
@@ -239,7 +245,7 @@ impl Sky {
         let aerial = self.aerial?;
         let rayleigh_550 = self.rayleigh_optical_depth / RAYLEIGH_SCALE_HEIGHT_M;
         let aerosol_550 = (KOSCHMIEDER_CONSTANT / aerial.visibility_m - rayleigh_550).max(0.0);
-        let ratios = CHANNEL_WAVELENGTHS_NM.map(|l| 550.0 / l);
+        let ratios = self.channel_wavelengths_nm.map(|l| 550.0 / l);
         Some(Extinction {
             rayleigh_per_m: ratios.map(|r| rayleigh_550 * r.powi(4)),
             aerosol_per_m: ratios.map(|r| aerosol_550 * r.powf(AEROSOL_ANGSTROM_EXPONENT)),
@@ -258,7 +264,7 @@ impl Sky {
         if let Some(extinction) = self.extinction() {
             return extinction;
         }
-        let ratios = CHANNEL_WAVELENGTHS_NM.map(|l| 550.0 / l);
+        let ratios = self.channel_wavelengths_nm.map(|l| 550.0 / l);
         let rayleigh_550 = self.rayleigh_optical_depth / RAYLEIGH_SCALE_HEIGHT_M;
         let aerosol_550 = self.aerosol_optical_depth / DEFAULT_AEROSOL_SCALE_HEIGHT_M;
         Extinction {
