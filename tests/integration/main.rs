@@ -24,6 +24,7 @@ mod refractivity;
 mod render;
 mod scenes;
 mod sea;
+mod spectral;
 mod stress;
 mod terrain;
 mod tracer;

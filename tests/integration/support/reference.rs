@@ -747,3 +747,52 @@ pub fn atmosphere_index<'a>(
         .collect();
     ReferenceIndex::new(move |h| atm.exact(h), breaks)
 }
+
+/// The direction (elevation in rad against the observer's horizontal plane) in which a ray
+/// launched upwards at apparent elevation `alpha` ≥ 0 from `h0` (m above the surface) leaves
+/// the top `top_m` of the index `n(h)`, over a sphere of `earth_radius_m`: from Bouguer's
+/// invariant c = n r cos ψ alone (no ray integration, so independent of both tracers). The
+/// angle the ray sweeps about the centre is the refraction integral
+/// θ = ∫ c dr / (r √(n²r² − c²)) from r₀ to the top, taken in t with r = r₀ + t² (regular at
+/// a horizontal start) by composite Simpson on `intervals` intervals; out of the top into
+/// vacuum the ray's elevation is ψ = acos(c / r_t), against the observer's horizontal plane
+/// ψ − θ.
+pub fn bouguer_escape_elevation(
+    n: &dyn Fn(f64) -> f64,
+    earth_radius_m: f64,
+    top_m: f64,
+    h0: f64,
+    alpha: f64,
+    intervals: usize,
+) -> f64 {
+    assert!(alpha >= 0.0 && intervals % 2 == 0);
+    let r0 = earth_radius_m + h0;
+    let c = n(h0) * r0 * alpha.cos();
+    let t_top = (top_m - h0).sqrt();
+    let g = |t: f64| {
+        let r = r0 + t * t;
+        let nr = n(r - earth_radius_m) * r;
+        let root = ((nr - c) * (nr + c)).max(0.0).sqrt();
+        if t == 0.0 {
+            // The limit 2c / (r₀ √(d(n²r²)/dr)) of a horizontal start (0 for alpha > 0).
+            if root > 0.0 {
+                return 0.0;
+            }
+            let dr = 1e-3;
+            let r1 = r0 + dr;
+            let nr1 = n(r1 - earth_radius_m) * r1;
+            let slope = (nr1 * nr1 - c * c) / dr;
+            return 2.0 * c / (r0 * slope.sqrt());
+        }
+        2.0 * t * c / (r * root)
+    };
+    let step = t_top / intervals as f64;
+    let mut sum = g(0.0) + g(t_top);
+    for i in 1..intervals {
+        sum += g(i as f64 * step) * if i % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    let theta = sum * step / 3.0;
+    // Out of the top into vacuum (n = 1): the invariant holds across the boundary.
+    let psi_out = (c / (earth_radius_m + top_m)).min(1.0).acos();
+    psi_out - theta
+}
