@@ -76,6 +76,21 @@ fn traced_limb_rad(
     0.5 * (lo + hi)
 }
 
+/// The apparent elevation (rad) of the sea horizon at `wavelength_nm` (the lowest ray that
+/// does not meet the sea), if the lowest ray of `bracket_rad` meets it.
+fn sea_horizon_rad(
+    atm: &RefractiveAtmosphere,
+    h0: f64,
+    wavelength_nm: f64,
+    bracket_rad: (f64, f64),
+) -> Option<f64> {
+    let atm = atm.at_wavelength_nm(wavelength_nm).unwrap();
+    let rays = CurvedRays::new(&atm, render_tracer_config(R), 0.0).unwrap();
+    let meets_sea = |a: f64| matches!(rays.trace(h0, a, &[], true).end, FanEnd::Ground { .. });
+    let lowest = bracket_rad.0 - 0.05f64.to_radians();
+    meets_sea(lowest).then(|| bisect(lowest, bracket_rad.1, 50, |a| !meets_sea(a)).1)
+}
+
 /// The same from Bouguer's refraction integral (secant iteration on the escape elevation).
 fn integral_limb_rad(
     atm: &RefractiveAtmosphere,
@@ -111,12 +126,13 @@ fn centre_column_elevations(scene: &Scene) -> Vec<f64> {
         .collect()
 }
 
-/// The first row (from the top) of the centre column where band `band` shows the sun: its
+/// The first row (from the top) of the centre column where band `band` shows the sun, among
+/// the rows above `rows` (the band's sea horizon: below it the sea mirrors the sun): its
 /// radiance exceeds the sky of the top row by a tenth of the column's excess at its brightest;
 /// `None` if the band's sun is not brighter than twice that sky (extinguished).
-fn top_sun_row(film: &SpectralFilm, band: usize) -> Option<usize> {
+fn top_sun_row(film: &SpectralFilm, band: usize, rows: usize) -> Option<usize> {
     let w = film.film.width as usize;
-    let column: Vec<f32> = (0..film.film.height as usize)
+    let column: Vec<f32> = (0..rows)
         .map(|y| film.bands[band][y * w + w / 2])
         .collect();
     let sky = column[0];
@@ -148,7 +164,9 @@ fn check_limbs(scene: &Scene, bracket_rad: (f64, f64), seen: usize) -> Vec<(f64,
     for (k, &wavelength_nm) in film.wavelengths_nm.iter().enumerate() {
         let alpha = traced_limb_rad(&atm, scene.camera.height_m, limb_rad, wavelength_nm, bracket_rad);
         let predicted = rows.iter().position(|&e| e <= alpha).unwrap();
-        let Some(found) = top_sun_row(&film, k) else {
+        let above_sea = sea_horizon_rad(&atm, scene.camera.height_m, wavelength_nm, bracket_rad)
+            .map_or(rows.len(), |h| rows.iter().position(|&e| e <= h).unwrap_or(rows.len()));
+        let Some(found) = top_sun_row(&film, k, above_sea) else {
             continue;
         };
         assert!(
