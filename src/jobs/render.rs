@@ -256,12 +256,14 @@ pub fn render_film(
     };
     let refractive = atmosphere.map(|a| &a.refractive);
     let film = match scene.spectral_bands {
-        Some(bands) => render_spectral(scene, refractive, options, bands)
-            .map_err(|e| match e {
-                SpectralError::Prepare(source) => prepare(source),
-                SpectralError::Render(source) => render(source),
-            })?
-            .film,
+        Some(bands) => {
+            render_spectral(scene, refractive, options, bands)
+                .map_err(|e| match e {
+                    SpectralError::Prepare(source) => prepare(source),
+                    SpectralError::Render(source) => render(source),
+                })?
+                .film
+        }
         None => {
             let tracer = prepare_tracer(scene, refractive, options).map_err(prepare)?;
             render_scene(scene, tracer.as_ref(), options).map_err(render)?

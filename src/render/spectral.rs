@@ -130,9 +130,7 @@ pub fn integrated_colour_matching(lo_nm: f64, hi_nm: f64) -> [f64; 3] {
 pub fn band_centres_nm(bands: u32) -> Vec<f64> {
     let (lo, hi) = SPECTRAL_RANGE_NM;
     let width = (hi - lo) / bands as f64;
-    (0..bands)
-        .map(|k| lo + (k as f64 + 0.5) * width)
-        .collect()
+    (0..bands).map(|k| lo + (k as f64 + 0.5) * width).collect()
 }
 
 /// How much of each RGB channel an RGB colour's reflectance spectrum takes at `wavelength_nm`:
@@ -182,11 +180,7 @@ impl BandColour {
         );
         let xyz_weights: Vec<[f64; 3]> = (0..bands)
             .map(|k| {
-                let a = if k == 0 {
-                    first
-                } else {
-                    lo + k as f64 * width
-                };
+                let a = if k == 0 { first } else { lo + k as f64 * width };
                 let b = if k + 1 == bands {
                     last
                 } else {

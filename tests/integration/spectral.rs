@@ -132,15 +132,15 @@ fn centre_column_elevations(scene: &Scene) -> Vec<f64> {
 /// `None` if the band's sun is not brighter than twice that sky (extinguished).
 fn top_sun_row(film: &SpectralFilm, band: usize, rows: usize) -> Option<usize> {
     let w = film.film.width as usize;
-    let column: Vec<f32> = (0..rows)
-        .map(|y| film.bands[band][y * w + w / 2])
-        .collect();
+    let column: Vec<f32> = (0..rows).map(|y| film.bands[band][y * w + w / 2]).collect();
     let sky = column[0];
     let brightest = column.iter().copied().fold(0.0, f32::max);
     if brightest <= 2.0 * sky {
         return None;
     }
-    column.iter().position(|&l| l > sky + 0.1 * (brightest - sky))
+    column
+        .iter()
+        .position(|&l| l > sky + 0.1 * (brightest - sky))
 }
 
 /// Every band's upper limb in `scene`'s spectral render lies in the row whose centre the
@@ -149,23 +149,26 @@ fn top_sun_row(film: &SpectralFilm, band: usize, rows: usize) -> Option<usize> {
 /// extinguished (at least `seen` of them).
 fn check_limbs(scene: &Scene, bracket_rad: (f64, f64), seen: usize) -> Vec<(f64, f64, usize)> {
     let atm = atmosphere(scene);
-    let film = render_spectral(
-        scene,
-        Some(&atm),
-        &options(),
-        scene.spectral_bands.unwrap(),
-    )
-    .unwrap();
+    let film =
+        render_spectral(scene, Some(&atm), &options(), scene.spectral_bands.unwrap()).unwrap();
     assert_eq!(film.film.stats.non_finite_samples, 0);
     let sun = scene.sun.unwrap();
     let limb_rad = sun.elevation_rad + 0.5 * sun.angular_diameter_rad;
     let rows = centre_column_elevations(scene);
     let mut out = Vec::new();
     for (k, &wavelength_nm) in film.wavelengths_nm.iter().enumerate() {
-        let alpha = traced_limb_rad(&atm, scene.camera.height_m, limb_rad, wavelength_nm, bracket_rad);
+        let alpha = traced_limb_rad(
+            &atm,
+            scene.camera.height_m,
+            limb_rad,
+            wavelength_nm,
+            bracket_rad,
+        );
         let predicted = rows.iter().position(|&e| e <= alpha).unwrap();
         let above_sea = sea_horizon_rad(&atm, scene.camera.height_m, wavelength_nm, bracket_rad)
-            .map_or(rows.len(), |h| rows.iter().position(|&e| e <= h).unwrap_or(rows.len()));
+            .map_or(rows.len(), |h| {
+                rows.iter().position(|&e| e <= h).unwrap_or(rows.len())
+            });
         let Some(found) = top_sun_row(&film, k, above_sea) else {
             continue;
         };
@@ -185,7 +188,10 @@ fn check_limbs(scene: &Scene, bracket_rad: (f64, f64), seen: usize) -> Vec<(f64,
     let rim = px(top);
     assert!(rim[1] > rim[0] || rim[2] > rim[0], "rim row {top}: {rim:?}");
     let body = px(inside);
-    assert!(body[0] > body[1] && body[1] > body[2], "row {inside}: {body:?}");
+    assert!(
+        body[0] > body[1] && body[1] > body[2],
+        "row {inside}: {body:?}"
+    );
     out
 }
 
@@ -211,7 +217,12 @@ fn dispersion_at_the_horizon_through_us1976_matches_the_refraction_integral() {
         i650 / ARCSEC
     );
     for (t, i) in [(t450, i450), (t650, i650)] {
-        assert!((t - i).abs() < 1.0 * ARCSEC, "{} vs {}", t / ARCSEC, i / ARCSEC);
+        assert!(
+            (t - i).abs() < 1.0 * ARCSEC,
+            "{} vs {}",
+            t / ARCSEC,
+            i / ARCSEC
+        );
     }
     assert!((traced - integral).abs() < 0.3, "{traced} vs {integral}");
     assert!((15.0..30.0).contains(&traced), "{traced}″");
@@ -230,11 +241,7 @@ fn us1976_spectral_limbs_lie_where_single_wavelength_traces_put_them() {
 #[test]
 fn fig13_green_rim_lies_where_single_wavelength_traces_put_it() {
     let scene = Scene::from_file(&repo_file("data/scenes/fig13_green_flash.toml")).unwrap();
-    let limbs = check_limbs(
-        &scene,
-        ((-0.055f64).to_radians(), 0.1f64.to_radians()),
-        6,
-    );
+    let limbs = check_limbs(&scene, ((-0.055f64).to_radians(), 0.1f64.to_radians()), 6);
     eprintln!("fig13 limbs (nm, apparent °, row): {limbs:?}");
     assert!(limbs.windows(2).all(|w| w[0].2 <= w[1].2), "{limbs:?}");
 }
@@ -255,7 +262,10 @@ fn a_flat_spectrum_is_white_and_the_colour_tables_are_the_cie_ones() {
     assert!(d65.iter().all(|v| (v - 1.0).abs() < 1e-3), "{d65:?}");
     for bands in [8, 13, 60] {
         let white = BandColour::new(bands).rec709(|_| 1.0);
-        assert!(white.iter().all(|v| (v - 1.0).abs() < 1e-3), "{bands}: {white:?}");
+        assert!(
+            white.iter().all(|v| (v - 1.0).abs() < 1e-3),
+            "{bands}: {white:?}"
+        );
     }
 }
 
@@ -312,13 +322,17 @@ fn spectral_renders_do_not_depend_on_the_thread_count() {
             render_spectral(&scene, Some(&atm), &o, 8).unwrap()
         })
     };
-    assert!(run(1) == run(2), "spectral frames differ between 1 and 2 threads");
+    assert!(
+        run(1) == run(2),
+        "spectral frames differ between 1 and 2 threads"
+    );
 }
 
 #[test]
 fn out_of_range_band_counts_are_refused() {
     for bands in [1, 7, 61] {
-        let text = US1976_SUNSET.replace("spectral_bands = 8", &format!("spectral_bands = {bands}"));
+        let text =
+            US1976_SUNSET.replace("spectral_bands = 8", &format!("spectral_bands = {bands}"));
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("scene.toml");
         std::fs::write(&path, text).unwrap();
