@@ -765,7 +765,7 @@ pub fn bouguer_escape_elevation(
     alpha: f64,
     intervals: usize,
 ) -> f64 {
-    assert!(alpha >= 0.0 && intervals % 2 == 0);
+    assert!(alpha >= 0.0 && intervals.is_multiple_of(2));
     let r0 = earth_radius_m + h0;
     let c = n(h0) * r0 * alpha.cos();
     let t_top = (top_m - h0).sqrt();
