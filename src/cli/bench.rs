@@ -19,7 +19,8 @@ use ghostship::verify::accuracy::{
 };
 use ghostship::verify::benchmarks::benchmarks_markdown;
 use ghostship::verify::frames::{
-    FrameConfig, FrameTiming, PaperScene, SceneSweep, load_paper_scenes, sweep_scene, time_scene,
+    FrameConfig, FrameTiming, PaperScene, SceneSweep, SpectralTiming, load_paper_scenes,
+    load_spectral_scenes, sweep_scene, time_scene, time_spectral,
 };
 use ghostship::verify::frames_report::{frame_time_vs_error_png, frames_markdown};
 use ghostship::verify::stress::stress_suite;
@@ -113,6 +114,12 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     let scenes_dir = args.data.join("scenes");
     let scenes = load_paper_scenes(&scenes_dir)
         .with_context(|| format!("cannot load the paper scenes from {}", scenes_dir.display()))?;
+    let spectral_scenes = load_spectral_scenes(&scenes_dir).with_context(|| {
+        format!(
+            "cannot load the spectral scenes from {}",
+            scenes_dir.display()
+        )
+    })?;
     let stress_dir = std::env::temp_dir().join(format!("ghostship-stress-{}", std::process::id()));
     std::fs::create_dir_all(&stress_dir)
         .with_context(|| format!("cannot create {}", stress_dir.display()))?;
@@ -124,7 +131,7 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
                 .filter(|s| !s.scene.atmosphere.straight)
                 .count();
             let runs = cases.len() * (config.tolerances_m.len() + 1)
-                + scenes.len() * frame_config.timing_sizes.len()
+                + (scenes.len() + spectral_scenes.len()) * frame_config.timing_sizes.len()
                 + curved * (frame_config.tolerances_m.len() + 1);
             let bar = progress_bar(quiet, runs as u64);
             measure_rays(&cases, &config, &bar).map(|r| (r, bar))
@@ -132,6 +139,7 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     let _ = std::fs::remove_dir_all(&stress_dir);
     let (results, bar) = measured?;
     let (timings, sweeps) = measure_frames(&scenes, &frame_config, &bar)?;
+    let spectral = measure_spectral(&spectral_scenes, &frame_config, &bar)?;
     bar.finish_and_clear();
 
     let mut command = String::from("ghostship bench accuracy");
@@ -144,7 +152,7 @@ fn accuracy(args: AccuracyArgs, quiet: bool) -> anyhow::Result<()> {
     let md = benchmarks_markdown(
         &command,
         &[
-            frames_markdown(&timings, &sweeps, &frame_config, FRAME_PLOT),
+            frames_markdown(&timings, &spectral, &sweeps, &frame_config, FRAME_PLOT),
             rays_markdown(&results, &config, RAY_PLOT),
         ],
     );
@@ -248,6 +256,22 @@ fn measure_rays(
         results.push(measure_case(case, config, &mut || bar.inc(1))?);
     }
     Ok(results)
+}
+
+fn measure_spectral(
+    scenes: &[PaperScene],
+    config: &FrameConfig,
+    bar: &ProgressBar,
+) -> anyhow::Result<Vec<SpectralTiming>> {
+    let mut timings = Vec::new();
+    for &size in &config.timing_sizes {
+        for ps in scenes {
+            bar.set_message(format!("spectral: {} at {}×{}", ps.name, size.0, size.1));
+            timings.push(time_spectral(ps, size, config)?);
+            bar.inc(1);
+        }
+    }
+    Ok(timings)
 }
 
 fn measure_frames(

@@ -3,7 +3,9 @@
 //! [`FrameConfig`]. Out: per scene and size, the time per frame of the fan path, the exact
 //! per-pixel 3-D path and straight rays, with the fan tracer's rays and steps inside the frame
 //! ([`FrameTiming`]); per curved scene and tolerance, the image error of both curved paths
-//! against renders at a far tighter tolerance ([`SceneSweep`]). The tables and the plot are in
+//! against renders at a far tighter tolerance ([`SceneSweep`]); per spectral scene
+//! ([`SPECTRAL_SCENES`]) and size, its spectral frame's time against its RGB frame's
+//! ([`SpectralTiming`]). The tables and the plot are in
 //! [`frames_report`](super::frames_report).
 //!
 //! Every frame is rendered through the library's render API ([`prepare_tracer`] and
@@ -30,6 +32,7 @@ use crate::atmosphere::{AtmosphereError, LoadedAtmosphere};
 use crate::output::png::{DEFAULT_EXPOSURE, film_to_srgb8};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::render::curved::cards_top_m;
+use crate::render::spectral::{SpectralError, render_spectral};
 use crate::render::{
     CurvedRays, FanEnd, FanRay, Film, PrepareError, RayTracer, RenderError, RenderOptions,
     TRACER_TOLERANCE_RANGE_M, prepare_tracer, render_scene, render_tracer_config,
@@ -52,6 +55,10 @@ pub const PAPER_SCENES: [&str; 9] = [
     "fig12_novaya_zemlya.toml",
     "fig12b_novaya_zemlya_strips.toml",
 ];
+
+/// Scene files (in `data/scenes/`) rendered spectrally (`[render] spectral_bands`), timed
+/// against the same scene on the RGB path ([`time_spectral`]).
+pub const SPECTRAL_SCENES: [&str; 1] = ["fig13_green_flash.toml"];
 
 /// What to measure.
 #[derive(Debug, Clone, PartialEq)]
@@ -218,7 +225,16 @@ impl PaperScene {
 
 /// Load every scene of [`PAPER_SCENES`] from `scenes_dir` with its atmosphere.
 pub fn load_paper_scenes(scenes_dir: &Path) -> Result<Vec<PaperScene>, FrameError> {
-    PAPER_SCENES
+    load_scenes(scenes_dir, &PAPER_SCENES)
+}
+
+/// Load every scene of [`SPECTRAL_SCENES`] from `scenes_dir` with its atmosphere.
+pub fn load_spectral_scenes(scenes_dir: &Path) -> Result<Vec<PaperScene>, FrameError> {
+    load_scenes(scenes_dir, &SPECTRAL_SCENES)
+}
+
+fn load_scenes(scenes_dir: &Path, files: &[&str]) -> Result<Vec<PaperScene>, FrameError> {
+    files
         .iter()
         .map(|file| {
             let path = scenes_dir.join(file);
@@ -864,6 +880,73 @@ pub fn time_scene(
         timed_size: proxy,
     });
     Ok(timing)
+}
+
+/// The cost of one spectral scene at one size: its RGB frame against its spectral frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpectralTiming {
+    /// The scene's name.
+    pub name: String,
+    /// Frame size (width, height).
+    pub size: (u32, u32),
+    /// Its wavelength bands.
+    pub bands: u32,
+    /// The RGB fan path: `render_scene` alone (ms).
+    pub rgb_ms: f64,
+    /// The spectral frame: `render_spectral`, which prepares each band's atmosphere and
+    /// tracer, renders every band and integrates them (ms).
+    pub spectral_ms: f64,
+}
+
+/// Time the RGB and the spectral frame of `ps` (a scene with `[render] spectral_bands`) at
+/// `size`, the render default tolerance, the median of `config.repetitions` renders each.
+pub fn time_spectral(
+    ps: &PaperScene,
+    size: (u32, u32),
+    config: &FrameConfig,
+) -> Result<SpectralTiming, FrameError> {
+    config.check()?;
+    let Some(bands) = ps.scene.spectral_bands else {
+        return Err(FrameError::InvalidConfig(format!(
+            "{} has no [render] spectral_bands",
+            ps.name
+        )));
+    };
+    let tol = RenderOptions::default().tolerance_m;
+    let scene = variant(&ps.scene, size, false);
+    let tracer = prepared(ps, &scene, RenderPath::Fan, tol)?;
+    let reps = config.repetitions;
+    let (rgb_s, _) = timed_render(
+        &ps.name,
+        &scene,
+        tracer.as_ref(),
+        RenderPath::Fan,
+        tol,
+        reps,
+    )?;
+    let opts = options(RenderPath::Fan, tol);
+    let mut times = Vec::with_capacity(reps);
+    for _ in 0..reps.max(1) {
+        let start = Instant::now();
+        render_spectral(&scene, ps.refractive(), &opts, bands).map_err(|e| match e {
+            SpectralError::Prepare(source) => FrameError::Prepare {
+                name: ps.name.clone(),
+                source,
+            },
+            SpectralError::Render(source) => FrameError::Render {
+                name: ps.name.clone(),
+                source,
+            },
+        })?;
+        times.push(start.elapsed().as_secs_f64());
+    }
+    Ok(SpectralTiming {
+        name: ps.name.clone(),
+        size,
+        bands,
+        rgb_ms: rgb_s * 1e3,
+        spectral_ms: median(&mut times).unwrap_or(f64::NAN) * 1e3,
+    })
 }
 
 #[cfg(test)]

@@ -8,7 +8,9 @@ use std::fmt::Write as _;
 use plotters::prelude::*;
 
 use super::accuracy::fmt_tol;
-use super::frames::{FrameConfig, FrameError, FrameTiming, PathPoint, PixelDiff, SceneSweep};
+use super::frames::{
+    FrameConfig, FrameError, FrameTiming, PathPoint, PixelDiff, SceneSweep, SpectralTiming,
+};
 use crate::render::RenderOptions;
 
 fn size(s: (u32, u32)) -> String {
@@ -79,6 +81,40 @@ fn timing_markdown(timings: &[FrameTiming], config: &FrameConfig) -> String {
     }
     s.push('\n');
     s.push_str(&fan_tracer_markdown(timings));
+    s
+}
+
+/// The table of the spectral frames against their RGB frames (empty without any).
+fn spectral_markdown(timings: &[SpectralTiming], config: &FrameConfig) -> String {
+    if timings.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from("\n### Spectral frames\n\n");
+    let _ = writeln!(
+        s,
+        "* Scenes with `[render] spectral_bands`, rendered on the fan path at the render default \
+         tolerance with 1 sample per pixel, the median of {reps} renders each. *RGB*: the same \
+         scene on the RGB path, `render_scene` alone. *Spectral*: `render_spectral`, which \
+         rebuilds the refractive atmosphere and the tracer at each band's wavelength, renders \
+         every band and integrates the bands to Rec.709.\n",
+        reps = config.repetitions,
+    );
+    s.push_str(
+        "| scene | size | bands | RGB (ms) | spectral (ms) | spectral / RGB |\n\
+         |---|---|---:|---:|---:|---:|\n",
+    );
+    for t in timings {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {:.1}× |",
+            t.name,
+            size(t.size),
+            t.bands,
+            ms(t.rgb_ms),
+            ms(t.spectral_ms),
+            t.spectral_ms / t.rgb_ms,
+        );
+    }
     s
 }
 
@@ -164,15 +200,18 @@ fn sweep_table(sw: &SceneSweep) -> String {
     s
 }
 
-/// The frame study's sections of `BENCHMARKS.md` (`##` headings): time per frame, then image
-/// error against tolerance with the plot at `plot_rel` (relative to the file).
+/// The frame study's sections of `BENCHMARKS.md` (`##` headings): time per frame (with the
+/// spectral scenes' cost against RGB), then image error against tolerance with the plot at
+/// `plot_rel` (relative to the file).
 pub fn frames_markdown(
     timings: &[FrameTiming],
+    spectral: &[SpectralTiming],
     sweeps: &[SceneSweep],
     config: &FrameConfig,
     plot_rel: &str,
 ) -> String {
     let mut s = timing_markdown(timings, config);
+    s.push_str(&spectral_markdown(spectral, config));
     let _ = writeln!(
         s,
         "\n## Frames: image error against tolerance\n\n\

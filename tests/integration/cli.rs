@@ -884,7 +884,7 @@ fn check_rays_section(md: &str) {
 fn check_frame_times(md: &str) {
     let frames = md_section(md, "Frames: time per frame");
     let tables = markdown_tables(frames);
-    assert_eq!(tables.len(), 2, "{frames}");
+    assert_eq!(tables.len(), 3, "{frames}");
     let times = &tables[0];
     assert_eq!(times.len(), 18, "{frames}");
     for row in times {
@@ -901,6 +901,17 @@ fn check_frame_times(md: &str) {
         assert_eq!(row.len(), 7, "{row:?}");
         let steps: f64 = row[5].parse().unwrap_or_else(|_| panic!("{row:?}"));
         assert!(steps > 1.0, "{row:?}");
+    }
+    // Spectral frames: fig13 at both quick sizes, 8 bands, each band at least one more render.
+    let spectral = &tables[2];
+    assert!(frames.contains("### Spectral frames"), "{frames}");
+    assert_eq!(first_cells(spectral), ["fig13_green_flash"; 2], "{frames}");
+    for row in spectral {
+        assert_eq!(row.len(), 6, "{row:?}");
+        assert_eq!(row[2], "8", "{row:?}");
+        let num = |c: &str| -> f64 { c.parse().unwrap_or_else(|_| panic!("{row:?}")) };
+        let (rgb, spectral) = (num(&row[3]), num(&row[4]));
+        assert!(rgb > 0.0 && spectral > rgb, "{row:?}");
     }
 }
 
