@@ -660,8 +660,20 @@ fn sea_reflection(
         .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky));
     let sky = scene.sky;
     let glint = scene.sun.filter(|_| !mirror).map(|sun| {
-        let refraction_rad = reflection::sea_level_refraction_rad(inp.tracer, sun.elevation_rad);
-        let t = sky.transmittance(sun.elevation_rad + refraction_rad);
+        // The sun's light at the sea comes along its own curved ray from the sea surface (a
+        // ray skimming a surface duct crosses far more air than any air-mass formula of its
+        // elevation gives); none when the sun is below the sea's apparent horizon.
+        let launch = reflection::sea_level_sun_launch_rad(inp.tracer, sun.elevation_rad);
+        let extinction = sky.sun_extinction();
+        let t = launch
+            .and_then(|a| {
+                inp.tracer
+                    .density_paths_m(0.0, a, extinction.scale_heights_m())
+            })
+            .map_or([0.0; 3], |paths| {
+                extinction.path_optical_depth(paths).map(|tau| (-tau).exp())
+            });
+        let refraction_rad = launch.map_or(0.0, |a| a - sun.elevation_rad);
         let r = 0.5 * sun.angular_diameter_rad;
         let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
         reflection::Glint {

@@ -198,7 +198,8 @@ pub(super) struct Glint {
     pub(super) sun: Sun,
     /// Apparent minus true elevation of the sun seen from the sea surface (rad).
     pub(super) refraction_rad: f64,
-    /// Solar irradiance normal to the beam at the sea, per channel (film units × sr).
+    /// Solar irradiance normal to the beam at the sea, per channel (film units × sr): the sun
+    /// attenuated along its own curved ray from the sea surface below the camera to the top.
     pub(super) irradiance: [f64; 3],
     /// The sun's attenuated disc-centre radiance at the sea (the glint's cap before ρ).
     pub(super) radiance_cap: [f64; 3],
@@ -221,28 +222,36 @@ pub(super) struct Reflection {
     pub(super) mirror_sun: Option<(Sun, SunDisc)>,
 }
 
-/// The sun's apparent elevation seen from the sea surface minus its true elevation (rad):
-/// bisection on the launch elevation of rays from height 0 whose final direction is the sun's
-/// (0 when the sun is below every such ray's reach or the rays do not leave).
-pub(super) fn sea_level_refraction_rad(tracer: &dyn RayTracer, sun_elevation_rad: f64) -> f64 {
+/// The launch elevation (rad) at the sea surface of the ray that leaves the atmosphere towards
+/// a sun at true elevation `sun_elevation_rad`: bisection on the launch elevation of rays from
+/// height 0 over [0, 0.5 rad], where a ray that does not leave (trapped in a surface duct, or
+/// back on the sea) counts as passing below the sun. Above the reach of the 0.5 rad ray, the
+/// sun's true elevation plus that ray's refraction. `None` when every ray from the sea surface
+/// leaves above the sun: the sun's centre is below the sea's apparent horizon.
+pub(super) fn sea_level_sun_launch_rad(
+    tracer: &dyn RayTracer,
+    sun_elevation_rad: f64,
+) -> Option<f64> {
     let end = |e: f64| match tracer.trace(0.0, e, &[], true).end {
         FanEnd::Sky { elevation_rad } => Some(elevation_rad),
         _ => None,
     };
     let (mut lo, mut hi) = (0.0f64, 0.5f64);
-    match (end(lo), end(hi)) {
-        (Some(a), Some(b)) if a <= sun_elevation_rad && sun_elevation_rad <= b => {}
-        _ => return 0.0,
+    let top = end(hi)?;
+    if top < sun_elevation_rad {
+        return Some(sun_elevation_rad + (hi - top));
+    }
+    if end(lo).is_some_and(|e| e > sun_elevation_rad) {
+        return None;
     }
     for _ in 0..30 {
         let mid = 0.5 * (lo + hi);
         match end(mid) {
-            Some(e) if e < sun_elevation_rad => lo = mid,
-            Some(_) => hi = mid,
-            None => lo = mid,
+            Some(e) if e >= sun_elevation_rad => hi = mid,
+            _ => lo = mid,
         }
     }
-    0.5 * (lo + hi) - sun_elevation_rad
+    Some(0.5 * (lo + hi))
 }
 
 impl Reflection {

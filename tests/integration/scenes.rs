@@ -26,7 +26,8 @@ use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 use crate::render::{at_edge, max_channel_difference};
 use crate::support::data::data_dir;
 use crate::support::reference::{
-    BreakSource, atmosphere_index, reference_density_paths, reference_heights,
+    BreakSource, atmosphere_index, bouguer_escape_elevation, reference_density_paths,
+    reference_heights,
 };
 
 pub(crate) fn load_scene(name: &str) -> Scene {
@@ -653,6 +654,74 @@ fn the_ducted_sun_is_redder_and_dimmer_than_the_sun_at_five_degrees() {
     );
     for c in 0..3 {
         assert!(d[c] < 0.1 * h[c], "channel {c}: {d:?} vs {h:?}");
+    }
+}
+
+/// The sun's glitter on the sea takes its colour from the sun's own curved ray from the sea
+/// surface: in the Novaya Zemlya inversion, with the sun 0.5° above the true horizon, the ratios
+/// of the glitter's channels (the render with the sun minus the same render without it) are
+/// those of e^(−τ_c), τ_c along the independent reference tracer's ray launched from the sea
+/// towards the sun (its launch elevation found from Bouguer's invariant alone), within 1 %.
+#[test]
+fn the_glitter_is_lit_along_the_suns_curved_ray_from_the_sea() {
+    let mut scene = load_scene("fig12_novaya_zemlya.toml");
+    let (atm, nz) = novaya_zemlya_rays();
+    scene.camera.pitch_rad = f64::to_radians(-1.0);
+    scene.camera.hfov_rad = f64::to_radians(4.0);
+    (scene.camera.width, scene.camera.height) = (200, 100);
+    let sun_elevation = f64::to_radians(0.5);
+    scene.sun.as_mut().unwrap().elevation_rad = sun_elevation;
+    assert!(scene.sea.wave_slope_rad > 0.0, "a rough sea shows glitter");
+    let lit = render(&scene, &atm, false);
+    let mut dark = scene.clone();
+    dark.sun = None;
+    let dark = render(&dark, &atm, false);
+    let glint = lit
+        .pixels
+        .iter()
+        .zip(&dark.pixels)
+        .map(|(a, b)| [0, 1, 2].map(|c| f64::from(a[c]) - f64::from(b[c])))
+        .max_by(|a, b| a[0].total_cmp(&b[0]))
+        .unwrap();
+    // The reference: the launch elevation at the sea whose ray leaves towards the sun.
+    let n = |h: f64| atm.exact(h).0;
+    let exit = |a: f64| bouguer_escape_elevation(&n, atm_radius(), 40e3, 0.0, a, 4000);
+    let (mut lo, mut hi) = (f64::to_radians(0.2), f64::to_radians(5.0));
+    assert!(exit(lo) < sun_elevation && exit(hi) > sun_elevation);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if exit(mid) < sun_elevation {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let launch = 0.5 * (lo + hi);
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    let extinction = scene.sky.sun_extinction();
+    let paths = reference_density_paths(
+        &index,
+        0.0,
+        launch,
+        1.5e6,
+        100.0,
+        extinction.scale_heights_m(),
+    );
+    let tau = extinction.path_optical_depth(paths);
+    let air_mass = scene.sky.transmittance(launch);
+    eprintln!(
+        "launch {:.4}°, τ {tau:?}; glitter {glint:?}; air-mass transmittance {air_mass:?}",
+        launch.to_degrees()
+    );
+    assert!(glint[2] > 0.0, "the glitter is in the frame: {glint:?}");
+    for c in 1..3 {
+        let want = (tau[0] - tau[c]).exp();
+        let got = glint[c] / glint[0];
+        eprintln!("channel {c} over red: {got:.5} vs {want:.5}");
+        assert!(
+            (got / want - 1.0).abs() < 0.01,
+            "channel {c}: {got} vs {want}"
+        );
     }
 }
 
