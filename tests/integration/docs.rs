@@ -182,7 +182,8 @@ fn base_scene(with_sounding: bool) -> toml::Table {
     let mut text = format!(
         "{CAMERA}[atmosphere]\n[earth]\n[sky]\n[sea]\n[[cards]]\nimage = \"../cards/ship.png\"\n\
          distance_m = 10000.0\nwidth_m = 50.0\nheight_m = 20.0\n[sun]\nelevation_deg = 1.0\n\
-         [terrain]\ndem = \"terrain/island.tif\"\nobserver_lat_deg = 78.0\nobserver_lon_deg = 15.0\n"
+         [terrain]\ndem = \"terrain/island.tif\"\nobserver_lat_deg = 78.0\nobserver_lon_deg = 15.0\n\
+         [render]\n"
     );
     if with_sounding {
         text = text.replace(
@@ -240,6 +241,7 @@ fn scene_field(section: &str, name: &str) -> (String, bool) {
     let pointer = match section {
         "earth" => format!("/earth_{stored}"),
         "cards" => format!("/cards/0/{stored}"),
+        "render" => format!("/{stored}"),
         s => format!("/{s}/{stored}"),
     };
     (pointer, radians)

@@ -19,6 +19,7 @@ mod layer_fit;
 mod pipeline;
 mod profile;
 mod readme;
+mod reference_images;
 mod reference_tracer;
 mod refractivity;
 mod render;
