@@ -280,24 +280,34 @@ pub fn render_film(
 }
 
 /// Provenance for an EXR of `scene` rendered with `options` (scene hash, observer height,
-/// wavelength, fan tolerance or "exact", tracer tolerance, samples per pixel).
+/// wavelength, fan tolerance or "exact", tracer tolerance, samples per pixel; for a spectral
+/// render the number of bands and their centre wavelengths, which replace `wavelength_nm`).
 pub fn provenance(scene: &Scene, options: &RenderOptions) -> ExrMetadata {
     let spp = options
         .samples_per_pixel
         .unwrap_or(scene.camera.samples_per_pixel);
+    let mut extra = vec![
+        ("samples_per_pixel".into(), spp.to_string()),
+        (
+            "straight_rays".into(),
+            scene.atmosphere.straight.to_string(),
+        ),
+        ("earth_radius_m".into(), scene.earth_radius_m.to_string()),
+    ];
+    if let Some(bands) = scene.spectral_bands {
+        let centres: Vec<String> = crate::render::spectral::band_centres_nm(bands)
+            .iter()
+            .map(|nm| nm.to_string())
+            .collect();
+        extra.push(("spectral_bands".into(), bands.to_string()));
+        extra.push(("spectral_band_centres_nm".into(), centres.join(",")));
+    }
     ExrMetadata {
         scene_hash: scene.hash_hex.clone(),
         observer_height_m: scene.camera.height_m,
         wavelength_nm: scene.atmosphere.wavelength_nm,
         tolerance_px: (!options.exact).then_some(options.tolerance_px),
         tracer_tolerance_m: options.tolerance_m,
-        extra: vec![
-            ("samples_per_pixel".into(), spp.to_string()),
-            (
-                "straight_rays".into(),
-                scene.atmosphere.straight.to_string(),
-            ),
-            ("earth_radius_m".into(), scene.earth_radius_m.to_string()),
-        ],
+        extra,
     }
 }

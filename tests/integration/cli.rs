@@ -1179,6 +1179,39 @@ fn render_tolerance_is_validated_used_and_recorded() {
     );
 }
 
+/// A spectral render's EXR records its bands and their centre wavelengths (they replace the
+/// scene's single wavelength); an RGB render's records none.
+#[test]
+fn spectral_exr_records_its_bands() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = |scene: &str| {
+        let exr = dir.path().join(format!("{scene}.exr"));
+        let path = data_file(&format!("scenes/{scene}.toml"));
+        ok(&[
+            "render",
+            path.to_str().unwrap(),
+            "--size",
+            "16x8",
+            "--spp",
+            "1",
+            "-q",
+            "-o",
+            exr.to_str().unwrap(),
+        ]);
+        exr_provenance(&exr)
+    };
+    let spectral = lines("fig13_green_flash");
+    assert!(
+        spectral.contains(&"spectral_bands=8".to_string()),
+        "{spectral:?}"
+    );
+    // 8 equal bands over 400–700 nm: 37.5 nm wide, centred from 418.75 nm.
+    let want = "spectral_band_centres_nm=418.75,456.25,493.75,531.25,568.75,606.25,643.75,681.25";
+    assert!(spectral.contains(&want.to_string()), "{spectral:?}");
+    let rgb = lines("fig12_novaya_zemlya");
+    assert!(!rgb.iter().any(|l| l.starts_with("spectral")), "{rgb:?}");
+}
+
 /// `profile` of a real sounding writes `fitted_layers.toml` and names it in the summary; the file
 /// is an atmosphere `profile` accepts, with the sounding's surface height and temperature.
 #[test]

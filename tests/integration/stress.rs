@@ -336,6 +336,8 @@ struct Worst {
 struct Comparison {
     errors_m: Vec<Option<f64>>,
     estimate_m: f64,
+    /// Observer height (m), launch elevation (°) and distance (m): where, for the messages.
+    at: (f64, f64, f64),
 }
 
 /// Check every record of `run` (problems pushed with their context), fill `worst` (one per
@@ -397,6 +399,7 @@ fn check_observer(
                 errors_m[t] = Some(err);
             }
             comparisons.push(Comparison {
+                at: (h0, deg, d),
                 errors_m,
                 estimate_m: estimate,
             });
@@ -415,19 +418,24 @@ fn monotone_problems(
 ) {
     for k in 0..tolerances_m.len().saturating_sub(1) {
         let (mut loose, mut tight) = (0.0f64, 0.0f64);
+        let mut worst_tight = None;
         for c in comparisons
             .iter()
             .filter(|c| c.estimate_m <= REFERENCE_TARGET_M)
         {
             if let (Some(a), Some(b)) = (c.errors_m[k], c.errors_m[k + 1]) {
                 loose = loose.max(a);
-                tight = tight.max(b);
+                if b > tight {
+                    tight = b;
+                    worst_tight = Some((c.at, a));
+                }
             }
         }
         if tight > loose + MONOTONE_ALLOWANCE_M {
+            let ((h0, deg, d), its_loose) = worst_tight.expect("a comparison gave the worst");
             let text = format!(
                 "{name}: worst error grows from {loose:.3e} m at tolerance {:e} m to {tight:.3e} m \
-                 at {:e} m",
+                 at {:e} m (h0 {h0} m α {deg:.9}° at {d} m, there {its_loose:.3e} m at the looser)",
                 tolerances_m[k],
                 tolerances_m[k + 1]
             );
