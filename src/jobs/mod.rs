@@ -5,7 +5,8 @@
 //! when it is built. Out: the job's products as named bytes ([`Product`]); nothing here but
 //! [`writer`] touches the output folder, and [`manifest`] records what was written.
 //!
-//! * [`profile`], [`trace`], [`render`], [`compare`] — request → products, one module per kind;
+//! * [`profile`], [`trace`], [`render`], [`sequence`], [`compare`] — request → products, one
+//!   module per kind;
 //!   [`ensemble`] — the trace job's sensitivity ensemble of a sounding's fit.
 //! * [`cache`] — each atmosphere (fitted profile and refractive table) is loaded once per run and
 //!   shared by every job that names it.
@@ -20,6 +21,7 @@ pub mod manifest;
 pub mod profile;
 pub mod render;
 pub mod run;
+pub mod sequence;
 pub mod trace;
 pub mod writer;
 
@@ -29,6 +31,7 @@ pub use cache::AtmosphereCache;
 pub use compare::CompareRequest;
 pub use profile::ProfileRequest;
 pub use render::RenderRequest;
+pub use sequence::SequenceRequest;
 pub use trace::TraceJobRequest;
 
 /// One output of a job: a file name (relative to the job's folder) and its bytes.
@@ -192,6 +195,9 @@ pub enum JobError {
     /// An image could not be encoded.
     #[error(transparent)]
     Film(#[from] crate::output::film::FilmExportError),
+    /// A sequence's animated GIF could not be encoded.
+    #[error("cannot encode GIF: {0}")]
+    Gif(#[source] image::ImageError),
     /// Measured and synthetic could not be compared (images, figures).
     #[error("cannot compare: {0}")]
     Compare(String),
