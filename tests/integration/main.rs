@@ -24,6 +24,7 @@ mod reference_tracer;
 mod refractivity;
 mod render;
 mod scenes;
+mod sequence;
 mod sea;
 mod spectral;
 mod stress;
