@@ -64,16 +64,19 @@ pub enum JobRequest {
     Render(RenderRequest),
     /// A measured sounding against synthetic layers through one scene.
     Compare(Box<CompareRequest>),
+    /// Frames of a sweep of the sun or the observer through one scene.
+    Sequence(Box<SequenceRequest>),
 }
 
 impl JobRequest {
-    /// `profile`, `trace` or `render`.
+    /// `profile`, `trace`, `render`, `compare` or `sequence`.
     pub fn kind(&self) -> &'static str {
         match self {
             JobRequest::Profile(_) => "profile",
             JobRequest::Trace(_) => "trace",
             JobRequest::Render(_) => "render",
             JobRequest::Compare(_) => "compare",
+            JobRequest::Sequence(_) => "sequence",
         }
     }
 
@@ -84,6 +87,7 @@ impl JobRequest {
             JobRequest::Trace(r) => Some(&r.atmosphere),
             JobRequest::Render(r) => r.atmosphere.as_ref(),
             JobRequest::Compare(r) => Some(&r.measured),
+            JobRequest::Sequence(r) => r.atmosphere(),
         }
     }
 
@@ -101,6 +105,7 @@ impl JobRequest {
                 files.extend(synthetic.map(|p| p.to_path_buf()));
                 Some(&c.render)
             }
+            JobRequest::Sequence(s) => Some(&s.render),
             _ => None,
         };
         if let Some(r) = render {
@@ -120,6 +125,12 @@ impl JobRequest {
                 "atmosphere": r.atmosphere,
                 "scene_sha256": r.scene.hash_hex,
             })),
+            JobRequest::Sequence(s) => serde_json::to_value(serde_json::json!({
+                "settings": s.render.settings,
+                "sweep": s.sweep,
+                "atmosphere": s.render.atmosphere,
+                "scene_sha256": s.render.scene.hash_hex,
+            })),
             JobRequest::Compare(c) => serde_json::to_value(serde_json::json!({
                 "settings": c.render.settings,
                 "measured": c.measured,
@@ -138,6 +149,7 @@ impl JobRequest {
             JobRequest::Profile(r) => Ok(r.products(&*cache.get(&r.atmosphere)?)?.into_products()),
             JobRequest::Trace(r) => r.products(&*cache.get(&r.atmosphere)?, true),
             JobRequest::Render(r) => r.products(cache),
+            JobRequest::Sequence(s) => s.products(cache),
             JobRequest::Compare(c) => c.products(cache),
         }
     }
