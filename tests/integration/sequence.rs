@@ -242,3 +242,36 @@ fn observer_sweep_frames_are_the_single_renders_at_that_height() {
     let frame = std::fs::read(out.join(frame_name(1))).unwrap();
     assert!(products[0].bytes == frame, "frame 1 differs from render at 15 m");
 }
+
+#[test]
+fn a_pipeline_sequence_job_writes_the_frames_the_command_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = dir.path().join("seq.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[sequence]]\nname = \"sunrise\"\nscene = {:?}\nsun_elevation_deg = \"-2:-1:0.5\"\n\
+             size = \"200x100\"\nspp = 1\n",
+            scene_path(STRIPS)
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    let single = dir.path().join("single");
+    sequence(&single, "-2:-1:0.5", "2");
+    crate::support::cli::assert_same_tree(&out.join("sunrise"), &single);
+    // Both sweeps in one table is a diagnostic, not a job.
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[sequence]]\nscene = {:?}\nsun_elevation_deg = \"-2:-1:0.5\"\n\
+             observer_height_m = \"5:10:5\"\n",
+            scene_path(STRIPS)
+        ),
+    )
+    .unwrap();
+    let r = crate::support::cli::pipeline_run(&pipeline, &out, &[]);
+    assert_ne!(r.code, Some(0));
+    assert!(r.stderr.contains("one sweep per sequence"), "{}", r.stderr);
+}
