@@ -155,9 +155,11 @@ impl SequenceRequest {
     /// sun sweep needs a `[sun]` and an RGB (not spectral) scene.
     pub fn new(scene: Scene, settings: SequenceSettings) -> Result<Self, JobError> {
         let sweep = settings.sweep;
-        if !(1..=MAX_FRAMES).contains(&sweep.count)
-            || !(sweep.step.is_finite() && sweep.step > 0.0 && sweep.from.is_finite())
-        {
+        let valid = (1..=MAX_FRAMES).contains(&sweep.count)
+            && sweep.step.is_finite()
+            && sweep.step > 0.0
+            && sweep.from.is_finite();
+        if !valid {
             return Err(JobError::Invalid(format!(
                 "a sweep needs 1 to {MAX_FRAMES} frames, a finite start and a step > 0"
             )));
@@ -246,12 +248,8 @@ impl SequenceRequest {
                         source,
                     }
                 })?;
-                let elevations: Vec<f64> = self
-                    .sweep
-                    .values()
-                    .iter()
-                    .map(|d| d.to_radians())
-                    .collect();
+                let elevations: Vec<f64> =
+                    self.sweep.values().iter().map(|d| d.to_radians()).collect();
                 let frames = render_sun_sweep(&scene, tracer.as_ref(), &options, &elevations)
                     .map_err(|source| JobError::Render {
                         scene: name.clone(),

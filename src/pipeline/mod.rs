@@ -215,9 +215,15 @@ fn read_document(
 fn check_default_keys(defaults: &DeTable, problems: &mut Vec<Problem>) {
     for key in defaults.keys() {
         let k: &str = key.get_ref();
-        let known = [PROFILE_KEYS, TRACE_KEYS, RENDER_KEYS, SEQUENCE_KEYS, COMPARE_KEYS]
-            .iter()
-            .any(|keys| keys.contains(&k));
+        let known = [
+            PROFILE_KEYS,
+            TRACE_KEYS,
+            RENDER_KEYS,
+            SEQUENCE_KEYS,
+            COMPARE_KEYS,
+        ]
+        .iter()
+        .any(|keys| keys.contains(&k));
         if !known || k == "name" {
             problems.push((key.span(), format!("unknown key `{k}` in [defaults]")));
         }

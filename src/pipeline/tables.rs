@@ -580,7 +580,10 @@ pub fn sequence_jobs(t: &mut Table) -> Vec<NamedJob> {
             return Vec::new();
         }
     };
-    let template = raw.name.clone().unwrap_or_else(|| "sequence_{scene}".into());
+    let template = raw
+        .name
+        .clone()
+        .unwrap_or_else(|| "sequence_{scene}".into());
     let name = t.name(&template, "", &stem(&scene_path), None);
     match SequenceRequest::new(scene, settings) {
         Ok(r) => vec![(name, JobRequest::Sequence(Box::new(r)))],

@@ -98,8 +98,12 @@ impl RayTracer for MemoRays<'_> {
             u64::from(need_sky_direction),
         );
         remembered(&self.traces, key, || {
-            self.inner
-                .trace(camera_height_m, elevation_rad, distances_m, need_sky_direction)
+            self.inner.trace(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
         })
     }
 
@@ -130,7 +134,12 @@ impl RayTracer for MemoRays<'_> {
     ) -> Option<RayDensityPaths> {
         let mut args: Vec<f64> = distances_m.to_vec();
         args.extend(scale_heights_m);
-        let key = Key::new(camera_height_m, elevation_rad, &args, distances_m.len() as u64);
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &args,
+            distances_m.len() as u64,
+        );
         remembered(&self.paths_along, key, || {
             self.inner.density_paths_along(
                 camera_height_m,

@@ -84,7 +84,10 @@ fn sun_sweep_frames_are_the_single_renders_of_their_sun_byte_for_byte() {
         ]);
         let single = std::fs::read(&png).unwrap();
         let frame = std::fs::read(out.join(frame_name(i))).unwrap();
-        assert!(single == frame, "frame {i} (sun {value}°) differs from render");
+        assert!(
+            single == frame,
+            "frame {i} (sun {value}°) differs from render"
+        );
     }
     // The frames differ from each other (the sun moved).
     let first = std::fs::read(out.join(frame_name(0))).unwrap();
@@ -182,7 +185,10 @@ fn bad_sweeps_are_clear_errors() {
         ("--sun-elevation-deg=-3:1", "is not FROM:TO:STEP in degrees"),
         ("--sun-elevation-deg=a:1:0.1", "FROM \"a\" is not a number"),
         ("--sun-elevation-deg=-95:0:1", "within -90° and 90°"),
-        ("--sun-elevation-deg=-3:1:0.0001", "at most 10000 are allowed"),
+        (
+            "--sun-elevation-deg=-3:1:0.0001",
+            "at most 10000 are allowed",
+        ),
         ("--observer-height-m=-5:10:5", "≥ 0 m"),
     ] {
         let r = usage_error(&["sequence", &scene, sweep]);
@@ -202,7 +208,13 @@ fn bad_sweeps_are_clear_errors() {
     let r = fails(&["sequence", &scene, "--out", out]);
     assert!(r.stderr.contains("give a sweep"), "{}", r.stderr);
     let no_sun = scene_path("fig04_superior_mirage.toml");
-    let r = fails(&["sequence", &no_sun, "--out", out, "--sun-elevation-deg=0:1:0.5"]);
+    let r = fails(&[
+        "sequence",
+        &no_sun,
+        "--out",
+        out,
+        "--sun-elevation-deg=0:1:0.5",
+    ]);
     assert!(r.stderr.contains("no [sun]"), "{}", r.stderr);
 }
 
@@ -240,7 +252,10 @@ fn observer_sweep_frames_are_the_single_renders_at_that_height() {
     .unwrap();
     let products = request.products(&AtmosphereCache::new()).unwrap();
     let frame = std::fs::read(out.join(frame_name(1))).unwrap();
-    assert!(products[0].bytes == frame, "frame 1 differs from render at 15 m");
+    assert!(
+        products[0].bytes == frame,
+        "frame 1 differs from render at 15 m"
+    );
 }
 
 #[test]
