@@ -1,5 +1,6 @@
 //! Frame time of the paper scenes with the real tracer: the fast path (elevation fan) at 400×200
-//! and 1920×1080, 1 sample per pixel, render only; exact per-pixel 3-D tracing at 400×200 for
+//! and 1920×1080, 1 sample per pixel, render only; a sun sequence (100 sun elevations of the
+//! Novaya Zemlya strips scene at 400×200 against one frame, both with the tracer prepared); exact per-pixel 3-D tracing at 400×200 for
 //! every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance); PNG and EXR encoding of a 1920×1080 film; and the process's peak resident memory
 //! (VmHWM, printed at the end).
 
@@ -10,6 +11,7 @@ use criterion::{Criterion, criterion_group};
 use ghostship::atmosphere::LoadedAtmosphere;
 use ghostship::jobs::render::provenance;
 use ghostship::output::{exr, png};
+use ghostship::render::sweep::render_sun_sweep;
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
@@ -89,6 +91,32 @@ fn exact(c: &mut Criterion) {
     group.finish();
 }
 
+/// 100 frames of a sunrise (true elevation −3° to +0.96° in steps of 0.04°) against one frame,
+/// each preparing its tracer: the sequence traces its rays once and shades every frame.
+fn sun_sequence(c: &mut Criterion) {
+    let (scene, atm) = load("fig12b_novaya_zemlya_strips", 400, 200);
+    let opts = options(false);
+    let refractive = atm.as_ref().map(|a| &a.refractive);
+    let elevations: Vec<f64> = (0..100)
+        .map(|i| (-3.0 + 0.04 * f64::from(i)).to_radians())
+        .collect();
+    let mut group = c.benchmark_group("sun_sequence_400x200");
+    group.sample_size(10);
+    group.bench_function("one_frame", |b| {
+        b.iter(|| {
+            let tracer = prepare_tracer(&scene, refractive, &opts).unwrap();
+            black_box(render_scene(&scene, tracer.as_ref(), &opts).unwrap())
+        })
+    });
+    group.bench_function("100_sun_frames", |b| {
+        b.iter(|| {
+            let tracer = prepare_tracer(&scene, refractive, &opts).unwrap();
+            black_box(render_sun_sweep(&scene, tracer.as_ref(), &opts, &elevations).unwrap())
+        })
+    });
+    group.finish();
+}
+
 fn encoding(c: &mut Criterion) {
     let (scene, atm) = load("fig10_fata_morgana", 1920, 1080);
     let opts = options(false);
@@ -106,7 +134,7 @@ fn encoding(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, small, large, exact, encoding);
+criterion_group!(benches, small, large, sun_sequence, exact, encoding);
 
 /// Peak resident memory of this process (kB), from /proc/self/status (Linux).
 fn peak_rss_kb() -> Option<u64> {

@@ -5,7 +5,8 @@
 //! when it is built. Out: the job's products as named bytes ([`Product`]); nothing here but
 //! [`writer`] touches the output folder, and [`manifest`] records what was written.
 //!
-//! * [`profile`], [`trace`], [`render`], [`compare`] — request → products, one module per kind;
+//! * [`profile`], [`trace`], [`render`], [`sequence`], [`compare`] — request → products, one
+//!   module per kind;
 //!   [`ensemble`] — the trace job's sensitivity ensemble of a sounding's fit.
 //! * [`cache`] — each atmosphere (fitted profile and refractive table) is loaded once per run and
 //!   shared by every job that names it.
@@ -20,6 +21,7 @@ pub mod manifest;
 pub mod profile;
 pub mod render;
 pub mod run;
+pub mod sequence;
 pub mod trace;
 pub mod writer;
 
@@ -29,6 +31,7 @@ pub use cache::AtmosphereCache;
 pub use compare::CompareRequest;
 pub use profile::ProfileRequest;
 pub use render::RenderRequest;
+pub use sequence::SequenceRequest;
 pub use trace::TraceJobRequest;
 
 /// One output of a job: a file name (relative to the job's folder) and its bytes.
@@ -61,16 +64,19 @@ pub enum JobRequest {
     Render(RenderRequest),
     /// A measured sounding against synthetic layers through one scene.
     Compare(Box<CompareRequest>),
+    /// Frames of a sweep of the sun or the observer through one scene.
+    Sequence(Box<SequenceRequest>),
 }
 
 impl JobRequest {
-    /// `profile`, `trace` or `render`.
+    /// `profile`, `trace`, `render`, `compare` or `sequence`.
     pub fn kind(&self) -> &'static str {
         match self {
             JobRequest::Profile(_) => "profile",
             JobRequest::Trace(_) => "trace",
             JobRequest::Render(_) => "render",
             JobRequest::Compare(_) => "compare",
+            JobRequest::Sequence(_) => "sequence",
         }
     }
 
@@ -81,6 +87,7 @@ impl JobRequest {
             JobRequest::Trace(r) => Some(&r.atmosphere),
             JobRequest::Render(r) => r.atmosphere.as_ref(),
             JobRequest::Compare(r) => Some(&r.measured),
+            JobRequest::Sequence(r) => r.atmosphere(),
         }
     }
 
@@ -98,6 +105,7 @@ impl JobRequest {
                 files.extend(synthetic.map(|p| p.to_path_buf()));
                 Some(&c.render)
             }
+            JobRequest::Sequence(s) => Some(&s.render),
             _ => None,
         };
         if let Some(r) = render {
@@ -117,6 +125,12 @@ impl JobRequest {
                 "atmosphere": r.atmosphere,
                 "scene_sha256": r.scene.hash_hex,
             })),
+            JobRequest::Sequence(s) => serde_json::to_value(serde_json::json!({
+                "settings": s.render.settings,
+                "sweep": s.sweep,
+                "atmosphere": s.render.atmosphere,
+                "scene_sha256": s.render.scene.hash_hex,
+            })),
             JobRequest::Compare(c) => serde_json::to_value(serde_json::json!({
                 "settings": c.render.settings,
                 "measured": c.measured,
@@ -135,6 +149,7 @@ impl JobRequest {
             JobRequest::Profile(r) => Ok(r.products(&*cache.get(&r.atmosphere)?)?.into_products()),
             JobRequest::Trace(r) => r.products(&*cache.get(&r.atmosphere)?, true),
             JobRequest::Render(r) => r.products(cache),
+            JobRequest::Sequence(s) => s.products(cache),
             JobRequest::Compare(c) => c.products(cache),
         }
     }
@@ -192,6 +207,9 @@ pub enum JobError {
     /// An image could not be encoded.
     #[error(transparent)]
     Film(#[from] crate::output::film::FilmExportError),
+    /// A sequence's animated GIF could not be encoded.
+    #[error("cannot encode GIF: {0}")]
+    Gif(#[source] image::ImageError),
     /// Measured and synthetic could not be compared (images, figures).
     #[error("cannot compare: {0}")]
     Compare(String),

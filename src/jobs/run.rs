@@ -81,6 +81,21 @@ fn cost_estimate(request: &JobRequest) -> f64 {
         JobRequest::Profile(_) => 200_000.0,
         JobRequest::Trace(t) => (50_000.0 + 300.0 * t.ray_count() as f64) * (1 + t.ensemble) as f64,
         JobRequest::Compare(c) => c.cost(),
+        JobRequest::Sequence(s) => {
+            let r = &s.render;
+            let spp = r.settings.spp.unwrap_or(r.scene.camera.samples_per_pixel) as f64;
+            let (w, h) =
+                r.settings.sizes[0].unwrap_or((r.scene.camera.width, r.scene.camera.height));
+            let frame = 0.3 * (w as f64) * (h as f64) * spp;
+            // A sun sweep traces its rays once; an observer sweep prepares every frame.
+            let setup = match s.sweep.kind {
+                crate::jobs::sequence::SweepKind::SunElevationDeg => 50_000.0,
+                crate::jobs::sequence::SweepKind::ObserverHeightM => {
+                    50_000.0 * s.sweep.count as f64
+                }
+            };
+            setup + frame * s.sweep.count as f64
+        }
         JobRequest::Render(r) => {
             let spp = r.settings.spp.unwrap_or(r.scene.camera.samples_per_pixel) as f64;
             let (w, h) = (r.scene.camera.width, r.scene.camera.height);

@@ -78,10 +78,65 @@ pub fn parse_elevation_spec(text: &str) -> Result<ElevationSpec, String> {
         }
         return Ok(ElevationSpec::List(list));
     }
+    let (from, step, count) = parse_from_to_step(
+        text,
+        &RangeSyntax {
+            label: "elevation fan",
+            unit: "in degrees",
+            example: "-0.4:0.6:0.001",
+            noun: "rays",
+            max_count: MAX_RAYS,
+        },
+        |from, to| {
+            if inside(from) && inside(to) {
+                Ok(())
+            } else {
+                Err("elevations must lie strictly between -90° and 90°".into())
+            }
+        },
+    )?;
+    Ok(ElevationSpec::Range {
+        from_deg: from,
+        to_deg: from + (count - 1) as f64 * step,
+        count,
+    })
+}
+
+/// How [`parse_from_to_step`] names what it parses in its messages.
+#[derive(Debug, Clone, Copy)]
+pub struct RangeSyntax<'a> {
+    /// What the range is, e.g. `"elevation fan"`.
+    pub label: &'a str,
+    /// Its unit as a phrase, e.g. `"in degrees"`.
+    pub unit: &'a str,
+    /// A valid example, e.g. `"-0.4:0.6:0.001"`.
+    pub example: &'a str,
+    /// What it counts, e.g. `"rays"`.
+    pub noun: &'a str,
+    /// Most values it may have.
+    pub max_count: usize,
+}
+
+/// Parse an evenly spaced range `FROM:TO:STEP` (STEP > 0, TO ≥ FROM; when (TO − FROM)/STEP is
+/// not a whole number the range stops at the last step below TO) into (FROM, STEP, count): the
+/// values are FROM + i·STEP for i < count. `check(FROM, TO)` may refuse the bounds (its message
+/// follows the range's label). At most `syntax.max_count` values.
+pub fn parse_from_to_step(
+    text: &str,
+    syntax: &RangeSyntax<'_>,
+    check: impl Fn(f64, f64) -> Result<(), String>,
+) -> Result<(f64, f64, usize), String> {
+    let RangeSyntax {
+        label,
+        unit,
+        example,
+        noun,
+        max_count,
+    } = *syntax;
     let parts: Vec<&str> = text.split(':').collect();
     let [from, to, step] = parts.as_slice() else {
         return Err(format!(
-            "elevation fan {text:?} is not FROM:TO:STEP in degrees (e.g. \"-0.4:0.6:0.001\")"
+            "{label} {text:?} is not FROM:TO:STEP {unit} (e.g. \"{example}\")"
         ));
     };
     let num = |name: &str, s: &str| {
@@ -89,34 +144,25 @@ pub fn parse_elevation_spec(text: &str) -> Result<ElevationSpec, String> {
             .parse::<f64>()
             .ok()
             .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("elevation fan {text:?}: {name} {s:?} is not a number"))
+            .ok_or_else(|| format!("{label} {text:?}: {name} {s:?} is not a number"))
     };
     let (from, to, step) = (num("FROM", from)?, num("TO", to)?, num("STEP", step)?);
     if step <= 0.0 {
-        return Err(format!("elevation fan {text:?}: STEP must be > 0"));
+        return Err(format!("{label} {text:?}: STEP must be > 0"));
     }
     if to < from {
-        return Err(format!("elevation fan {text:?}: TO must not be below FROM"));
+        return Err(format!("{label} {text:?}: TO must not be below FROM"));
     }
-    if !(inside(from) && inside(to)) {
-        return Err(format!(
-            "elevation fan {text:?}: elevations must lie strictly between -90° and 90°"
-        ));
-    }
+    check(from, to).map_err(|e| format!("{label} {text:?}: {e}"))?;
     // A relative slack so that 0.6 reached by steps of 0.001 counts despite rounding.
     let intervals = ((to - from) / step * (1.0 + 1e-9)).floor();
-    if intervals + 1.0 > MAX_RAYS as f64 {
+    if intervals + 1.0 > max_count as f64 {
         return Err(format!(
-            "elevation fan {text:?} has {} rays; at most {MAX_RAYS} are allowed (use a larger STEP)",
+            "{label} {text:?} has {} {noun}; at most {max_count} are allowed (use a larger STEP)",
             intervals + 1.0
         ));
     }
-    let count = intervals as usize + 1;
-    Ok(ElevationSpec::Range {
-        from_deg: from,
-        to_deg: from + (count - 1) as f64 * step,
-        count,
-    })
+    Ok((from, step, intervals as usize + 1))
 }
 
 /// A validated trace request.

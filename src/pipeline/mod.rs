@@ -19,6 +19,9 @@
 //! scene = "../data/scenes/fig04_superior_mirage.toml"
 //! atmosphere = ["../data/*.csv"]         # optional: one job per atmosphere instead of the scene's
 //! name = "ghost_ship_{stem}"
+//! [[sequence]]                           # frames of a sweep (one of the two keys)
+//! scene = "../data/scenes/fig12b_novaya_zemlya_strips.toml"
+//! sun_elevation_deg = "-3:1:0.04"        # or observer_height_m = "5:120:5"
 //! [[compare]]                            # measured against synthetic layers (fitted if absent)
 //! atmosphere = "../data/*.csv"           # the measured soundings, one job each
 //! scene = "../data/scenes/fig04_superior_mirage.toml"
@@ -33,7 +36,7 @@ use std::path::{Path, PathBuf};
 use toml::de::{DeTable, DeValue};
 
 pub use expand::{TimeSelection, glob_files, relative_label};
-pub use tables::{COMPARE_KEYS, PROFILE_KEYS, RENDER_KEYS, TRACE_KEYS};
+pub use tables::{COMPARE_KEYS, PROFILE_KEYS, RENDER_KEYS, SEQUENCE_KEYS, TRACE_KEYS};
 
 use crate::jobs::run::PlannedJob;
 use tables::{NamedJob, Problem, Table};
@@ -167,15 +170,15 @@ fn read_document(
                 defaults = t.clone();
                 check_default_keys(t, problems);
             }
-            ("profile" | "trace" | "render" | "compare", DeValue::Array(_)) => {}
-            (k @ ("name" | "defaults" | "profile" | "trace" | "render" | "compare"), v) => problems.push((
+            ("profile" | "trace" | "render" | "sequence" | "compare", DeValue::Array(_)) => {}
+            (k @ ("name" | "defaults" | "profile" | "trace" | "render" | "sequence" | "compare"), v) => problems.push((
                 value.span(),
                 format!("{k}: unexpected {} here", v.type_str()),
             )),
             (k, _) => problems.push((
                 key.span(),
                 format!(
-                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]], [[render]] or [[compare]])"
+                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]], [[render]], [[sequence]] or [[compare]])"
                 ),
             )),
         }
@@ -184,6 +187,7 @@ fn read_document(
         ("profile", PROFILE_KEYS),
         ("trace", TRACE_KEYS),
         ("render", RENDER_KEYS),
+        ("sequence", SEQUENCE_KEYS),
         ("compare", COMPARE_KEYS),
     ] {
         let Some(DeValue::Array(items)) = doc.get(kind).map(|v| v.get_ref()) else {
@@ -211,9 +215,15 @@ fn read_document(
 fn check_default_keys(defaults: &DeTable, problems: &mut Vec<Problem>) {
     for key in defaults.keys() {
         let k: &str = key.get_ref();
-        let known = [PROFILE_KEYS, TRACE_KEYS, RENDER_KEYS, COMPARE_KEYS]
-            .iter()
-            .any(|keys| keys.contains(&k));
+        let known = [
+            PROFILE_KEYS,
+            TRACE_KEYS,
+            RENDER_KEYS,
+            SEQUENCE_KEYS,
+            COMPARE_KEYS,
+        ]
+        .iter()
+        .any(|keys| keys.contains(&k));
         if !known || k == "name" {
             problems.push((key.span(), format!("unknown key `{k}` in [defaults]")));
         }
@@ -266,6 +276,7 @@ fn job_table(
         "profile" => tables::profile_jobs(&mut table),
         "trace" => tables::trace_jobs(&mut table),
         "compare" => tables::compare_jobs(&mut table),
+        "sequence" => tables::sequence_jobs(&mut table),
         _ => tables::render_jobs(&mut table, &own_keys),
     };
     problems.append(&mut table.problems);

@@ -13,8 +13,11 @@ use super::expand::{AtmosphereChoice, TimeSelection, atmospheres, check_file, gl
 use crate::atmosphere::AtmosphereOptions;
 use crate::jobs::cache::AtmosphereRequest;
 use crate::jobs::render::{RenderSettings, parse_size};
+use crate::jobs::sequence::{SequenceSettings, Sweep, SweepKind, parse_sweep};
 use crate::jobs::trace::parse_elevation_spec;
-use crate::jobs::{CompareRequest, JobRequest, ProfileRequest, RenderRequest, TraceJobRequest};
+use crate::jobs::{
+    CompareRequest, JobRequest, ProfileRequest, RenderRequest, SequenceRequest, TraceJobRequest,
+};
 use crate::output::film::ImageFormat;
 use crate::profile::TemperatureFit;
 use crate::scene::Scene;
@@ -52,6 +55,19 @@ pub const TRACE_KEYS: &[&str] = &[
     "max_distance_m",
     "straight",
     "ensemble",
+];
+
+/// The keys a `[[sequence]]` table accepts.
+pub const SEQUENCE_KEYS: &[&str] = &[
+    "name",
+    "scene",
+    "sun_elevation_deg",
+    "observer_height_m",
+    "size",
+    "spp",
+    "tolerance_m",
+    "exposure",
+    "straight",
 ];
 /// Keys a `[[render]]` table accepts.
 pub const RENDER_KEYS: &[&str] = &[
@@ -165,6 +181,20 @@ struct RawRender {
     tolerance_m: Option<f64>,
     exposure: Option<f64>,
     exact: Option<bool>,
+    straight: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSequence {
+    name: Option<String>,
+    scene: String,
+    sun_elevation_deg: Option<String>,
+    observer_height_m: Option<String>,
+    size: Option<String>,
+    spp: Option<u32>,
+    tolerance_m: Option<f64>,
+    exposure: Option<f64>,
     straight: Option<bool>,
 }
 
@@ -483,6 +513,85 @@ fn render_settings(t: &mut Table, raw: &RawRender) -> Option<RenderSettings> {
         straight: raw.straight.unwrap_or(false),
         ..d
     })
+}
+
+/// The one sweep of a `[[sequence]]` table, or a problem.
+fn sequence_sweep(t: &mut Table, raw: &RawSequence) -> Option<Sweep> {
+    let (key, kind, text) = match (&raw.sun_elevation_deg, &raw.observer_height_m) {
+        (Some(s), None) => ("sun_elevation_deg", SweepKind::SunElevationDeg, s),
+        (None, Some(s)) => ("observer_height_m", SweepKind::ObserverHeightM, s),
+        (Some(_), Some(_)) => {
+            t.problem(
+                "observer_height_m",
+                "give one sweep per sequence: sun_elevation_deg or observer_height_m, not both",
+            );
+            return None;
+        }
+        (None, None) => {
+            t.problem(
+                "scene",
+                "give a sweep: sun_elevation_deg = \"FROM:TO:STEP\" or observer_height_m = \"FROM:TO:STEP\"",
+            );
+            return None;
+        }
+    };
+    match parse_sweep(kind, text) {
+        Ok(sweep) => Some(sweep),
+        Err(e) => {
+            t.problem(key, e);
+            None
+        }
+    }
+}
+
+/// One `[[sequence]]` table → its job (the same [`SequenceRequest`] as `ghostship sequence`).
+pub fn sequence_jobs(t: &mut Table) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawSequence>() else {
+        return Vec::new();
+    };
+    let Some(sweep) = sequence_sweep(t, &raw) else {
+        return Vec::new();
+    };
+    let size = match raw.size.as_deref().map(parse_size).transpose() {
+        Ok(size) => size,
+        Err(e) => {
+            t.problem("size", e);
+            return Vec::new();
+        }
+    };
+    let d = SequenceSettings::new(sweep);
+    let settings = SequenceSettings {
+        size,
+        spp: raw.spp,
+        tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
+        exposure: raw.exposure.unwrap_or(d.exposure),
+        straight: raw.straight.unwrap_or(false),
+        ..d
+    };
+    let scene_path = t.folder.join(&raw.scene);
+    if let Err(e) = check_file(&scene_path) {
+        t.problem("scene", e);
+        return Vec::new();
+    }
+    let scene = match Scene::from_file(&scene_path) {
+        Ok(s) => s,
+        Err(e) => {
+            t.problem("scene", crate::jobs::run::error_text(&e));
+            return Vec::new();
+        }
+    };
+    let template = raw
+        .name
+        .clone()
+        .unwrap_or_else(|| "sequence_{scene}".into());
+    let name = t.name(&template, "", &stem(&scene_path), None);
+    match SequenceRequest::new(scene, settings) {
+        Ok(r) => vec![(name, JobRequest::Sequence(Box::new(r)))],
+        Err(e) => {
+            t.problem_in_message(e.to_string());
+            Vec::new()
+        }
+    }
 }
 
 /// The jobs of a `[[compare]]` table: one per measured sounding.

@@ -33,11 +33,13 @@
 mod air_paths;
 pub mod curved;
 pub mod elevation_fan;
+mod memo;
 pub mod ray_model;
 mod reflection;
 mod shade;
 pub mod spectral;
 mod sun;
+pub mod sweep;
 pub mod terrain;
 
 use std::io::IsTerminal;
@@ -52,6 +54,7 @@ use crate::scene::{Scene, Sun, samples_per_pixel_root};
 use air_paths::AirPaths;
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
+pub use memo::MemoRays;
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
 use sun::SunTransmittance;
@@ -118,6 +121,12 @@ pub enum RenderError {
         "tracer tolerance must be a finite number of metres from 1e-6 to 10 (default 0.01), got {0}"
     )]
     TracerTolerance(f64),
+    /// A sun sweep needs a scene with a `[sun]`.
+    #[error("the scene has no [sun]: a sun sweep needs one to move")]
+    NoSun,
+    /// A sun sweep's true elevation is outside −90°…90°.
+    #[error("sun elevations must lie within -90° and 90°, got {:.6}°", .0.to_degrees())]
+    SunElevation(f64),
 }
 
 /// Counters from one render.

@@ -25,6 +25,7 @@ mod refractivity;
 mod render;
 mod scenes;
 mod sea;
+mod sequence;
 mod spectral;
 mod stress;
 mod terrain;

@@ -1,0 +1,185 @@
+//! Stage 5 (render) — a ray tracer that remembers. In: any [`RayTracer`]. Out: [`MemoRays`], the
+//! same tracer behind a cache keyed by the exact bits of every argument, so that frames sharing
+//! a view (a sun sweep: the same camera, atmosphere and cards, only the sun moves) trace each
+//! ray once and look it up afterwards.
+//!
+//! A cached answer is the value the inner tracer returned for exactly the same arguments, and
+//! the tracers are deterministic, so a frame rendered through [`MemoRays`] is bit for bit the
+//! frame rendered through the inner tracer, whichever frame or thread traced a ray first. Two
+//! threads asking for the same ray at once may both trace it (the lock is not held while
+//! tracing); they store the same value.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use super::ray_model::{FanRay, RayTracer};
+use crate::tracer::RayDensityPaths;
+
+/// The arguments of one call, by their bits.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct Key {
+    camera_height: u64,
+    elevation: u64,
+    distances: Vec<u64>,
+    flag: u64,
+}
+
+impl Key {
+    fn new(camera_height_m: f64, elevation_rad: f64, distances_m: &[f64], flag: u64) -> Self {
+        Key {
+            camera_height: camera_height_m.to_bits(),
+            elevation: elevation_rad.to_bits(),
+            distances: distances_m.iter().map(|d| d.to_bits()).collect(),
+            flag,
+        }
+    }
+}
+
+/// Both scale heights folded into one key word.
+fn scales_key(scale_heights_m: [f64; 2]) -> u64 {
+    scale_heights_m[0].to_bits() ^ scale_heights_m[1].to_bits().rotate_left(32)
+}
+
+/// A [`RayTracer`] that answers every call it has seen before from memory.
+pub struct MemoRays<'a> {
+    inner: &'a dyn RayTracer,
+    traces: Mutex<HashMap<Key, FanRay>>,
+    /// Keyed with both scale heights (the second in `distances`).
+    paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
+    paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
+}
+
+impl<'a> MemoRays<'a> {
+    /// Remember the answers of `inner`.
+    pub fn new(inner: &'a dyn RayTracer) -> Self {
+        MemoRays {
+            inner,
+            traces: Mutex::new(HashMap::new()),
+            paths: Mutex::new(HashMap::new()),
+            paths_along: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Number of distinct rays traced so far (calls of [`RayTracer::trace`] that were not
+    /// answered from memory, less repeats traced at the same time by two threads).
+    pub fn traced(&self) -> usize {
+        lock(&self.traces).len()
+    }
+}
+
+/// The map behind `m`, even if a thread panicked while holding it (the map is only ever
+/// extended with finished values, so it is never half-written).
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The cached value of `key` in `map`, or `compute()` stored under it.
+fn remembered<V: Clone>(map: &Mutex<HashMap<Key, V>>, key: Key, compute: impl FnOnce() -> V) -> V {
+    if let Some(v) = lock(map).get(&key) {
+        return v.clone();
+    }
+    let v = compute();
+    lock(map).entry(key).or_insert_with(|| v.clone());
+    v
+}
+
+impl RayTracer for MemoRays<'_> {
+    fn trace(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            u64::from(need_sky_direction),
+        );
+        remembered(&self.traces, key, || {
+            self.inner.trace(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        })
+    }
+
+    fn density_paths_m(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        scale_heights_m: [f64; 2],
+    ) -> Option<[f64; 2]> {
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &scale_heights_m,
+            scales_key(scale_heights_m),
+        );
+        remembered(&self.paths, key, || {
+            self.inner
+                .density_paths_m(camera_height_m, elevation_rad, scale_heights_m)
+        })
+    }
+
+    fn density_paths_along(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        scale_heights_m: [f64; 2],
+    ) -> Option<RayDensityPaths> {
+        let mut args: Vec<f64> = distances_m.to_vec();
+        args.extend(scale_heights_m);
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &args,
+            distances_m.len() as u64,
+        );
+        remembered(&self.paths_along, key, || {
+            self.inner.density_paths_along(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                scale_heights_m,
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::ray_model::ConstantCurvatureRays;
+    use crate::units::EARTH_RADIUS_M;
+
+    #[test]
+    fn answers_equal_the_inner_tracer_and_repeats_are_not_traced_again() {
+        let inner = ConstantCurvatureRays::new(0.13, EARTH_RADIUS_M).unwrap();
+        let memo = MemoRays::new(&inner);
+        for pass in 0..2 {
+            for i in 0..50 {
+                let alpha = -0.004 + 1e-4 * f64::from(i);
+                let d = [5_000.0, 20_000.0];
+                assert_eq!(
+                    memo.trace(10.0, alpha, &d, true),
+                    inner.trace(10.0, alpha, &d, true)
+                );
+                assert_eq!(
+                    memo.density_paths_m(10.0, alpha, [8_000.0, 1_200.0]),
+                    inner.density_paths_m(10.0, alpha, [8_000.0, 1_200.0])
+                );
+            }
+            assert_eq!(memo.traced(), 50, "pass {pass}");
+        }
+        // Another argument is another ray.
+        memo.trace(10.0, 0.0, &[5_000.0], true);
+        memo.trace(10.0, 0.0, &[5_000.0], false);
+        memo.trace(11.0, 0.0, &[5_000.0], false);
+        assert_eq!(memo.traced(), 53);
+    }
+}
