@@ -19,6 +19,7 @@ pub mod ensemble;
 pub mod manifest;
 pub mod profile;
 pub mod render;
+pub mod survey;
 pub mod run;
 pub mod trace;
 pub mod writer;
@@ -29,6 +30,7 @@ pub use cache::AtmosphereCache;
 pub use compare::CompareRequest;
 pub use profile::ProfileRequest;
 pub use render::RenderRequest;
+pub use survey::SurveyRequest;
 pub use trace::TraceJobRequest;
 
 /// One output of a job: a file name (relative to the job's folder) and its bytes.
@@ -195,6 +197,9 @@ pub enum JobError {
     /// Measured and synthetic could not be compared (images, figures).
     #[error("cannot compare: {0}")]
     Compare(String),
+    /// A survey option is out of range, or its table or plots could not be made.
+    #[error(transparent)]
+    Survey(#[from] crate::survey::SurveyError),
     /// A file could not be written.
     #[error(transparent)]
     Write(#[from] crate::output::WriteError),

@@ -27,5 +27,6 @@ mod scenes;
 mod sea;
 mod spectral;
 mod stress;
+mod survey;
 mod terrain;
 mod tracer;
