@@ -33,6 +33,7 @@ pub mod render;
 pub mod report;
 pub mod scene;
 pub mod sounding;
+pub mod survey;
 pub mod tracer;
 pub mod units;
 pub mod verify;

@@ -13,6 +13,7 @@ pub mod pipeline;
 pub mod profile;
 pub mod render;
 pub mod sequence;
+pub mod survey;
 pub mod trace;
 
 use std::io::Write;
@@ -59,6 +60,10 @@ pub enum Command {
     /// synthetic layers (by default fitted to it), and report what differs: images of each
     /// target, horizons, trapped rays, ducts, RMSE/SSIM; writes compare.json and figures.
     Compare(compare::CompareArgs),
+    /// Survey a sounding archive (IGRA2 records, Wyoming pages, folders, globs): per sounding its
+    /// inversions, ducts, horizon dip and what an observer would see of a target and the sun;
+    /// writes survey.csv, survey.parquet, survey.json and plots.
+    Survey(survey::SurveyArgs),
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
     /// Benchmarks: `bench accuracy` measures the tracer's error against its time per ray and
@@ -80,6 +85,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render::run(args, cli.quiet),
         Command::Sequence(args) => sequence::run(args, cli.quiet),
         Command::Compare(args) => compare::run(args, cli.quiet),
+        Command::Survey(args) => survey::run(args, cli.quiet),
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
         Command::Bench(args) => bench::run(args, cli.quiet),
     }

@@ -22,6 +22,7 @@ pub mod profile;
 pub mod render;
 pub mod run;
 pub mod sequence;
+pub mod survey;
 pub mod trace;
 pub mod writer;
 
@@ -32,6 +33,7 @@ pub use compare::CompareRequest;
 pub use profile::ProfileRequest;
 pub use render::RenderRequest;
 pub use sequence::SequenceRequest;
+pub use survey::SurveyRequest;
 pub use trace::TraceJobRequest;
 
 /// One output of a job: a file name (relative to the job's folder) and its bytes.
@@ -213,6 +215,9 @@ pub enum JobError {
     /// Measured and synthetic could not be compared (images, figures).
     #[error("cannot compare: {0}")]
     Compare(String),
+    /// A survey option is out of range, or its table or plots could not be made.
+    #[error(transparent)]
+    Survey(#[from] crate::survey::SurveyError),
     /// A file could not be written.
     #[error(transparent)]
     Write(#[from] crate::output::WriteError),

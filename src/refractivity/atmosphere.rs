@@ -166,6 +166,15 @@ impl RefractiveAtmosphere {
         Self::build(column, wavelength_nm, DEFAULT_CO2_PPM, TableSpec::default())
     }
 
+    /// As [`new`](Self::new) with the table layout `spec` (validated once, on its grid).
+    pub fn with_spec(
+        column: Arc<dyn AirColumn>,
+        wavelength_nm: f64,
+        spec: TableSpec,
+    ) -> Result<Self, RefractivityError> {
+        Self::build(column, wavelength_nm, DEFAULT_CO2_PPM, spec)
+    }
+
     /// The same atmosphere with another CO₂ content (ppm, 0–10 000); rebuilds the table.
     pub fn with_co2_ppm(self, co2_ppm: f64) -> Result<Self, RefractivityError> {
         Self::build(self.column, self.wavelength_nm, co2_ppm, self.spec)

@@ -206,6 +206,76 @@ pub(crate) fn read(
             twins.join(", ")
         ));
     }
+    read_block(path, &lines, header, format, &available, metadata)
+}
+
+/// Every sounding of an IGRA2 text, in file order: its header line (1-based), its nominal time
+/// (`"YYYY-MM-DD HH"`, `None` when the header cannot be read) and its rows or why they cannot be
+/// read. One bad sounding (a malformed header or record, a wrong level count) is one `Err`; the
+/// others are read as if each were alone in the file (line numbers count lines of the whole
+/// text). A line starting with `#` that is not a header belongs to the sounding before it,
+/// which it spoils. `None` if the text is not IGRA2.
+pub(crate) fn read_all(path: &Path, text: &str) -> Option<Vec<BlockRead>> {
+    let format = detect(text)?;
+    let lines: Vec<&str> = text.lines().collect();
+    let starts: Vec<usize> = (0..lines.len()).filter(|&i| is_header(lines[i])).collect();
+    let headers: Vec<Result<Header, SoundingError>> = starts
+        .iter()
+        .map(|&i| parse_header(path, i + 1, lines[i], format))
+        .collect();
+    let available: Vec<String> = headers
+        .iter()
+        .filter_map(|h| h.as_ref().ok().map(|h| h.time.clone()))
+        .collect();
+    let blocks = starts.iter().zip(headers).enumerate().map(|(k, (&i, header))| {
+        let end = starts.get(k + 1).copied().unwrap_or(lines.len());
+        let time = header.as_ref().ok().map(|h| h.time.clone());
+        let result = header.and_then(|header| {
+            let stray = (i + 1..end).find(|&j| lines[j].starts_with('#'));
+            if let Some(j) = stray {
+                return Err(SoundingError::line_error(
+                    path,
+                    j + 1,
+                    "a line starting with # is not an IGRA2 header record",
+                ));
+            }
+            let mut metadata = BTreeMap::new();
+            let (rows, names) =
+                read_block(path, &lines, &header, format, &available, &mut metadata)?;
+            Ok((rows, names, metadata))
+        });
+        BlockRead {
+            header_line: i + 1,
+            time,
+            format,
+            result,
+        }
+    });
+    Some(blocks.collect())
+}
+
+/// One sounding of a multi-sounding IGRA2 text, as [`read_all`] reads it.
+pub(crate) struct BlockRead {
+    /// Line of its header record (1-based).
+    pub header_line: usize,
+    /// Its nominal time, when the header could be read.
+    pub time: Option<String>,
+    /// Data or derived file.
+    pub format: SoundingFormat,
+    /// Its rows, column names and header metadata, or why they cannot be read.
+    pub result: Result<(Vec<RawRow>, ColumnNames, BTreeMap<String, String>), SoundingError>,
+}
+
+/// The metadata and rows of the sounding whose header is `header`: its records run from the line
+/// after the header to the next header. `available` lists every time in the file.
+fn read_block(
+    path: &Path,
+    lines: &[&str],
+    header: &Header,
+    format: SoundingFormat,
+    available: &[String],
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<(Vec<RawRow>, ColumnNames), SoundingError> {
     let header_text = lines[header.line - 1];
     metadata.insert(
         "station".into(),

@@ -149,6 +149,11 @@ impl ReadOptions {
             ..ReadOptions::default()
         }
     }
+
+    /// These options with [`strict`](Self::strict) set to `strict`.
+    pub fn strict(self, strict: bool) -> Self {
+        ReadOptions { strict, ..self }
+    }
 }
 
 /// The bytes of the sounding file at `path`, read with the input size limit and inflated if the
@@ -366,4 +371,77 @@ impl Sounding {
     pub fn surface(&self) -> &Level {
         &self.levels[0]
     }
+}
+
+/// One sounding of a file that may hold many, as [`read_soundings`] reads it.
+#[derive(Debug)]
+pub struct SoundingEntry {
+    /// Where it is: the file, and for a multi-sounding file the line of its header (1-based).
+    pub line: Option<usize>,
+    /// Its nominal time (`"YYYY-MM-DD HH"`, UTC) when the file says it before the data.
+    pub time: Option<String>,
+    /// The validated sounding, or why it cannot be used.
+    pub result: Result<Sounding, SoundingError>,
+}
+
+/// Every sounding in the file at `path`, in file order, each read and validated on its own: all
+/// soundings of an IGRA2 data or derived file (read once, not once per sounding), every
+/// sounding of a Wyoming TEXT:LIST page, or the one sounding of any other format. A bad
+/// sounding in the middle of a record is one entry with its error; the others are unaffected.
+/// `Err` only when the file itself cannot be read (missing, too large, not text).
+/// `options.sounding_time` is ignored (every sounding is read).
+pub fn read_soundings(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Vec<SoundingEntry>, SoundingError> {
+    let single = ReadOptions {
+        sounding_time: None,
+        ..options.clone()
+    };
+    let (bytes, packing) = read_bytes(path)?;
+    if is_netcdf(&bytes) {
+        let result = read_netcdf(&bytes, path, &single);
+        return Ok(vec![SoundingEntry {
+            line: None,
+            time: None,
+            result,
+        }]);
+    }
+    let text = utf8(&bytes, path)?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut entries = if let Some(blocks) = igra2::read_all(path, text) {
+        blocks
+            .into_iter()
+            .map(|b| SoundingEntry {
+                line: Some(b.header_line),
+                time: b.time,
+                result: b.result.and_then(|(rows, names, metadata)| {
+                    build(path, b.format, metadata, Vec::new(), rows, &names, &single)
+                }),
+            })
+            .collect()
+    } else if wyoming::detect(text) && wyoming::times(text).len() > 1 {
+        wyoming::times(text)
+            .into_iter()
+            .map(|t| SoundingEntry {
+                line: None,
+                result: parse_sounding(text, path, &ReadOptions::with_time(&t).strict(single.strict)),
+                time: Some(t),
+            })
+            .collect()
+    } else {
+        vec![SoundingEntry {
+            line: None,
+            time: None,
+            result: parse_sounding(text, path, &single),
+        }]
+    };
+    if let Some(how) = packing.describe() {
+        for entry in &mut entries {
+            if let Ok(s) = &mut entry.result {
+                s.metadata.insert("packed_as".into(), how.clone());
+            }
+        }
+    }
+    Ok(entries)
 }

@@ -28,5 +28,6 @@ mod sea;
 mod sequence;
 mod spectral;
 mod stress;
+mod survey;
 mod terrain;
 mod tracer;

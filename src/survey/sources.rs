@@ -1,0 +1,163 @@
+//! Survey — its inputs. In: what the user named (files, folders, glob patterns) and an optional
+//! date range. Out: [`SurveyItem`]s, one per sounding, in a fixed order (sources as given,
+//! folders and globs sorted by path, soundings in file order), each the sounding or why it
+//! cannot be read.
+
+use std::path::{Path, PathBuf};
+
+use super::SurveyError;
+use crate::sounding::{ReadOptions, Sounding, SoundingError, read_soundings};
+
+/// One sounding to survey.
+#[derive(Debug)]
+pub struct SurveyItem {
+    /// The file, and `:line` of the sounding's header in a multi-sounding file.
+    pub origin: String,
+    /// Its nominal time (`"YYYY-MM-DD HH"`), when known before reading it.
+    pub time: Option<String>,
+    /// The sounding, or why it cannot be read.
+    pub sounding: Result<Sounding, SoundingError>,
+}
+
+/// Inclusive range of nominal dates (`"YYYY-MM-DD"`) to keep.
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct DateRange {
+    /// First day kept.
+    pub from: Option<String>,
+    /// Last day kept.
+    pub to: Option<String>,
+}
+
+impl DateRange {
+    /// Check the dates' form (`YYYY-MM-DD`) and order.
+    pub fn validate(&self) -> Result<(), SurveyError> {
+        for (key, d) in [("from", &self.from), ("to", &self.to)] {
+            if let Some(d) = d {
+                let ok = d.len() == 10
+                    && d.bytes().enumerate().all(|(i, b)| match i {
+                        4 | 7 => b == b'-',
+                        _ => b.is_ascii_digit(),
+                    });
+                if !ok {
+                    return Err(SurveyError::Invalid(format!(
+                        "date {key} {d:?} is not YYYY-MM-DD"
+                    )));
+                }
+            }
+        }
+        if let (Some(a), Some(b)) = (&self.from, &self.to)
+            && a > b
+        {
+            return Err(SurveyError::Invalid(format!("date range {a} to {b} is empty")));
+        }
+        Ok(())
+    }
+
+    /// Whether a sounding at `time` (`"YYYY-MM-DD HH"`) is kept; one of unknown time is kept.
+    pub fn keeps(&self, time: Option<&str>) -> bool {
+        let Some(day) = time.and_then(|t| t.get(..10)) else {
+            return true;
+        };
+        self.from.as_deref().is_none_or(|f| day >= f) && self.to.as_deref().is_none_or(|t| day <= t)
+    }
+}
+
+/// The files `sources` name: a file as is, a folder's regular files (not `*.md`, not hidden),
+/// a pattern with `*`, `?` or `[` every file it matches; folders and patterns sorted by path.
+/// A folder or pattern with no file, or a source that does not exist, is an error.
+pub fn expand_files(sources: &[PathBuf]) -> Result<Vec<PathBuf>, SurveyError> {
+    let mut files = Vec::new();
+    for source in sources {
+        let text = source.to_string_lossy();
+        let found = if text.contains(['*', '?', '[']) {
+            glob_files(&text)?
+        } else if source.is_dir() {
+            folder_files(source)?
+        } else if source.is_file() {
+            vec![source.clone()]
+        } else {
+            return Err(SurveyError::Invalid(format!(
+                "{}: no such file or folder",
+                source.display()
+            )));
+        };
+        if found.is_empty() {
+            return Err(SurveyError::Invalid(format!(
+                "{text}: no sounding file there"
+            )));
+        }
+        files.extend(found);
+    }
+    Ok(files)
+}
+
+fn glob_files(pattern: &str) -> Result<Vec<PathBuf>, SurveyError> {
+    let paths = glob::glob(pattern)
+        .map_err(|e| SurveyError::Invalid(format!("pattern {pattern:?}: {e}")))?;
+    let mut files: Vec<PathBuf> = paths.filter_map(Result::ok).filter(|p| p.is_file()).collect();
+    files.sort();
+    Ok(files)
+}
+
+fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
+    let entries = std::fs::read_dir(folder)
+        .map_err(|e| SurveyError::Invalid(format!("{}: {e}", folder.display())))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .filter(|p| {
+            let name = p.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+            !name.starts_with('.') && !name.to_ascii_lowercase().ends_with(".md")
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// Every sounding in `files` within `dates`, read with `read` (in parallel by file; the order
+/// is the files' and, inside a file, the soundings').
+pub fn expand_sources(
+    files: &[PathBuf],
+    dates: &DateRange,
+    read: &ReadOptions,
+) -> Vec<SurveyItem> {
+    use rayon::prelude::*;
+    let per_file: Vec<Vec<SurveyItem>> = files
+        .par_iter()
+        .map(|path| file_items(path, dates, read))
+        .collect();
+    per_file.into_iter().flatten().collect()
+}
+
+fn file_items(path: &Path, dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
+    let name = path.display().to_string();
+    let entries = match read_soundings(path, read) {
+        Ok(e) => e,
+        Err(e) => {
+            return vec![SurveyItem {
+                origin: name,
+                time: None,
+                sounding: Err(e),
+            }];
+        }
+    };
+    entries
+        .into_iter()
+        .map(|mut e| {
+            if e.time.is_none() {
+                e.time = e.result.as_ref().ok().and_then(super::sounding_time);
+            }
+            e
+        })
+        .filter(|e| dates.keeps(e.time.as_deref()))
+        .map(|e| SurveyItem {
+            origin: match e.line {
+                Some(line) => format!("{name}:{line}"),
+                None => name.clone(),
+            },
+            time: e.time,
+            sounding: e.result,
+        })
+        .collect()
+}

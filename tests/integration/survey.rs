@@ -1,0 +1,351 @@
+//! `ghostship survey`: rows checked against `profile` and `trace` on the same files, a
+//! multi-sounding IGRA2 record with a corrupt sounding in the middle, the Parquet table read
+//! back by the `parquet` crate's own reader, determinism across thread counts, and clear errors.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use ghostship::survey::SurveyOptions;
+
+use crate::support::cli::{fails, json_file, ok};
+use crate::support::data::{public_sounding, sounding};
+
+/// The survey CSV as rows of column → text.
+fn read_csv(path: &Path) -> Vec<BTreeMap<String, String>> {
+    let mut reader = csv::Reader::from_path(path).unwrap();
+    let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            header.iter().cloned().zip(r.iter().map(String::from)).collect()
+        })
+        .collect()
+}
+
+fn num(row: &BTreeMap<String, String>, key: &str) -> Option<f64> {
+    let text = row.get(key).unwrap_or_else(|| panic!("no column {key}"));
+    (!text.is_empty()).then(|| text.parse().unwrap())
+}
+
+fn survey(sources: &[&Path], out: &Path, extra: &[&str]) -> Vec<BTreeMap<String, String>> {
+    let mut args = vec!["survey", "--quiet", "--out", out.to_str().unwrap()];
+    args.extend(sources.iter().map(|p| p.to_str().unwrap()));
+    args.extend(extra);
+    ok(&args);
+    read_csv(&out.join("survey.csv"))
+}
+
+/// The survey's fan from `observer_height_m` as a `--elevation-deg` value for `trace`.
+fn survey_fan(observer_height_m: f64) -> String {
+    let r = SurveyOptions::default().trace_request(observer_height_m);
+    let step = SurveyOptions::default().fan_step_deg;
+    format!("{:.17}:{:.17}:{step}", r.elevation_min_deg, r.elevation_max_deg)
+}
+
+fn trace_json(path: &Path, observer_height_m: f64, distance_m: f64) -> serde_json::Value {
+    let r = ok(&[
+        "trace",
+        "-a",
+        path.to_str().unwrap(),
+        "--observer-height-m",
+        &observer_height_m.to_string(),
+        &format!("--elevation-deg={}", survey_fan(observer_height_m)),
+        "--distance-m",
+        &distance_m.to_string(),
+        "--target-height-m",
+        "20",
+        "--format",
+        "json",
+    ]);
+    serde_json::from_str(&r.stdout).unwrap()
+}
+
+fn layers_json(path: &Path) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    ok(&[
+        "profile",
+        path.to_str().unwrap(),
+        "--layers-top-m",
+        "3000",
+        "--quiet",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    json_file(&dir.path().join("layers.json"))
+}
+
+/// Inversions and ducts of a row against `profile`'s layers.json (which rounds to 0.1 K, 1 m).
+fn check_layers(row: &BTreeMap<String, String>, layers: &serde_json::Value, name: &str) {
+    let inversions = layers["inversions"].as_array().unwrap();
+    assert_eq!(num(row, "inversion_count"), Some(inversions.len() as f64), "{name}");
+    let strongest = inversions
+        .iter()
+        .max_by(|a, b| {
+            let key = |v: &serde_json::Value| v["delta_t_k"].as_f64().unwrap_or(0.0);
+            key(a).total_cmp(&key(b))
+        });
+    match strongest {
+        Some(s) => {
+            let dt = num(row, "strongest_inversion_dt_k").unwrap();
+            assert!((dt - s["delta_t_k"].as_f64().unwrap()).abs() <= 0.051, "{name}: {dt}");
+            let base = num(row, "strongest_inversion_base_m").unwrap();
+            assert!((base - s["base_agl_m"].as_f64().unwrap()).abs() <= 0.51, "{name}");
+            let top = num(row, "strongest_inversion_top_m").unwrap();
+            assert!((top - s["top_agl_m"].as_f64().unwrap()).abs() <= 0.51, "{name}");
+        }
+        None => assert_eq!(num(row, "strongest_inversion_dt_k"), None, "{name}"),
+    }
+    let ducts = layers["ducts"].as_array().unwrap();
+    assert_eq!(num(row, "duct_count"), Some(ducts.len() as f64), "{name}");
+    let surface_duct = ducts.iter().any(|d| d["surface_based"].as_bool().unwrap());
+    assert_eq!(row["surface_duct"], surface_duct.to_string(), "{name}");
+}
+
+/// Horizon dip, lowest sun and images of a row against `trace` with the same fan. The survey's
+/// n(h) table is coarser (error bound 1e-12 instead of 1e-14), so angles agree to 1e-5 deg, and
+/// counts exactly.
+fn check_trace(row: &BTreeMap<String, String>, trace: &serde_json::Value, name: &str) {
+    let sea = trace["horizons"].as_array().unwrap().last().unwrap();
+    let dip = -sea["elevation_deg"].as_f64().unwrap();
+    let survey_dip = num(row, "horizon_dip_deg_h10m").unwrap();
+    assert!((dip - survey_dip).abs() < 1e-5, "{name}: dip {survey_dip} vs trace {dip}");
+    let lowest_sun = trace["rays"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["termination"] == "escaped")
+        .map(|r| r["end_elevation_deg"].as_f64().unwrap())
+        .reduce(f64::min)
+        .unwrap();
+    let survey_sun = num(row, "lowest_sun_deg_h10m").unwrap();
+    assert!((survey_sun - lowest_sun).abs() < 1e-5, "{name}: sun {survey_sun} vs {lowest_sun}");
+    let images = trace["images"].as_array().unwrap();
+    assert_eq!(num(row, "images_h10m_d20000m"), Some(images.len() as f64), "{name}");
+    let inverted = images.iter().any(|i| !i["erect"].as_bool().unwrap());
+    assert_eq!(row["inverted_h10m_d20000m"], inverted.to_string(), "{name}");
+}
+
+#[test]
+fn rows_agree_with_profile_and_trace_on_the_same_files() {
+    let names = [
+        "Tiksi-21824_2026020600.csv",
+        "Utqiagvik-70026_2026020600.csv",
+        "SouthPole-89009_2026020600.csv",
+        "Bjornoya-01028_2024022611.csv",
+    ];
+    let files: Vec<PathBuf> = names.iter().map(|n| sounding(n)).collect();
+    let refs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let out = tempfile::tempdir().unwrap();
+    let rows = survey(&refs, out.path(), &[]);
+    assert_eq!(rows.len(), names.len());
+    for (row, path) in rows.iter().zip(&files) {
+        let name = path.display().to_string();
+        assert_eq!(row["origin"], name);
+        assert_eq!(row["unusable_reason"], "", "{name}");
+        check_layers(row, &layers_json(path), &name);
+        check_trace(row, &trace_json(path, 10.0, 20_000.0), &name);
+    }
+    // The Tiksi surface inversion (+9.6 K over 776 m) is found.
+    assert!(num(&rows[0], "strongest_inversion_dt_k").unwrap() > 9.0);
+    assert_eq!(rows[0]["surface_inversion"], "true");
+}
+
+/// The standard atmosphere's horizon dip against the closed form for a uniform gradient near the
+/// ground, dip = √(2h(1 − k)/R) with k = −R·dn/dh, which holds to ~1 % for a 10 m observer.
+#[test]
+fn standard_reference_dip_matches_the_uniform_gradient_formula() {
+    use ghostship::refractivity::RefractiveAtmosphere;
+    use ghostship::tracer::StratifiedIndex;
+    let options = SurveyOptions::default();
+    let reference = ghostship::survey::Reference::standard(&options).unwrap();
+    let dip = reference.per_observer[0].0.unwrap();
+    let column = std::sync::Arc::new(ghostship::profile::StandardAtmosphere::default());
+    let atm = RefractiveAtmosphere::new(column, 550.0).unwrap();
+    let (_, dn_dh) = atm.index_and_derivative(5.0);
+    let r = ghostship::units::EARTH_RADIUS_M;
+    let k = -r * dn_dh;
+    let expected = (2.0 * 10.0 * (1.0 - k) / r).sqrt().to_degrees();
+    assert!((dip / expected - 1.0).abs() < 0.01, "dip {dip} vs {expected} (k {k})");
+}
+
+/// The header and records of every sounding in an IGRA2 text.
+fn igra2_blocks(text: &str) -> Vec<Vec<String>> {
+    let mut blocks: Vec<Vec<String>> = Vec::new();
+    for line in text.lines() {
+        if line.starts_with('#') {
+            blocks.push(Vec::new());
+        }
+        blocks.last_mut().unwrap().push(line.to_string());
+    }
+    blocks
+}
+
+/// `block` with the year of its header replaced.
+fn with_year(block: &[String], year: u32) -> Vec<String> {
+    let mut b = block.to_vec();
+    b[0] = format!("{}{year}{}", &b[0][..13], &b[0][17..]);
+    b
+}
+
+/// A record built from real soundings: the two complete soundings of the IGRA2 sample file
+/// (Utqiagvik 2010-06-01 00 and 12 UTC, from the siphon test suite), then a copy of the first
+/// dated 2011 whose fifth record has its temperature field replaced by `abcde`, then copies of
+/// both dated 2012. Returns the record's path and the mangled line's number.
+fn record_with_corrupt_sounding(dir: &Path) -> (PathBuf, usize) {
+    let text = std::fs::read_to_string(public_sounding("igra2_USM00070026-data.txt")).unwrap();
+    let blocks = igra2_blocks(&text);
+    let (a, b) = (&blocks[0], &blocks[1]);
+    let mut corrupt = with_year(a, 2011);
+    corrupt[5].replace_range(22..27, "abcde");
+    let parts = [a.clone(), b.clone(), corrupt, with_year(a, 2012), with_year(b, 2012)];
+    let bad_line = a.len() + b.len() + 6;
+    let lines: Vec<String> = parts.concat();
+    let path = dir.join("USM00070026-record.txt");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    (path, bad_line)
+}
+
+#[test]
+fn igra2_record_with_a_corrupt_sounding_in_the_middle() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, bad_line) = record_with_corrupt_sounding(dir.path());
+    let out = dir.path().join("out");
+    let rows = survey(&[&record], &out, &[]);
+    assert_eq!(rows.len(), 5);
+    let times: Vec<&str> = rows.iter().map(|r| r["time_utc"].as_str()).collect();
+    assert_eq!(
+        times,
+        ["2010-06-01 00", "2010-06-01 12", "2011-06-01 00", "2012-06-01 00", "2012-06-01 12"]
+    );
+    let reason = &rows[2]["unusable_reason"];
+    assert!(reason.contains(&format!("line {bad_line}")), "{reason}");
+    assert!(reason.contains("TEMP"), "{reason}");
+    assert_eq!(rows[2]["inversion_count"], "");
+    for k in [0, 1, 3, 4] {
+        assert_eq!(rows[k]["unusable_reason"], "", "row {k}");
+    }
+    // A sounding's facts do not depend on its neighbours: the 2012 copies equal the originals.
+    let facts = |r: &BTreeMap<String, String>| {
+        let mut r = r.clone();
+        for key in ["origin", "time_utc", "month"] {
+            r.remove(key);
+        }
+        r
+    };
+    assert_eq!(facts(&rows[0]), facts(&rows[3]));
+    assert_eq!(facts(&rows[1]), facts(&rows[4]));
+    // Each row equals `trace` of that sounding chosen by its time from the same record.
+    for k in [0, 1, 3] {
+        let r = ok(&[
+            "trace",
+            "-a",
+            record.to_str().unwrap(),
+            "--time",
+            &rows[k]["time_utc"],
+            "--observer-height-m",
+            "10",
+            &format!("--elevation-deg={}", survey_fan(10.0)),
+            "--distance-m",
+            "20000",
+            "--target-height-m",
+            "20",
+            "--format",
+            "json",
+        ]);
+        check_trace(&rows[k], &serde_json::from_str(&r.stdout).unwrap(), &format!("row {k}"));
+    }
+}
+
+#[test]
+fn parquet_table_reads_back_with_the_parquet_reader_as_the_csv() {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    use parquet::record::Field;
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let out = dir.path().join("out");
+    let extra = ["--observer-height-m", "10,50", "--distance-m", "10000,30000"];
+    let rows = survey(&[&record, &sounding("Tiksi-21824_2026020600.csv")], &out, &extra);
+    let file = std::fs::File::open(out.join("survey.parquet")).unwrap();
+    let reader = SerializedFileReader::new(file).unwrap();
+    assert_eq!(reader.metadata().file_metadata().num_rows(), rows.len() as i64);
+    let mut read = 0;
+    for (k, record) in reader.get_row_iter(None).unwrap().enumerate() {
+        let record = record.unwrap();
+        for (name, field) in record.get_column_iter() {
+            let csv = &rows[k][name];
+            let same = match field {
+                Field::Null => csv.is_empty(),
+                Field::Str(s) => s == csv,
+                Field::Double(x) => csv.parse::<f64>().unwrap() == *x,
+                Field::Long(x) => csv.parse::<i64>().unwrap() == *x,
+                Field::Bool(x) => csv.parse::<bool>().unwrap() == *x,
+                other => panic!("unexpected Parquet field {other:?} in {name}"),
+            };
+            assert!(same, "row {k} column {name}: Parquet {field:?}, CSV {csv:?}");
+        }
+        read += 1;
+    }
+    assert_eq!(read, rows.len());
+    // 21 sounding columns, 6 per observer height, 6 per (height, distance) case.
+    assert_eq!(rows[0].len(), 21 + 2 * 6 + 4 * 6, "columns: {:?}", rows[0].keys());
+}
+
+#[test]
+fn survey_outputs_are_identical_whatever_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let tiksi = sounding("Tiksi-21824_2026020600.csv");
+    let mut trees = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path().join(format!("out{threads}"));
+        crate::support::cli::ghostship()
+            .env("RAYON_NUM_THREADS", threads)
+            .args(["survey", "--quiet", "--out", out.to_str().unwrap()])
+            .args([record.to_str().unwrap(), tiksi.to_str().unwrap()])
+            .assert()
+            .success();
+        trees.push(crate::support::cli::output_tree(&out));
+    }
+    assert_eq!(trees[0].len(), 6);
+    assert_eq!(trees[0], trees[1]);
+}
+
+#[test]
+fn folders_and_date_ranges_choose_the_soundings() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let out = dir.path().join("out");
+    let rows = survey(&[&record], &out, &["--from", "2011-01-01", "--to", "2012-06-01"]);
+    let times: Vec<&str> = rows.iter().map(|r| r["time_utc"].as_str()).collect();
+    assert_eq!(times, ["2011-06-01 00", "2012-06-01 00", "2012-06-01 12"]);
+    // A folder: its files sorted, README.md skipped.
+    let folder = dir.path().join("folder");
+    std::fs::create_dir(&folder).unwrap();
+    for name in ["Tiksi-21824_2026020600.csv", "Cherskiy-25123_2026020600.csv"] {
+        std::fs::copy(sounding(name), folder.join(name)).unwrap();
+    }
+    std::fs::write(folder.join("README.md"), "notes\n").unwrap();
+    let rows = survey(&[&folder], &dir.path().join("out2"), &[]);
+    let origins: Vec<String> = rows.iter().map(|r| r["origin"].clone()).collect();
+    assert!(origins[0].ends_with("Cherskiy-25123_2026020600.csv"), "{origins:?}");
+    assert!(origins[1].ends_with("Tiksi-21824_2026020600.csv"), "{origins:?}");
+    assert_eq!(rows.len(), 2);
+}
+
+#[test]
+fn bad_requests_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let r = fails(&["survey", "/no/such/archive.txt", "--out", out]);
+    assert!(r.stderr.contains("/no/such/archive.txt: no such file or folder"), "{}", r.stderr);
+    let tiksi = sounding("Tiksi-21824_2026020600.csv");
+    let t = tiksi.to_str().unwrap();
+    let r = fails(&["survey", t, "--from", "2024-13", "--out", out]);
+    assert!(r.stderr.contains("is not YYYY-MM-DD"), "{}", r.stderr);
+    let r = fails(&["survey", t, "--distance-m", "30000,10000", "--out", out]);
+    assert!(r.stderr.contains("strictly ascending"), "{}", r.stderr);
+    let pattern = format!("{}/*.nothing", dir.path().display());
+    let r = fails(&["survey", &pattern, "--out", out]);
+    assert!(r.stderr.contains("no sounding file there"), "{}", r.stderr);
+}
