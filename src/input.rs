@@ -6,7 +6,7 @@
 //! as `.gz`), again never inflating past the limit.
 
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Largest sounding file read (an IGRA2 station record of decades of soundings fits).
 pub const MAX_SOUNDING_BYTES: u64 = 512 * 1024 * 1024;
@@ -14,6 +14,32 @@ pub const MAX_SOUNDING_BYTES: u64 = 512 * 1024 * 1024;
 pub const MAX_TOML_BYTES: u64 = 16 * 1024 * 1024;
 /// Largest card image read.
 pub const MAX_IMAGE_BYTES: u64 = 256 * 1024 * 1024;
+
+/// Whether `text` holds a glob wildcard (`*`, `?` or `[`).
+pub fn is_glob(text: &str) -> bool {
+    text.contains(['*', '?', '['])
+}
+
+/// The regular files matching the glob `pattern` (`*`, `?`, `[...]` and `**`, in folders as in
+/// file names; a wildcard never matches a hidden file or folder), sorted by path. An
+/// error when the pattern is malformed or matches no file.
+pub fn glob_files(pattern: &Path) -> Result<Vec<PathBuf>, String> {
+    let text = pattern.to_string_lossy();
+    let options = glob::MatchOptions {
+        require_literal_leading_dot: true,
+        ..glob::MatchOptions::new()
+    };
+    let paths = glob::glob_with(&text, options).map_err(|e| format!("pattern {text:?}: {e}"))?;
+    let mut files: Vec<PathBuf> = paths
+        .filter_map(Result::ok)
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(format!("no file matches {text}"));
+    }
+    Ok(files)
+}
 
 /// Read the regular file at `path`, refusing anything else and anything over `limit_bytes`.
 pub fn read_limited(path: &Path, limit_bytes: u64) -> std::io::Result<Vec<u8>> {
@@ -159,6 +185,33 @@ fn too_large(len_bytes: u64, limit_bytes: u64) -> std::io::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn globs_match_files_sorted_without_hidden_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["b.csv", "a.csv", ".hidden.csv", "c.txt", "sub/d.csv"] {
+            let path = dir.path().join(name);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, "x").unwrap();
+        }
+        let names = |pattern: &str| -> Vec<String> {
+            glob_files(&dir.path().join(pattern))
+                .unwrap()
+                .iter()
+                .map(|p| p.strip_prefix(dir.path()).unwrap().display().to_string())
+                .collect()
+        };
+        assert_eq!(names("*.csv"), ["a.csv", "b.csv"]);
+        assert_eq!(names("[ab].csv"), ["a.csv", "b.csv"]);
+        assert_eq!(names("s*/*.csv"), ["sub/d.csv"]);
+        assert_eq!(names("**/*.csv"), ["a.csv", "b.csv", "sub/d.csv"]);
+        assert_eq!(names(".hidden.csv"), [".hidden.csv"]);
+        assert!(glob_files(&dir.path().join(".h*.csv")).is_err());
+        let err = glob_files(&dir.path().join("*.nc")).unwrap_err();
+        assert!(err.starts_with("no file matches"), "{err}");
+        assert!(glob_files(&dir.path().join("[.csv")).is_err());
+        assert!(is_glob("a*") && is_glob("a?") && is_glob("[a]") && !is_glob("a.csv"));
+    }
 
     #[test]
     fn refuses_devices_folders_and_large_files() {

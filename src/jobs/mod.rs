@@ -68,10 +68,12 @@ pub enum JobRequest {
     Compare(Box<CompareRequest>),
     /// Frames of a sweep of the sun or the observer through one scene.
     Sequence(Box<SequenceRequest>),
+    /// Every sounding of an archive, one row each.
+    Survey(Box<SurveyRequest>),
 }
 
 impl JobRequest {
-    /// `profile`, `trace`, `render`, `compare` or `sequence`.
+    /// `profile`, `trace`, `render`, `compare`, `sequence` or `survey`.
     pub fn kind(&self) -> &'static str {
         match self {
             JobRequest::Profile(_) => "profile",
@@ -79,6 +81,7 @@ impl JobRequest {
             JobRequest::Render(_) => "render",
             JobRequest::Compare(_) => "compare",
             JobRequest::Sequence(_) => "sequence",
+            JobRequest::Survey(_) => "survey",
         }
     }
 
@@ -90,11 +93,15 @@ impl JobRequest {
             JobRequest::Render(r) => r.atmosphere.as_ref(),
             JobRequest::Compare(r) => Some(&r.measured),
             JobRequest::Sequence(r) => r.atmosphere(),
+            JobRequest::Survey(_) => None,
         }
     }
 
     /// The files the job reads: atmosphere file, scene file, card images.
     pub fn input_files(&self) -> Vec<std::path::PathBuf> {
+        if let JobRequest::Survey(s) = self {
+            return s.files().unwrap_or_else(|_| s.sources.clone());
+        }
         let mut files: Vec<std::path::PathBuf> = self
             .atmosphere()
             .and_then(|a| a.source.path())
@@ -133,6 +140,11 @@ impl JobRequest {
                 "atmosphere": s.render.atmosphere,
                 "scene_sha256": s.render.scene.hash_hex,
             })),
+            // The files themselves are the job's inputs (hashed in the manifest).
+            JobRequest::Survey(s) => serde_json::to_value(serde_json::json!({
+                "dates": s.dates,
+                "options": s.options,
+            })),
             JobRequest::Compare(c) => serde_json::to_value(serde_json::json!({
                 "settings": c.render.settings,
                 "measured": c.measured,
@@ -152,6 +164,7 @@ impl JobRequest {
             JobRequest::Trace(r) => r.products(&*cache.get(&r.atmosphere)?, true),
             JobRequest::Render(r) => r.products(cache),
             JobRequest::Sequence(s) => s.products(cache),
+            JobRequest::Survey(s) => s.products(&s.run(&indicatif::ProgressBar::hidden())?),
             JobRequest::Compare(c) => c.products(cache),
         }
     }

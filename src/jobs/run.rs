@@ -81,6 +81,17 @@ fn cost_estimate(request: &JobRequest) -> f64 {
         JobRequest::Profile(_) => 200_000.0,
         JobRequest::Trace(t) => (50_000.0 + 300.0 * t.ray_count() as f64) * (1 + t.ensemble) as f64,
         JobRequest::Compare(c) => c.cost(),
+        // About one sounding per 4 kB of archive, each about as costly as a short trace.
+        JobRequest::Survey(s) => {
+            let bytes: u64 = s
+                .files()
+                .unwrap_or_default()
+                .iter()
+                .filter_map(|f| std::fs::metadata(f).ok())
+                .map(|m| m.len())
+                .sum();
+            50_000.0 + 25.0 * bytes as f64
+        }
         JobRequest::Sequence(s) => {
             let r = &s.render;
             let spp = r.settings.spp.unwrap_or(r.scene.camera.samples_per_pixel) as f64;

@@ -55,7 +55,9 @@ impl SurveyRequest {
         options: SurveyOptions,
     ) -> Result<Self, JobError> {
         if sources.is_empty() {
-            return Err(JobError::Invalid("give at least one sounding source".into()));
+            return Err(JobError::Invalid(
+                "give at least one sounding source".into(),
+            ));
         }
         options.validate()?;
         dates.validate()?;
@@ -115,7 +117,10 @@ impl SurveyRequest {
                 "monthly.png",
                 plot::monthly_png(rows, &self.options).map_err(plot_err("monthly.png"))?,
             ),
-            Product::new("ducts.png", plot::ducts_png(rows).map_err(plot_err("ducts.png"))?),
+            Product::new(
+                "ducts.png",
+                plot::ducts_png(rows).map_err(plot_err("ducts.png"))?,
+            ),
             Product::new(
                 "dip.png",
                 plot::dip_png(rows, &self.options).map_err(plot_err("dip.png"))?,

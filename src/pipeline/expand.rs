@@ -19,65 +19,7 @@ pub struct AtmosphereChoice {
     pub stem: String,
 }
 
-/// Whether `text` holds a glob wildcard (`*`, `?` or `[`).
-pub fn is_glob(text: &str) -> bool {
-    text.contains(['*', '?', '['])
-}
-
-/// `*` (any run of characters) and `?` (one character) matching of a whole file name.
-fn wildcard_match(pattern: &[char], name: &[char]) -> bool {
-    match pattern.split_first() {
-        None => name.is_empty(),
-        Some(('*', rest)) => (0..=name.len()).any(|i| wildcard_match(rest, &name[i..])),
-        Some(('?', rest)) => !name.is_empty() && wildcard_match(rest, &name[1..]),
-        Some((c, rest)) => name.first() == Some(c) && wildcard_match(rest, &name[1..]),
-    }
-}
-
-/// The regular files matching `pattern` (wildcards `*` and `?` in the file name only; hidden
-/// files are not matched), sorted by name.
-pub fn glob_files(pattern: &Path) -> Result<Vec<PathBuf>, String> {
-    let name = pattern
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let dir = pattern.parent().unwrap_or(Path::new(""));
-    if is_glob(&dir.to_string_lossy()) {
-        return Err(format!(
-            "{}: wildcards are allowed in the file name only",
-            pattern.display()
-        ));
-    }
-    if name.contains('[') {
-        return Err(format!(
-            "{}: only the wildcards * and ? are supported",
-            pattern.display()
-        ));
-    }
-    let listing = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let entries = std::fs::read_dir(listing)
-        .map_err(|e| format!("cannot list {}: {e}", listing.display()))?;
-    let pattern_chars: Vec<char> = name.chars().collect();
-    let mut files: Vec<PathBuf> = entries
-        .flatten()
-        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
-        .filter_map(|e| {
-            let file = e.file_name().to_string_lossy().into_owned();
-            let chars: Vec<char> = file.chars().collect();
-            (!file.starts_with('.') && wildcard_match(&pattern_chars, &chars))
-                .then(|| dir.join(file))
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(format!("no file matches {}", pattern.display()));
-    }
-    Ok(files)
-}
+pub use crate::input::{glob_files, is_glob};
 
 /// Which IGRA2 soundings a job's `sounding_time` selects: one `"YYYY-MM-DD HH"`, `"all"`, or an
 /// inclusive range `"FROM..TO"` (either end may be left out).
@@ -279,6 +221,24 @@ pub fn relative_label(path: &Path, base: &Path) -> String {
     parts.join("/")
 }
 
+/// `path` with `.` and `folder/..` removed, still relative if it was (`pipelines/../data/x`
+/// → `data/x`), so what a job records does not depend on where the checkout lies.
+pub fn tidy_path(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir
+                if matches!(out.components().next_back(), Some(Component::Normal(_))) =>
+            {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
 fn normalise(path: &Path) -> PathBuf {
     let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
     let mut out = PathBuf::new();
@@ -299,24 +259,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn wildcards() {
-        let m = |p: &str, n: &str| {
-            wildcard_match(
-                &p.chars().collect::<Vec<_>>(),
-                &n.chars().collect::<Vec<_>>(),
-            )
-        };
-        assert!(m("*.csv", "a.csv") && m("a?c", "abc") && m("*", "") && m("a*b*c", "axxbyc"));
-        assert!(!m("*.csv", "a.csv.bak") && !m("a?c", "ac"));
-    }
-
-    #[test]
     fn names_and_labels() {
         assert_eq!(
             job_name("{stem}_{scene}_{height}", "u", "fig", Some(10.0)).unwrap(),
             "u_fig_10m"
         );
         assert!(job_name("{nope}", "u", "", None).is_err());
+        assert_eq!(tidy_path(Path::new("p/./../d/x")), Path::new("d/x"));
+        assert_eq!(tidy_path(Path::new("../../d")), Path::new("../../d"));
+        assert_eq!(tidy_path(Path::new("/a/b/../c")), Path::new("/a/c"));
         assert_eq!(
             relative_label(
                 Path::new("/r/pipelines/../data/x.csv"),

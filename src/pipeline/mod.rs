@@ -25,6 +25,8 @@
 //! [[compare]]                            # measured against synthetic layers (fitted if absent)
 //! atmosphere = "../data/*.csv"           # the measured soundings, one job each
 //! scene = "../data/scenes/fig04_superior_mirage.toml"
+//! [[survey]]                             # every sounding of an archive, one table
+//! sources = ["../data/soundings/*.csv"]
 //! ```
 
 mod expand;
@@ -36,7 +38,7 @@ use std::path::{Path, PathBuf};
 use toml::de::{DeTable, DeValue};
 
 pub use expand::{TimeSelection, glob_files, relative_label};
-pub use tables::{COMPARE_KEYS, PROFILE_KEYS, RENDER_KEYS, SEQUENCE_KEYS, TRACE_KEYS};
+pub use tables::{COMPARE_KEYS, PROFILE_KEYS, RENDER_KEYS, SEQUENCE_KEYS, SURVEY_KEYS, TRACE_KEYS};
 
 use crate::jobs::run::PlannedJob;
 use tables::{NamedJob, Problem, Table};
@@ -170,15 +172,15 @@ fn read_document(
                 defaults = t.clone();
                 check_default_keys(t, problems);
             }
-            ("profile" | "trace" | "render" | "sequence" | "compare", DeValue::Array(_)) => {}
-            (k @ ("name" | "defaults" | "profile" | "trace" | "render" | "sequence" | "compare"), v) => problems.push((
+            ("profile" | "trace" | "render" | "sequence" | "compare" | "survey", DeValue::Array(_)) => {}
+            (k @ ("name" | "defaults" | "profile" | "trace" | "render" | "sequence" | "compare" | "survey"), v) => problems.push((
                 value.span(),
                 format!("{k}: unexpected {} here", v.type_str()),
             )),
             (k, _) => problems.push((
                 key.span(),
                 format!(
-                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]], [[render]], [[sequence]] or [[compare]])"
+                    "unknown key `{k}` (expected name, defaults, [[profile]], [[trace]], [[render]], [[sequence]], [[compare]] or [[survey]])"
                 ),
             )),
         }
@@ -189,6 +191,7 @@ fn read_document(
         ("render", RENDER_KEYS),
         ("sequence", SEQUENCE_KEYS),
         ("compare", COMPARE_KEYS),
+        ("survey", SURVEY_KEYS),
     ] {
         let Some(DeValue::Array(items)) = doc.get(kind).map(|v| v.get_ref()) else {
             continue;
@@ -205,7 +208,7 @@ fn read_document(
     if named.is_empty() && problems.is_empty() {
         problems.push((
             0..0,
-            "no jobs: add at least one [[profile]], [[trace]], [[render]] or [[compare]] table"
+            "no jobs: add at least one [[profile]], [[trace]], [[render]], [[sequence]], [[compare]] or [[survey]] table"
                 .into(),
         ));
     }
@@ -221,6 +224,7 @@ fn check_default_keys(defaults: &DeTable, problems: &mut Vec<Problem>) {
             RENDER_KEYS,
             SEQUENCE_KEYS,
             COMPARE_KEYS,
+            SURVEY_KEYS,
         ]
         .iter()
         .any(|keys| keys.contains(&k));
@@ -277,6 +281,7 @@ fn job_table(
         "trace" => tables::trace_jobs(&mut table),
         "compare" => tables::compare_jobs(&mut table),
         "sequence" => tables::sequence_jobs(&mut table),
+        "survey" => tables::survey_jobs(&mut table),
         _ => tables::render_jobs(&mut table, &own_keys),
     };
     problems.append(&mut table.problems);

@@ -1,4 +1,5 @@
-//! Pipeline — job tables. In: one `[[profile]]`, `[[trace]]`, `[[render]]` or `[[compare]]` table (the
+//! Pipeline — job tables. In: one `[[profile]]`, `[[trace]]`, `[[render]]`, `[[sequence]]`,
+//! `[[compare]]` or `[[survey]]` table (the
 //! `[defaults]` merged in) with the spans of its keys. Out: the named, validated job requests
 //! it expands to (every atmosphere × scene × observer height it names), or the problems found,
 //! each at the key it concerns.
@@ -16,11 +17,14 @@ use crate::jobs::render::{RenderSettings, parse_size};
 use crate::jobs::sequence::{SequenceSettings, Sweep, SweepKind, parse_sweep};
 use crate::jobs::trace::parse_elevation_spec;
 use crate::jobs::{
-    CompareRequest, JobRequest, ProfileRequest, RenderRequest, SequenceRequest, TraceJobRequest,
+    CompareRequest, JobRequest, ProfileRequest, RenderRequest, SequenceRequest, SurveyRequest,
+    TraceJobRequest,
 };
 use crate::output::film::ImageFormat;
 use crate::profile::TemperatureFit;
 use crate::scene::Scene;
+use crate::survey::SurveyOptions;
+use crate::survey::sources::DateRange;
 use crate::tracer::TracerConfig;
 
 /// Keys a `[[profile]]` table accepts.
@@ -68,6 +72,23 @@ pub const SEQUENCE_KEYS: &[&str] = &[
     "tolerance_m",
     "exposure",
     "straight",
+];
+/// Keys a `[[survey]]` table accepts.
+pub const SURVEY_KEYS: &[&str] = &[
+    "name",
+    "sources",
+    "from",
+    "to",
+    "observer_height_m",
+    "distances_m",
+    "target_height_m",
+    "layers_top_m",
+    "tolerance_m",
+    "fan_step_deg",
+    "wavelength_nm",
+    "smooth_m",
+    "fit",
+    "strict",
 ];
 /// Keys a `[[render]]` table accepts.
 pub const RENDER_KEYS: &[&str] = &[
@@ -196,6 +217,25 @@ struct RawSequence {
     tolerance_m: Option<f64>,
     exposure: Option<f64>,
     straight: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSurvey {
+    name: Option<String>,
+    sources: OneOrMany<String>,
+    from: Option<String>,
+    to: Option<String>,
+    observer_height_m: Option<OneOrMany<f64>>,
+    distances_m: Option<Vec<f64>>,
+    target_height_m: Option<f64>,
+    layers_top_m: Option<f64>,
+    tolerance_m: Option<f64>,
+    fan_step_deg: Option<f64>,
+    wavelength_nm: Option<f64>,
+    smooth_m: Option<f64>,
+    fit: Option<TemperatureFit>,
+    strict: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -587,6 +627,61 @@ pub fn sequence_jobs(t: &mut Table) -> Vec<NamedJob> {
     let name = t.name(&template, "", &stem(&scene_path), None);
     match SequenceRequest::new(scene, settings) {
         Ok(r) => vec![(name, JobRequest::Sequence(Box::new(r)))],
+        Err(e) => {
+            t.problem_in_message(e.to_string());
+            Vec::new()
+        }
+    }
+}
+
+/// One `[[survey]]` table → its job (the same [`SurveyRequest`] as `ghostship survey`), its
+/// sources resolved against the pipeline's folder and expanded to files (so the manifest hashes
+/// every file).
+pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
+    let Some(raw) = t.raw::<RawSurvey>() else {
+        return Vec::new();
+    };
+    let d = SurveyOptions::default();
+    let a = AtmosphereOptions::default();
+    let options = SurveyOptions {
+        observer_heights_m: raw
+            .observer_height_m
+            .map_or(d.observer_heights_m.clone(), |h| h.to_vec()),
+        distances_m: raw.distances_m.unwrap_or(d.distances_m.clone()),
+        target_height_m: raw.target_height_m.unwrap_or(d.target_height_m),
+        atmosphere: AtmosphereOptions {
+            smooth_m: raw.smooth_m.unwrap_or(a.smooth_m),
+            fit: raw.fit.unwrap_or(a.fit),
+            wavelength_nm: raw.wavelength_nm.unwrap_or(a.wavelength_nm),
+            strict: raw.strict.unwrap_or(false),
+            ..a
+        },
+        layers_top_m: raw.layers_top_m.unwrap_or(d.layers_top_m),
+        tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
+        fan_step_deg: raw.fan_step_deg.unwrap_or(d.fan_step_deg),
+        ..d
+    };
+    let named: Vec<std::path::PathBuf> = raw
+        .sources
+        .to_vec()
+        .iter()
+        .map(|s| super::expand::tidy_path(&t.folder.join(s)))
+        .collect();
+    let files = match crate::survey::sources::expand_files(&named) {
+        Ok(files) => files,
+        Err(e) => {
+            t.problem("sources", e.to_string());
+            return Vec::new();
+        }
+    };
+    let dates = DateRange {
+        from: raw.from,
+        to: raw.to,
+    };
+    let template = raw.name.clone().unwrap_or_else(|| "survey".into());
+    let name = t.name(&template, "", "", None);
+    match SurveyRequest::new(files, dates, options) {
+        Ok(r) => vec![(name, JobRequest::Survey(Box::new(r)))],
         Err(e) => {
             t.problem_in_message(e.to_string());
             Vec::new()

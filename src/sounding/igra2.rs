@@ -227,30 +227,34 @@ pub(crate) fn read_all(path: &Path, text: &str) -> Option<Vec<BlockRead>> {
         .iter()
         .filter_map(|h| h.as_ref().ok().map(|h| h.time.clone()))
         .collect();
-    let blocks = starts.iter().zip(headers).enumerate().map(|(k, (&i, header))| {
-        let end = starts.get(k + 1).copied().unwrap_or(lines.len());
-        let time = header.as_ref().ok().map(|h| h.time.clone());
-        let result = header.and_then(|header| {
-            let stray = (i + 1..end).find(|&j| lines[j].starts_with('#'));
-            if let Some(j) = stray {
-                return Err(SoundingError::line_error(
-                    path,
-                    j + 1,
-                    "a line starting with # is not an IGRA2 header record",
-                ));
+    let blocks = starts
+        .iter()
+        .zip(headers)
+        .enumerate()
+        .map(|(k, (&i, header))| {
+            let end = starts.get(k + 1).copied().unwrap_or(lines.len());
+            let time = header.as_ref().ok().map(|h| h.time.clone());
+            let result = header.and_then(|header| {
+                let stray = (i + 1..end).find(|&j| lines[j].starts_with('#'));
+                if let Some(j) = stray {
+                    return Err(SoundingError::line_error(
+                        path,
+                        j + 1,
+                        "a line starting with # is not an IGRA2 header record",
+                    ));
+                }
+                let mut metadata = BTreeMap::new();
+                let (rows, names) =
+                    read_block(path, &lines, &header, format, &available, &mut metadata)?;
+                Ok((rows, names, metadata))
+            });
+            BlockRead {
+                header_line: i + 1,
+                time,
+                format,
+                result,
             }
-            let mut metadata = BTreeMap::new();
-            let (rows, names) =
-                read_block(path, &lines, &header, format, &available, &mut metadata)?;
-            Ok((rows, names, metadata))
         });
-        BlockRead {
-            header_line: i + 1,
-            time,
-            format,
-            result,
-        }
-    });
     Some(blocks.collect())
 }
 

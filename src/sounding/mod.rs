@@ -425,7 +425,11 @@ pub fn read_soundings(
             .into_iter()
             .map(|t| SoundingEntry {
                 line: None,
-                result: parse_sounding(text, path, &ReadOptions::with_time(&t).strict(single.strict)),
+                result: parse_sounding(
+                    text,
+                    path,
+                    &ReadOptions::with_time(&t).strict(single.strict),
+                ),
                 time: Some(t),
             })
             .collect()

@@ -22,7 +22,9 @@ use serde::Serialize;
 
 use crate::analysis::{TraceReport, TraceRequest, trace_report};
 use crate::atmosphere::AtmosphereOptions;
-use crate::profile::{InversionKind, InversionOptions, Profile, StandardAtmosphere, detect_inversions};
+use crate::profile::{
+    InversionKind, InversionOptions, Profile, StandardAtmosphere, detect_inversions,
+};
 use crate::refractivity::{
     RefractiveAtmosphere, RegimeKind, RegimeOptions, TableSpec, detect_regimes,
 };
@@ -128,7 +130,10 @@ impl SurveyOptions {
             }
         }
         if !(self.fan_top_deg.is_finite() && self.fan_top_deg > 0.0 && self.fan_top_deg < 45.0) {
-            return bad(format!("fan_top_deg must be in (0, 45), got {}", self.fan_top_deg));
+            return bad(format!(
+                "fan_top_deg must be in (0, 45), got {}",
+                self.fan_top_deg
+            ));
         }
         self.atmosphere
             .validate()
@@ -141,7 +146,9 @@ impl SurveyOptions {
     /// The fan traced from `observer_height_m`: from `fan_below_dip_deg` below the straight-ray
     /// dip of the sea horizon to `fan_top_deg`, every `fan_step_deg`.
     pub fn trace_request(&self, observer_height_m: f64) -> TraceRequest {
-        let dip_deg = (2.0 * observer_height_m / EARTH_RADIUS_M).sqrt().to_degrees();
+        let dip_deg = (2.0 * observer_height_m / EARTH_RADIUS_M)
+            .sqrt()
+            .to_degrees();
         let from_deg = -(dip_deg + self.fan_below_dip_deg);
         let count = ((self.fan_top_deg - from_deg) / self.fan_step_deg).ceil() as usize + 1;
         TraceRequest {
@@ -249,7 +256,11 @@ pub struct SurveyRow {
 
 impl SurveyRow {
     /// The row of a sounding that cannot be used, saying why (the whole error chain).
-    pub fn unusable(origin: String, time_utc: Option<String>, error: &dyn std::error::Error) -> Self {
+    pub fn unusable(
+        origin: String,
+        time_utc: Option<String>,
+        error: &dyn std::error::Error,
+    ) -> Self {
         let mut reason = error.to_string();
         let mut source = error.source();
         while let Some(e) = source {
@@ -292,8 +303,8 @@ impl Reference {
             .observer_heights_m
             .iter()
             .map(|&h| {
-                let report =
-                    trace_report(&atm, &options.trace_request(h)).map_err(SurveyError::Reference)?;
+                let report = trace_report(&atm, &options.trace_request(h))
+                    .map_err(SurveyError::Reference)?;
                 Ok((dip_deg(&report), lowest_sun_deg(&report)))
             })
             .collect::<Result<_, SurveyError>>()?;
@@ -389,13 +400,39 @@ pub const SURVEY_TABLE_DNDH_PER_M: f64 = 1e-12;
 /// The sounding's nominal time as `"YYYY-MM-DD HH"` when its metadata gives one.
 pub(crate) fn sounding_time(sounding: &Sounding) -> Option<String> {
     let m = &sounding.metadata;
-    let text = m.get("nominal_time_utc").or_else(|| m.get("launch_time_utc"))?;
+    let text = m
+        .get("nominal_time_utc")
+        .or_else(|| m.get("launch_time_utc"))?;
     if let Some(t) = crate::sounding::time::CommaTime::parse(text) {
         return t.nominal().or_else(|| Some(t.readable()));
     }
     crate::sounding::time::canonical_time(text)
         .ok()
+        .or_else(|| time_in_text(text))
         .or_else(|| Some(text.trim().to_string()))
+}
+
+/// The `"YYYY-MM-DD HH"` a free-text time holds: the one after `nominal` if there is one (a
+/// launch time with its nominal synoptic hour), else the first.
+fn time_in_text(text: &str) -> Option<String> {
+    let is_time = |s: &[u8]| {
+        s.len() >= 13
+            && s[..13].iter().enumerate().all(|(i, b)| match i {
+                4 | 7 => *b == b'-',
+                10 => *b == b' ',
+                _ => b.is_ascii_digit(),
+            })
+            && s.get(13).is_none_or(|b| !b.is_ascii_digit() && *b != b':')
+    };
+    let first = |t: &str| {
+        (0..t.len())
+            .filter(|&i| t.is_char_boundary(i))
+            .find(|&i| is_time(&t.as_bytes()[i..]))
+            .map(|i| t[i..i + 13].to_string())
+    };
+    text.find("nominal")
+        .and_then(|at| first(&text[at..]))
+        .or_else(|| first(text))
 }
 
 /// Inversions and ducts up to `layers_top_m` above the surface (or the top of the data).
@@ -414,7 +451,9 @@ fn layer_facts(
     let strongest = inversions
         .iter()
         .max_by(|a, b| a.delta_t_k.total_cmp(&b.delta_t_k));
-    let strongest_duct = ducts.iter().max_by(|a, b| a.m_deficit.total_cmp(&b.m_deficit));
+    let strongest_duct = ducts
+        .iter()
+        .max_by(|a, b| a.m_deficit.total_cmp(&b.m_deficit));
     LayerFacts {
         surface_height_m: surface_m,
         surface_temperature_k: s.air.temperature_k,
@@ -483,8 +522,16 @@ fn case_facts(report: &TraceReport, distance_m: f64) -> CaseFacts {
         .iter()
         .filter(|i| i.distance_m == distance_m)
         .collect();
-    let erect: Vec<f64> = images.iter().filter(|i| i.erect).map(|i| i.elevation_deg).collect();
-    let inverted: Vec<f64> = images.iter().filter(|i| !i.erect).map(|i| i.elevation_deg).collect();
+    let erect: Vec<f64> = images
+        .iter()
+        .filter(|i| i.erect)
+        .map(|i| i.elevation_deg)
+        .collect();
+    let inverted: Vec<f64> = images
+        .iter()
+        .filter(|i| !i.erect)
+        .map(|i| i.elevation_deg)
+        .collect();
     let above = |e: f64| erect.iter().any(|&x| e > x);
     let below = |e: f64| erect.iter().any(|&x| e < x);
     CaseFacts {
@@ -495,5 +542,25 @@ fn case_facts(report: &TraceReport, distance_m: f64) -> CaseFacts {
         superior: inverted.iter().any(|&e| above(e)),
         inferior: inverted.iter().any(|&e| below(e)),
         max_magnification: images.iter().map(|i| i.magnification).reduce(f64::max),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn free_text_times_give_their_nominal_hour() {
+        let t = |s: &str| time_in_text(s);
+        assert_eq!(
+            t("2026-02-06 00 UTC (TTAA identifier YYGGI=06002: day 6, hour 00)").as_deref(),
+            Some("2026-02-06 00")
+        );
+        assert_eq!(
+            t("2014-09-10 11:03 UTC (IGRA RELTIME=1103); nominal 2014-09-10 12 UTC").as_deref(),
+            Some("2014-09-10 12")
+        );
+        assert_eq!(t("2024-02-26 11:20 UTC"), None);
+        assert_eq!(t("launch at dawn"), None);
     }
 }

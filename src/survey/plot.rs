@@ -30,10 +30,18 @@ fn any_case(r: &SurveyRow, k: usize, n: usize, f: fn(&super::CaseFacts) -> bool)
 }
 
 const PHENOMENA: [(&str, Phenomenon); 5] = [
-    ("superior mirage", |r, k, n| any_case(r, k, n, |c| c.superior)),
-    ("inferior mirage", |r, k, n| any_case(r, k, n, |c| c.inferior)),
-    ("Fata Morgana (≥ 3 images)", |r, k, n| any_case(r, k, n, |c| c.images >= 3)),
-    ("Novaya Zemlya sun", |r, k, _| r.observers.get(k).is_some_and(|o| o.novaya_zemlya)),
+    ("superior mirage", |r, k, n| {
+        any_case(r, k, n, |c| c.superior)
+    }),
+    ("inferior mirage", |r, k, n| {
+        any_case(r, k, n, |c| c.inferior)
+    }),
+    ("Fata Morgana (≥ 3 images)", |r, k, n| {
+        any_case(r, k, n, |c| c.images >= 3)
+    }),
+    ("Novaya Zemlya sun", |r, k, _| {
+        r.observers.get(k).is_some_and(|o| o.novaya_zemlya)
+    }),
     ("duct (any height)", |r, _, _| r.layers.duct_count > 0),
 ];
 
@@ -56,7 +64,12 @@ pub fn monthly_png(rows: &[SurveyRow], options: &SurveyOptions) -> Result<Vec<u8
         let root = root.titled(&title, (PLOT_FONT, 22)).map_err(plot_err)?;
         for (k, area) in root.split_evenly((panels, 1)).iter().enumerate() {
             let per_month: Vec<Vec<&SurveyRow>> = (1..=12)
-                .map(|m| used.iter().copied().filter(|r| r.month() == Some(m)).collect())
+                .map(|m| {
+                    used.iter()
+                        .copied()
+                        .filter(|r| r.month() == Some(m))
+                        .collect()
+                })
                 .collect();
             let caption = format!(
                 "observer {} m, target {} m at {}",
@@ -64,6 +77,15 @@ pub fn monthly_png(rows: &[SurveyRow], options: &SurveyOptions) -> Result<Vec<u8
                 options.target_height_m,
                 distances_label(&options.distances_m)
             );
+            // Each month's label carries its number of soundings: a share of 2 is not one of 200.
+            let counts: Vec<usize> = per_month.iter().map(Vec::len).collect();
+            let month_label = |v: &f64| {
+                let m = v.round() as usize;
+                match (MONTHS.get(m.wrapping_sub(1)), counts.get(m.wrapping_sub(1))) {
+                    (Some(name), Some(count)) => format!("{name} ({count})"),
+                    _ => String::new(),
+                }
+            };
             let mut chart = ChartBuilder::on(area)
                 .caption(caption, (PLOT_FONT, 17))
                 .margin(12)
@@ -73,10 +95,10 @@ pub fn monthly_png(rows: &[SurveyRow], options: &SurveyOptions) -> Result<Vec<u8
                 .map_err(plot_err)?;
             chart
                 .configure_mesh()
-                .x_desc("month")
+                .x_desc("month (number of usable soundings)")
                 .y_desc("soundings (%)")
                 .x_labels(12)
-                .x_label_formatter(&|v| format!("{v:.0}"))
+                .x_label_formatter(&month_label)
                 .label_style((PLOT_FONT, 14))
                 .light_line_style(RGBColor(235, 235, 235))
                 .draw()
@@ -120,8 +142,15 @@ pub fn monthly_png(rows: &[SurveyRow], options: &SurveyOptions) -> Result<Vec<u8
     rgb8_to_png(&buffer, w, h)
 }
 
+const MONTHS: [&str; 12] = [
+    "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+];
+
 fn distances_label(distances_m: &[f64]) -> String {
-    let km: Vec<String> = distances_m.iter().map(|d| format!("{}", d / 1000.0)).collect();
+    let km: Vec<String> = distances_m
+        .iter()
+        .map(|d| format!("{}", d / 1000.0))
+        .collect();
     format!("{} km", km.join(", "))
 }
 
@@ -161,7 +190,10 @@ pub fn ducts_png(rows: &[SurveyRow]) -> Result<Vec<u8>, String> {
         root.fill(&WHITE).map_err(plot_err)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(
-                format!("Strongest duct of each sounding ({} soundings)", points.len()),
+                format!(
+                    "Strongest duct of each sounding ({} soundings)",
+                    points.len()
+                ),
                 (PLOT_FONT, 20),
             )
             .margin(14)
@@ -211,7 +243,9 @@ pub fn ducts_png(rows: &[SurveyRow]) -> Result<Vec<u8>, String> {
 }
 
 fn span(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
     if !(lo.is_finite() && hi.is_finite()) {
         return (0.0, 1.0);
     }
@@ -230,7 +264,10 @@ pub fn dip_png(rows: &[SurveyRow], options: &SurveyOptions) -> Result<Vec<u8>, S
         let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(plot_err)?;
         let root = root
-            .titled("Horizon dip minus the standard atmosphere's", (PLOT_FONT, 22))
+            .titled(
+                "Horizon dip minus the standard atmosphere's",
+                (PLOT_FONT, 22),
+            )
             .map_err(plot_err)?;
         for (k, area) in root.split_evenly((panels, 1)).iter().enumerate() {
             let values: Vec<f64> = rows
@@ -258,7 +295,10 @@ fn draw_histogram<DB: DrawingBackend>(
     let top = counts.iter().copied().max().unwrap_or(0).max(1) as f64 * 1.15;
     let mut chart = ChartBuilder::on(area)
         .caption(
-            format!("observer {observer_height_m} m ({} soundings)", values.len()),
+            format!(
+                "observer {observer_height_m} m ({} soundings)",
+                values.len()
+            ),
             (PLOT_FONT, 17),
         )
         .margin(12)
@@ -285,11 +325,17 @@ fn draw_histogram<DB: DrawingBackend>(
     chart
         .draw_series(counts.iter().enumerate().map(|(i, &c)| {
             let x0 = lo + i as f64 * width;
-            Rectangle::new([(x0, 0.0), (x0 + width, c as f64)], COLOURS[0].mix(0.7).filled())
+            Rectangle::new(
+                [(x0, 0.0), (x0 + width, c as f64)],
+                COLOURS[0].mix(0.7).filled(),
+            )
         }))
         .map_err(plot_err)?;
     chart
-        .draw_series(LineSeries::new([(0.0, 0.0), (0.0, top)], BLACK.mix(0.6).stroke_width(1)))
+        .draw_series(LineSeries::new(
+            [(0.0, 0.0), (0.0, top)],
+            BLACK.mix(0.6).stroke_width(1),
+        ))
         .map_err(plot_err)?;
     Ok(())
 }

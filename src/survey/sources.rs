@@ -48,7 +48,9 @@ impl DateRange {
         if let (Some(a), Some(b)) = (&self.from, &self.to)
             && a > b
         {
-            return Err(SurveyError::Invalid(format!("date range {a} to {b} is empty")));
+            return Err(SurveyError::Invalid(format!(
+                "date range {a} to {b} is empty"
+            )));
         }
         Ok(())
     }
@@ -69,8 +71,8 @@ pub fn expand_files(sources: &[PathBuf]) -> Result<Vec<PathBuf>, SurveyError> {
     let mut files = Vec::new();
     for source in sources {
         let text = source.to_string_lossy();
-        let found = if text.contains(['*', '?', '[']) {
-            glob_files(&text)?
+        let found = if crate::input::is_glob(&text) {
+            crate::input::glob_files(source).map_err(SurveyError::Invalid)?
         } else if source.is_dir() {
             folder_files(source)?
         } else if source.is_file() {
@@ -91,14 +93,6 @@ pub fn expand_files(sources: &[PathBuf]) -> Result<Vec<PathBuf>, SurveyError> {
     Ok(files)
 }
 
-fn glob_files(pattern: &str) -> Result<Vec<PathBuf>, SurveyError> {
-    let paths = glob::glob(pattern)
-        .map_err(|e| SurveyError::Invalid(format!("pattern {pattern:?}: {e}")))?;
-    let mut files: Vec<PathBuf> = paths.filter_map(Result::ok).filter(|p| p.is_file()).collect();
-    files.sort();
-    Ok(files)
-}
-
 fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
     let entries = std::fs::read_dir(folder)
         .map_err(|e| SurveyError::Invalid(format!("{}: {e}", folder.display())))?;
@@ -107,7 +101,10 @@ fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
         .map(|e| e.path())
         .filter(|p| p.is_file())
         .filter(|p| {
-            let name = p.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default();
             !name.starts_with('.') && !name.to_ascii_lowercase().ends_with(".md")
         })
         .collect();
@@ -117,11 +114,7 @@ fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
 
 /// Every sounding in `files` within `dates`, read with `read` (in parallel by file; the order
 /// is the files' and, inside a file, the soundings').
-pub fn expand_sources(
-    files: &[PathBuf],
-    dates: &DateRange,
-    read: &ReadOptions,
-) -> Vec<SurveyItem> {
+pub fn expand_sources(files: &[PathBuf], dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
     use rayon::prelude::*;
     let per_file: Vec<Vec<SurveyItem>> = files
         .par_iter()

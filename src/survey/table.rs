@@ -46,7 +46,10 @@ impl Column {
     }
 }
 
-fn col(name: impl Into<String>, get: impl Fn(&SurveyRow) -> Value + Send + Sync + 'static) -> Column {
+fn col(
+    name: impl Into<String>,
+    get: impl Fn(&SurveyRow) -> Value + Send + Sync + 'static,
+) -> Column {
     Column {
         name: name.into(),
         get: Box::new(get),
@@ -58,7 +61,9 @@ fn used<T>(row: &SurveyRow, f: impl Fn(&SurveyRow) -> T) -> Option<T> {
     row.unusable.is_none().then(|| f(row))
 }
 
-fn float(f: impl Fn(&SurveyRow) -> Option<f64> + Send + Sync + 'static) -> impl Fn(&SurveyRow) -> Value {
+fn float(
+    f: impl Fn(&SurveyRow) -> Option<f64> + Send + Sync + 'static,
+) -> impl Fn(&SurveyRow) -> Value {
     move |r| Value::Float(used(r, &f).flatten())
 }
 
@@ -92,21 +97,62 @@ fn identity_columns() -> Vec<Column> {
 
 fn layer_columns() -> Vec<Column> {
     vec![
-        col("surface_height_m", float(|r| Some(r.layers.surface_height_m))),
-        col("surface_temperature_k", float(|r| Some(r.layers.surface_temperature_k))),
-        col("surface_pressure_hpa", float(|r| Some(r.layers.surface_pressure_hpa))),
-        col("surface_dt_dh_k_per_m", float(|r| Some(r.layers.surface_dt_dh_k_per_m))),
-        col("inversion_count", |r| Value::Int(used(r, |r| r.layers.inversion_count as i64))),
-        col("surface_inversion", |r| Value::Bool(used(r, |r| r.layers.surface_inversion))),
-        col("strongest_inversion_dt_k", float(|r| r.layers.strongest_inversion.map(|s| s.0))),
-        col("strongest_inversion_base_m", float(|r| r.layers.strongest_inversion.map(|s| s.1))),
-        col("strongest_inversion_top_m", float(|r| r.layers.strongest_inversion.map(|s| s.2))),
-        col("max_inversion_gradient_k_per_m", float(|r| r.layers.max_inversion_gradient_k_per_m)),
-        col("duct_count", |r| Value::Int(used(r, |r| r.layers.duct_count as i64))),
-        col("surface_duct", |r| Value::Bool(used(r, |r| r.layers.surface_duct))),
-        col("strongest_duct_base_m", float(|r| r.layers.strongest_duct.map(|d| d.0))),
-        col("strongest_duct_top_m", float(|r| r.layers.strongest_duct.map(|d| d.1))),
-        col("strongest_duct_delta_m_units", float(|r| r.layers.strongest_duct.map(|d| d.2))),
+        col(
+            "surface_height_m",
+            float(|r| Some(r.layers.surface_height_m)),
+        ),
+        col(
+            "surface_temperature_k",
+            float(|r| Some(r.layers.surface_temperature_k)),
+        ),
+        col(
+            "surface_pressure_hpa",
+            float(|r| Some(r.layers.surface_pressure_hpa)),
+        ),
+        col(
+            "surface_dt_dh_k_per_m",
+            float(|r| Some(r.layers.surface_dt_dh_k_per_m)),
+        ),
+        col("inversion_count", |r| {
+            Value::Int(used(r, |r| r.layers.inversion_count as i64))
+        }),
+        col("surface_inversion", |r| {
+            Value::Bool(used(r, |r| r.layers.surface_inversion))
+        }),
+        col(
+            "strongest_inversion_dt_k",
+            float(|r| r.layers.strongest_inversion.map(|s| s.0)),
+        ),
+        col(
+            "strongest_inversion_base_m",
+            float(|r| r.layers.strongest_inversion.map(|s| s.1)),
+        ),
+        col(
+            "strongest_inversion_top_m",
+            float(|r| r.layers.strongest_inversion.map(|s| s.2)),
+        ),
+        col(
+            "max_inversion_gradient_k_per_m",
+            float(|r| r.layers.max_inversion_gradient_k_per_m),
+        ),
+        col("duct_count", |r| {
+            Value::Int(used(r, |r| r.layers.duct_count as i64))
+        }),
+        col("surface_duct", |r| {
+            Value::Bool(used(r, |r| r.layers.surface_duct))
+        }),
+        col(
+            "strongest_duct_base_m",
+            float(|r| r.layers.strongest_duct.map(|d| d.0)),
+        ),
+        col(
+            "strongest_duct_top_m",
+            float(|r| r.layers.strongest_duct.map(|d| d.1)),
+        ),
+        col(
+            "strongest_duct_delta_m_units",
+            float(|r| r.layers.strongest_duct.map(|d| d.2)),
+        ),
         col("lowest_trapping_m", float(|r| r.layers.lowest_trapping_m)),
     ]
 }
@@ -123,7 +169,10 @@ fn observer_columns(k: usize, tag: &str) -> Vec<Column> {
         col(format!("horizon_dip_deg_{tag}"), f(|o| o.horizon_dip_deg)),
         col(format!("dip_anomaly_deg_{tag}"), f(|o| o.dip_anomaly_deg)),
         col(format!("lowest_sun_deg_{tag}"), f(|o| o.lowest_sun_deg)),
-        col(format!("sun_depth_anomaly_deg_{tag}"), f(|o| o.sun_depth_anomaly_deg)),
+        col(
+            format!("sun_depth_anomaly_deg_{tag}"),
+            f(|o| o.sun_depth_anomaly_deg),
+        ),
         col(format!("trapped_rays_{tag}"), move |r| {
             Value::Int(observer(r, k).map(|o| o.trapped_rays as i64))
         }),
@@ -157,7 +206,8 @@ fn case_columns(k: usize, tag: &str) -> Vec<Column> {
 pub fn to_csv(rows: &[SurveyRow], columns: &[Column]) -> Result<Vec<u8>, SurveyError> {
     let table = |e: csv::Error| SurveyError::Table(e.to_string());
     let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record(columns.iter().map(|c| c.name.as_str())).map_err(table)?;
+    w.write_record(columns.iter().map(|c| c.name.as_str()))
+        .map_err(table)?;
     for row in rows {
         let cells = columns.iter().map(|c| match c.value(row) {
             Value::Text(v) => v.unwrap_or_default(),
@@ -167,7 +217,8 @@ pub fn to_csv(rows: &[SurveyRow], columns: &[Column]) -> Result<Vec<u8>, SurveyE
         });
         w.write_record(cells).map_err(table)?;
     }
-    w.into_inner().map_err(|e| SurveyError::Table(e.to_string()))
+    w.into_inner()
+        .map_err(|e| SurveyError::Table(e.to_string()))
 }
 
 /// The Parquet schema of `columns`: every column optional; text as UTF-8 strings.
@@ -176,8 +227,8 @@ fn schema(columns: &[Column], sample: &[SurveyRow; 1]) -> Result<Type, SurveyErr
         .iter()
         .map(|c| {
             let kind = kind_of(c, sample);
-            let builder = Type::primitive_type_builder(&c.name, kind.0)
-                .with_repetition(Repetition::OPTIONAL);
+            let builder =
+                Type::primitive_type_builder(&c.name, kind.0).with_repetition(Repetition::OPTIONAL);
             let builder = match kind.1 {
                 true => builder.with_logical_type(Some(LogicalType::String)),
                 false => builder,
@@ -208,7 +259,11 @@ pub fn to_parquet(rows: &[SurveyRow], columns: &[Column]) -> Result<Vec<u8>, Sur
     let placeholder = [placeholder_row()];
     let schema = Arc::new(schema(columns, &placeholder)?);
     let kinds: Vec<PhysicalType> = columns.iter().map(|c| kind_of(c, &placeholder).0).collect();
-    let props = Arc::new(WriterProperties::builder().set_created_by("ghostship".into()).build());
+    let props = Arc::new(
+        WriterProperties::builder()
+            .set_created_by("ghostship".into())
+            .build(),
+    );
     let mut out = Vec::new();
     let mut writer = SerializedFileWriter::new(&mut out, schema, props).map_err(table)?;
     let mut group = writer.next_row_group().map_err(table)?;
@@ -253,14 +308,18 @@ fn write_column(
                     _ => None,
                 })
                 .collect();
-            column.typed::<$ty>().write_batch(&present, Some(&defs), None)?;
+            column
+                .typed::<$ty>()
+                .write_batch(&present, Some(&defs), None)?;
         }};
     }
     match kind {
         PhysicalType::DOUBLE => put!(DoubleType, Float, |x: &f64| *x),
         PhysicalType::INT64 => put!(Int64Type, Int, |x: &i64| *x),
         PhysicalType::BOOLEAN => put!(BoolType, Bool, |x: &bool| *x),
-        _ => put!(ByteArrayType, Text, |x: &String| ByteArray::from(x.as_str())),
+        _ => put!(ByteArrayType, Text, |x: &String| ByteArray::from(
+            x.as_str()
+        )),
     }
     Ok(())
 }

@@ -18,7 +18,11 @@ fn read_csv(path: &Path) -> Vec<BTreeMap<String, String>> {
         .records()
         .map(|r| {
             let r = r.unwrap();
-            header.iter().cloned().zip(r.iter().map(String::from)).collect()
+            header
+                .iter()
+                .cloned()
+                .zip(r.iter().map(String::from))
+                .collect()
         })
         .collect()
 }
@@ -40,7 +44,10 @@ fn survey(sources: &[&Path], out: &Path, extra: &[&str]) -> Vec<BTreeMap<String,
 fn survey_fan(observer_height_m: f64) -> String {
     let r = SurveyOptions::default().trace_request(observer_height_m);
     let step = SurveyOptions::default().fan_step_deg;
-    format!("{:.17}:{:.17}:{step}", r.elevation_min_deg, r.elevation_max_deg)
+    format!(
+        "{:.17}:{:.17}:{step}",
+        r.elevation_min_deg, r.elevation_max_deg
+    )
 }
 
 fn trace_json(path: &Path, observer_height_m: f64, distance_m: f64) -> serde_json::Value {
@@ -78,21 +85,32 @@ fn layers_json(path: &Path) -> serde_json::Value {
 /// Inversions and ducts of a row against `profile`'s layers.json (which rounds to 0.1 K, 1 m).
 fn check_layers(row: &BTreeMap<String, String>, layers: &serde_json::Value, name: &str) {
     let inversions = layers["inversions"].as_array().unwrap();
-    assert_eq!(num(row, "inversion_count"), Some(inversions.len() as f64), "{name}");
-    let strongest = inversions
-        .iter()
-        .max_by(|a, b| {
-            let key = |v: &serde_json::Value| v["delta_t_k"].as_f64().unwrap_or(0.0);
-            key(a).total_cmp(&key(b))
-        });
+    assert_eq!(
+        num(row, "inversion_count"),
+        Some(inversions.len() as f64),
+        "{name}"
+    );
+    let strongest = inversions.iter().max_by(|a, b| {
+        let key = |v: &serde_json::Value| v["delta_t_k"].as_f64().unwrap_or(0.0);
+        key(a).total_cmp(&key(b))
+    });
     match strongest {
         Some(s) => {
             let dt = num(row, "strongest_inversion_dt_k").unwrap();
-            assert!((dt - s["delta_t_k"].as_f64().unwrap()).abs() <= 0.051, "{name}: {dt}");
+            assert!(
+                (dt - s["delta_t_k"].as_f64().unwrap()).abs() <= 0.051,
+                "{name}: {dt}"
+            );
             let base = num(row, "strongest_inversion_base_m").unwrap();
-            assert!((base - s["base_agl_m"].as_f64().unwrap()).abs() <= 0.51, "{name}");
+            assert!(
+                (base - s["base_agl_m"].as_f64().unwrap()).abs() <= 0.51,
+                "{name}"
+            );
             let top = num(row, "strongest_inversion_top_m").unwrap();
-            assert!((top - s["top_agl_m"].as_f64().unwrap()).abs() <= 0.51, "{name}");
+            assert!(
+                (top - s["top_agl_m"].as_f64().unwrap()).abs() <= 0.51,
+                "{name}"
+            );
         }
         None => assert_eq!(num(row, "strongest_inversion_dt_k"), None, "{name}"),
     }
@@ -109,7 +127,10 @@ fn check_trace(row: &BTreeMap<String, String>, trace: &serde_json::Value, name: 
     let sea = trace["horizons"].as_array().unwrap().last().unwrap();
     let dip = -sea["elevation_deg"].as_f64().unwrap();
     let survey_dip = num(row, "horizon_dip_deg_h10m").unwrap();
-    assert!((dip - survey_dip).abs() < 1e-5, "{name}: dip {survey_dip} vs trace {dip}");
+    assert!(
+        (dip - survey_dip).abs() < 1e-5,
+        "{name}: dip {survey_dip} vs trace {dip}"
+    );
     let lowest_sun = trace["rays"]
         .as_array()
         .unwrap()
@@ -119,9 +140,16 @@ fn check_trace(row: &BTreeMap<String, String>, trace: &serde_json::Value, name: 
         .reduce(f64::min)
         .unwrap();
     let survey_sun = num(row, "lowest_sun_deg_h10m").unwrap();
-    assert!((survey_sun - lowest_sun).abs() < 1e-5, "{name}: sun {survey_sun} vs {lowest_sun}");
+    assert!(
+        (survey_sun - lowest_sun).abs() < 1e-5,
+        "{name}: sun {survey_sun} vs {lowest_sun}"
+    );
     let images = trace["images"].as_array().unwrap();
-    assert_eq!(num(row, "images_h10m_d20000m"), Some(images.len() as f64), "{name}");
+    assert_eq!(
+        num(row, "images_h10m_d20000m"),
+        Some(images.len() as f64),
+        "{name}"
+    );
     let inverted = images.iter().any(|i| !i["erect"].as_bool().unwrap());
     assert_eq!(row["inverted_h10m_d20000m"], inverted.to_string(), "{name}");
 }
@@ -166,7 +194,10 @@ fn standard_reference_dip_matches_the_uniform_gradient_formula() {
     let r = ghostship::units::EARTH_RADIUS_M;
     let k = -r * dn_dh;
     let expected = (2.0 * 10.0 * (1.0 - k) / r).sqrt().to_degrees();
-    assert!((dip / expected - 1.0).abs() < 0.01, "dip {dip} vs {expected} (k {k})");
+    assert!(
+        (dip / expected - 1.0).abs() < 0.01,
+        "dip {dip} vs {expected} (k {k})"
+    );
 }
 
 /// The header and records of every sounding in an IGRA2 text.
@@ -198,7 +229,13 @@ fn record_with_corrupt_sounding(dir: &Path) -> (PathBuf, usize) {
     let (a, b) = (&blocks[0], &blocks[1]);
     let mut corrupt = with_year(a, 2011);
     corrupt[5].replace_range(22..27, "abcde");
-    let parts = [a.clone(), b.clone(), corrupt, with_year(a, 2012), with_year(b, 2012)];
+    let parts = [
+        a.clone(),
+        b.clone(),
+        corrupt,
+        with_year(a, 2012),
+        with_year(b, 2012),
+    ];
     let bad_line = a.len() + b.len() + 6;
     let lines: Vec<String> = parts.concat();
     let path = dir.join("USM00070026-record.txt");
@@ -216,7 +253,13 @@ fn igra2_record_with_a_corrupt_sounding_in_the_middle() {
     let times: Vec<&str> = rows.iter().map(|r| r["time_utc"].as_str()).collect();
     assert_eq!(
         times,
-        ["2010-06-01 00", "2010-06-01 12", "2011-06-01 00", "2012-06-01 00", "2012-06-01 12"]
+        [
+            "2010-06-01 00",
+            "2010-06-01 12",
+            "2011-06-01 00",
+            "2012-06-01 00",
+            "2012-06-01 12"
+        ]
     );
     let reason = &rows[2]["unusable_reason"];
     assert!(reason.contains(&format!("line {bad_line}")), "{reason}");
@@ -253,7 +296,11 @@ fn igra2_record_with_a_corrupt_sounding_in_the_middle() {
             "--format",
             "json",
         ]);
-        check_trace(&rows[k], &serde_json::from_str(&r.stdout).unwrap(), &format!("row {k}"));
+        check_trace(
+            &rows[k],
+            &serde_json::from_str(&r.stdout).unwrap(),
+            &format!("row {k}"),
+        );
     }
 }
 
@@ -264,11 +311,23 @@ fn parquet_table_reads_back_with_the_parquet_reader_as_the_csv() {
     let dir = tempfile::tempdir().unwrap();
     let (record, _) = record_with_corrupt_sounding(dir.path());
     let out = dir.path().join("out");
-    let extra = ["--observer-height-m", "10,50", "--distance-m", "10000,30000"];
-    let rows = survey(&[&record, &sounding("Tiksi-21824_2026020600.csv")], &out, &extra);
+    let extra = [
+        "--observer-height-m",
+        "10,50",
+        "--distance-m",
+        "10000,30000",
+    ];
+    let rows = survey(
+        &[&record, &sounding("Tiksi-21824_2026020600.csv")],
+        &out,
+        &extra,
+    );
     let file = std::fs::File::open(out.join("survey.parquet")).unwrap();
     let reader = SerializedFileReader::new(file).unwrap();
-    assert_eq!(reader.metadata().file_metadata().num_rows(), rows.len() as i64);
+    assert_eq!(
+        reader.metadata().file_metadata().num_rows(),
+        rows.len() as i64
+    );
     let mut read = 0;
     for (k, record) in reader.get_row_iter(None).unwrap().enumerate() {
         let record = record.unwrap();
@@ -282,13 +341,21 @@ fn parquet_table_reads_back_with_the_parquet_reader_as_the_csv() {
                 Field::Bool(x) => csv.parse::<bool>().unwrap() == *x,
                 other => panic!("unexpected Parquet field {other:?} in {name}"),
             };
-            assert!(same, "row {k} column {name}: Parquet {field:?}, CSV {csv:?}");
+            assert!(
+                same,
+                "row {k} column {name}: Parquet {field:?}, CSV {csv:?}"
+            );
         }
         read += 1;
     }
     assert_eq!(read, rows.len());
     // 21 sounding columns, 6 per observer height, 6 per (height, distance) case.
-    assert_eq!(rows[0].len(), 21 + 2 * 6 + 4 * 6, "columns: {:?}", rows[0].keys());
+    assert_eq!(
+        rows[0].len(),
+        21 + 2 * 6 + 4 * 6,
+        "columns: {:?}",
+        rows[0].keys()
+    );
 }
 
 #[test]
@@ -316,20 +383,33 @@ fn folders_and_date_ranges_choose_the_soundings() {
     let dir = tempfile::tempdir().unwrap();
     let (record, _) = record_with_corrupt_sounding(dir.path());
     let out = dir.path().join("out");
-    let rows = survey(&[&record], &out, &["--from", "2011-01-01", "--to", "2012-06-01"]);
+    let rows = survey(
+        &[&record],
+        &out,
+        &["--from", "2011-01-01", "--to", "2012-06-01"],
+    );
     let times: Vec<&str> = rows.iter().map(|r| r["time_utc"].as_str()).collect();
     assert_eq!(times, ["2011-06-01 00", "2012-06-01 00", "2012-06-01 12"]);
     // A folder: its files sorted, README.md skipped.
     let folder = dir.path().join("folder");
     std::fs::create_dir(&folder).unwrap();
-    for name in ["Tiksi-21824_2026020600.csv", "Cherskiy-25123_2026020600.csv"] {
+    for name in [
+        "Tiksi-21824_2026020600.csv",
+        "Cherskiy-25123_2026020600.csv",
+    ] {
         std::fs::copy(sounding(name), folder.join(name)).unwrap();
     }
     std::fs::write(folder.join("README.md"), "notes\n").unwrap();
     let rows = survey(&[&folder], &dir.path().join("out2"), &[]);
     let origins: Vec<String> = rows.iter().map(|r| r["origin"].clone()).collect();
-    assert!(origins[0].ends_with("Cherskiy-25123_2026020600.csv"), "{origins:?}");
-    assert!(origins[1].ends_with("Tiksi-21824_2026020600.csv"), "{origins:?}");
+    assert!(
+        origins[0].ends_with("Cherskiy-25123_2026020600.csv"),
+        "{origins:?}"
+    );
+    assert!(
+        origins[1].ends_with("Tiksi-21824_2026020600.csv"),
+        "{origins:?}"
+    );
     assert_eq!(rows.len(), 2);
 }
 
@@ -338,7 +418,12 @@ fn bad_requests_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
     let r = fails(&["survey", "/no/such/archive.txt", "--out", out]);
-    assert!(r.stderr.contains("/no/such/archive.txt: no such file or folder"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("/no/such/archive.txt: no such file or folder"),
+        "{}",
+        r.stderr
+    );
     let tiksi = sounding("Tiksi-21824_2026020600.csv");
     let t = tiksi.to_str().unwrap();
     let r = fails(&["survey", t, "--from", "2024-13", "--out", out]);
@@ -347,5 +432,53 @@ fn bad_requests_are_clear_errors() {
     assert!(r.stderr.contains("strictly ascending"), "{}", r.stderr);
     let pattern = format!("{}/*.nothing", dir.path().display());
     let r = fails(&["survey", &pattern, "--out", out]);
+    assert!(r.stderr.contains("no file matches"), "{}", r.stderr);
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let r = fails(&["survey", empty.to_str().unwrap(), "--out", out]);
     assert!(r.stderr.contains("no sounding file there"), "{}", r.stderr);
+}
+
+#[test]
+fn a_pipeline_survey_job_writes_what_the_command_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let tiksi = sounding("Tiksi-21824_2026020600.csv");
+    let pipeline = dir.path().join("survey.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[defaults]\nsmooth_m = 10.0\n[[survey]]\nname = \"arctic\"\nsources = [{record:?}, {tiksi:?}]\n\
+             from = \"2011-01-01\"\nobserver_height_m = [10.0, 40.0]\n\
+             distances_m = [10000.0, 30000.0]\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    let single = dir.path().join("single");
+    let extra = [
+        "--smooth-m",
+        "10",
+        "--from",
+        "2011-01-01",
+        "--observer-height-m",
+        "10,40",
+        "--distance-m",
+        "10000,30000",
+    ];
+    survey(&[&record, &tiksi], &single, &extra);
+    crate::support::cli::assert_same_tree(&out.join("arctic"), &single);
+    let manifest = json_file(&out.join("manifest.json"));
+    let text = manifest.to_string();
+    assert!(
+        text.contains("Tiksi-21824_2026020600.csv"),
+        "inputs not hashed: {text}"
+    );
+    // A source that matches nothing is a diagnostic at its line, before any job runs.
+    std::fs::write(&pipeline, "[[survey]]\nsources = \"archive/*.nothing\"\n").unwrap();
+    let r = crate::support::cli::pipeline_run(&pipeline, &out, &[]);
+    assert_ne!(r.code, Some(0));
+    assert!(r.stderr.contains("survey.toml:2:"), "{}", r.stderr);
+    assert!(r.stderr.contains("no file matches"), "{}", r.stderr);
 }
