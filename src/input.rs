@@ -6,7 +6,7 @@
 //! as `.gz`), again never inflating past the limit.
 
 use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 
 /// Largest sounding file read (an IGRA2 station record of decades of soundings fits).
 pub const MAX_SOUNDING_BYTES: u64 = 512 * 1024 * 1024;
@@ -39,6 +39,44 @@ pub fn glob_files(pattern: &Path) -> Result<Vec<PathBuf>, String> {
         return Err(format!("no file matches {text}"));
     }
     Ok(files)
+}
+
+/// `path` relative to `base`, both made absolute and normalised lexically (`a/../b` → `b`), with
+/// `/` separators: the label a manifest records, the same from any working directory.
+pub fn relative_label(path: &Path, base: &Path) -> String {
+    let path = normalise(path);
+    let base = normalise(base);
+    let common = path
+        .components()
+        .zip(base.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut parts: Vec<String> = base
+        .components()
+        .skip(common)
+        .map(|_| "..".into())
+        .collect();
+    parts.extend(
+        path.components()
+            .skip(common)
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    parts.join("/")
+}
+
+fn normalise(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = PathBuf::new();
+    for c in absolute.components() {
+        match c {
+            Component::ParentDir => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// Read the regular file at `path`, refusing anything else and anything over `limit_bytes`.

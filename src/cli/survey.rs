@@ -50,6 +50,13 @@ pub struct SurveyArgs {
     /// Temperature between sounding levels: pchip, linear or auto.
     #[arg(long, value_name = "pchip|linear|auto", default_value = "auto", value_parser = parse_fit)]
     pub fit: ghostship::profile::TemperatureFit,
+    /// Vacuum wavelength for the refractive index, in nanometres (300–1700).
+    #[arg(long, value_name = "NM", default_value_t = ghostship::refractivity::DEFAULT_WAVELENGTH_NM)]
+    pub wavelength_nm: f64,
+    /// A sounding whose levels contradict each other within 3 km of its lowest level is unusable
+    /// (its row says why) instead of having those levels dropped with a note.
+    #[arg(long)]
+    pub strict: bool,
     /// Output folder [default: out/survey].
     #[arg(long, value_name = "DIR", default_value = "out/survey")]
     pub out: PathBuf,
@@ -65,6 +72,8 @@ impl SurveyArgs {
             atmosphere: AtmosphereOptions {
                 smooth_m: self.smooth_m,
                 fit: self.fit,
+                wavelength_nm: self.wavelength_nm,
+                strict: self.strict,
                 ..AtmosphereOptions::default()
             },
             layers_top_m: self.layers_top_m,

@@ -23,6 +23,9 @@ pub struct SurveyRequest {
     pub dates: DateRange,
     /// How each sounding is looked at.
     pub options: SurveyOptions,
+    /// Rows name their files relative to this folder (a pipeline's), or as given when `None`.
+    #[serde(skip)]
+    pub label_base: Option<PathBuf>,
 }
 
 /// What [`SurveyRequest::run`] found, before it becomes files.
@@ -36,7 +39,9 @@ pub struct SurveyOutcome {
 /// Counts in `survey.json`.
 #[derive(Debug, Serialize)]
 struct Summary<'a> {
-    request: &'a SurveyRequest,
+    sources: Vec<String>,
+    dates: &'a DateRange,
+    options: &'a SurveyOptions,
     reference: &'a Reference,
     soundings: usize,
     usable: usize,
@@ -65,7 +70,24 @@ impl SurveyRequest {
             sources,
             dates,
             options,
+            label_base: None,
         })
+    }
+
+    /// The same request, its rows naming files relative to `folder`.
+    pub fn with_label_base(self, folder: &std::path::Path) -> Self {
+        SurveyRequest {
+            label_base: Some(folder.to_path_buf()),
+            ..self
+        }
+    }
+
+    /// How rows and `survey.json` name `path`.
+    pub fn label(&self, path: &std::path::Path) -> String {
+        match &self.label_base {
+            Some(base) => crate::input::relative_label(path, base),
+            None => path.display().to_string(),
+        }
     }
 
     /// The files the sources name (folders and patterns expanded, sorted).
@@ -78,10 +100,27 @@ impl SurveyRequest {
     pub fn run(&self, progress: &indicatif::ProgressBar) -> Result<SurveyOutcome, JobError> {
         let files = self.files()?;
         let read = ReadOptions::default().strict(self.options.atmosphere.strict);
-        let items = expand_sources(&files, &self.dates, &read);
+        let labels: Vec<String> = files.iter().map(|f| self.label(f)).collect();
+        let items = expand_sources(&files, &labels, &self.dates, &read);
         progress.set_length(items.len() as u64);
         let reference = Reference::standard(&self.options)?;
-        let rows = survey(items, &self.options, &reference, progress);
+        let mut rows = survey(items, &self.options, &reference, progress);
+        if self.label_base.is_some() {
+            // Reasons name the file as it was opened: name it as the rows do.
+            let shown: std::collections::HashMap<&str, String> = labels
+                .iter()
+                .zip(&files)
+                .map(|(l, f)| (l.as_str(), f.display().to_string()))
+                .collect();
+            for row in &mut rows {
+                let file = row.origin.rsplit_once(':').map_or(&*row.origin, |(f, _)| f);
+                let opened = shown.get(file).or_else(|| shown.get(row.origin.as_str()));
+                if let (Some(opened), Some(reason)) = (opened, row.unusable.as_mut()) {
+                    let label = file.to_string();
+                    *reason = reason.replace(opened.as_str(), &label);
+                }
+            }
+        }
         Ok(SurveyOutcome { rows, reference })
     }
 
@@ -93,8 +132,11 @@ impl SurveyRequest {
             let name = name.to_string();
             move |message| JobError::from(SurveyError::Plot { name, message })
         };
+        let files = self.files()?;
         let summary = Summary {
-            request: self,
+            sources: files.iter().map(|f| self.label(f)).collect(),
+            dates: &self.dates,
+            options: &self.options,
             reference: &outcome.reference,
             soundings: rows.len(),
             usable: rows.iter().filter(|r| r.unusable.is_none()).count(),

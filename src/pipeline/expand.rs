@@ -3,7 +3,7 @@
 //! files or globs) relative to the pipeline file. Out: the concrete atmosphere sources and
 //! scene paths, each with the label the manifest records, and the `{stem}`-style job names.
 
-use std::path::{Component, Path, PathBuf};
+use std::path::Path;
 
 use crate::atmosphere::AtmosphereSource;
 
@@ -19,7 +19,7 @@ pub struct AtmosphereChoice {
     pub stem: String,
 }
 
-pub use crate::input::{glob_files, is_glob};
+pub use crate::input::{glob_files, is_glob, relative_label};
 
 /// Which IGRA2 soundings a job's `sounding_time` selects: one `"YYYY-MM-DD HH"`, `"all"`, or an
 /// inclusive range `"FROM..TO"` (either end may be left out).
@@ -198,62 +198,6 @@ pub fn job_name(
     Ok(out)
 }
 
-/// `path` relative to `base`, both made absolute and normalised lexically (`a/../b` → `b`), with
-/// `/` separators: the label a manifest records, the same from any working directory.
-pub fn relative_label(path: &Path, base: &Path) -> String {
-    let path = normalise(path);
-    let base = normalise(base);
-    let common = path
-        .components()
-        .zip(base.components())
-        .take_while(|(a, b)| a == b)
-        .count();
-    let mut parts: Vec<String> = base
-        .components()
-        .skip(common)
-        .map(|_| "..".into())
-        .collect();
-    parts.extend(
-        path.components()
-            .skip(common)
-            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
-    );
-    parts.join("/")
-}
-
-/// `path` with `.` and `folder/..` removed, still relative if it was (`pipelines/../data/x`
-/// → `data/x`), so what a job records does not depend on where the checkout lies.
-pub fn tidy_path(path: &Path) -> PathBuf {
-    let mut out = PathBuf::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir
-                if matches!(out.components().next_back(), Some(Component::Normal(_))) =>
-            {
-                out.pop();
-            }
-            other => out.push(other),
-        }
-    }
-    out
-}
-
-fn normalise(path: &Path) -> PathBuf {
-    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    let mut out = PathBuf::new();
-    for c in absolute.components() {
-        match c {
-            Component::ParentDir => {
-                out.pop();
-            }
-            Component::CurDir => {}
-            other => out.push(other),
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,9 +209,6 @@ mod tests {
             "u_fig_10m"
         );
         assert!(job_name("{nope}", "u", "", None).is_err());
-        assert_eq!(tidy_path(Path::new("p/./../d/x")), Path::new("d/x"));
-        assert_eq!(tidy_path(Path::new("../../d")), Path::new("../../d"));
-        assert_eq!(tidy_path(Path::new("/a/b/../c")), Path::new("/a/c"));
         assert_eq!(
             relative_label(
                 Path::new("/r/pipelines/../data/x.csv"),

@@ -665,7 +665,7 @@ pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
         .sources
         .to_vec()
         .iter()
-        .map(|s| super::expand::tidy_path(&t.folder.join(s)))
+        .map(|s| t.folder.join(s))
         .collect();
     let files = match crate::survey::sources::expand_files(&named) {
         Ok(files) => files,
@@ -681,7 +681,10 @@ pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
     let template = raw.name.clone().unwrap_or_else(|| "survey".into());
     let name = t.name(&template, "", "", None);
     match SurveyRequest::new(files, dates, options) {
-        Ok(r) => vec![(name, JobRequest::Survey(Box::new(r)))],
+        Ok(r) => vec![(
+            name,
+            JobRequest::Survey(Box::new(r.with_label_base(t.folder))),
+        )],
         Err(e) => {
             t.problem_in_message(e.to_string());
             Vec::new()

@@ -113,18 +113,25 @@ fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
 }
 
 /// Every sounding in `files` within `dates`, read with `read` (in parallel by file; the order
-/// is the files' and, inside a file, the soundings').
-pub fn expand_sources(files: &[PathBuf], dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
+/// is the files' and, inside a file, the soundings'). Each item's origin is its file's label in
+/// `labels` (the same order as `files`), with `:LINE` of its header in a record.
+pub fn expand_sources(
+    files: &[PathBuf],
+    labels: &[String],
+    dates: &DateRange,
+    read: &ReadOptions,
+) -> Vec<SurveyItem> {
     use rayon::prelude::*;
     let per_file: Vec<Vec<SurveyItem>> = files
         .par_iter()
-        .map(|path| file_items(path, dates, read))
+        .zip(labels)
+        .map(|(path, label)| file_items(path, label, dates, read))
         .collect();
     per_file.into_iter().flatten().collect()
 }
 
-fn file_items(path: &Path, dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
-    let name = path.display().to_string();
+fn file_items(path: &Path, label: &str, dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
+    let name = label.to_string();
     let entries = match read_soundings(path, read) {
         Ok(e) => e,
         Err(e) => {

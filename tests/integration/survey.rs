@@ -156,17 +156,20 @@ fn check_trace(row: &BTreeMap<String, String>, trace: &serde_json::Value, name: 
 
 #[test]
 fn rows_agree_with_profile_and_trace_on_the_same_files() {
-    let names = [
-        "Tiksi-21824_2026020600.csv",
-        "Utqiagvik-70026_2026020600.csv",
-        "SouthPole-89009_2026020600.csv",
-        "Bjornoya-01028_2024022611.csv",
-    ];
-    let files: Vec<PathBuf> = names.iter().map(|n| sounding(n)).collect();
+    // Every shipped real sounding (the 14 normalised CSVs), each row against `profile` and
+    // `trace` on the same file.
+    let mut files: Vec<PathBuf> = std::fs::read_dir(crate::support::data::soundings_dir())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 14);
     let refs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     let out = tempfile::tempdir().unwrap();
     let rows = survey(&refs, out.path(), &[]);
-    assert_eq!(rows.len(), names.len());
+    assert_eq!(rows.len(), files.len());
     for (row, path) in rows.iter().zip(&files) {
         let name = path.display().to_string();
         assert_eq!(row["origin"], name);
@@ -175,8 +178,12 @@ fn rows_agree_with_profile_and_trace_on_the_same_files() {
         check_trace(row, &trace_json(path, 10.0, 20_000.0), &name);
     }
     // The Tiksi surface inversion (+9.6 K over 776 m) is found.
-    assert!(num(&rows[0], "strongest_inversion_dt_k").unwrap() > 9.0);
-    assert_eq!(rows[0]["surface_inversion"], "true");
+    let tiksi = &rows[files
+        .iter()
+        .position(|f| f.ends_with("Tiksi-21824_2026020600.csv"))
+        .unwrap()];
+    assert!(num(tiksi, "strongest_inversion_dt_k").unwrap() > 9.0);
+    assert_eq!(tiksi["surface_inversion"], "true");
 }
 
 /// The standard atmosphere's horizon dip against the closed form for a uniform gradient near the
@@ -443,12 +450,15 @@ fn bad_requests_are_clear_errors() {
 fn a_pipeline_survey_job_writes_what_the_command_writes() {
     let dir = tempfile::tempdir().unwrap();
     let (record, _) = record_with_corrupt_sounding(dir.path());
-    let tiksi = sounding("Tiksi-21824_2026020600.csv");
+    let record_name = record.file_name().unwrap().to_str().unwrap().to_string();
+    let tiksi = "Tiksi-21824_2026020600.csv";
+    std::fs::copy(sounding(tiksi), dir.path().join(tiksi)).unwrap();
+    // Rows name files relative to the pipeline's folder: run the command from there.
     let pipeline = dir.path().join("survey.toml");
     std::fs::write(
         &pipeline,
         format!(
-            "[defaults]\nsmooth_m = 10.0\n[[survey]]\nname = \"arctic\"\nsources = [{record:?}, {tiksi:?}]\n\
+            "[defaults]\nsmooth_m = 10.0\n[[survey]]\nname = \"arctic\"\nsources = [{record_name:?}, {tiksi:?}]\n\
              from = \"2011-01-01\"\nobserver_height_m = [10.0, 40.0]\n\
              distances_m = [10000.0, 30000.0]\n"
         ),
@@ -456,19 +466,28 @@ fn a_pipeline_survey_job_writes_what_the_command_writes() {
     .unwrap();
     let out = dir.path().join("out");
     crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
-    let single = dir.path().join("single");
-    let extra = [
-        "--smooth-m",
-        "10",
-        "--from",
-        "2011-01-01",
-        "--observer-height-m",
-        "10,40",
-        "--distance-m",
-        "10000,30000",
-    ];
-    survey(&[&record, &tiksi], &single, &extra);
-    crate::support::cli::assert_same_tree(&out.join("arctic"), &single);
+    crate::support::cli::ghostship()
+        .current_dir(dir.path())
+        .args(["survey", "--quiet", "--out", "single", &record_name, tiksi])
+        .args(["--smooth-m", "10", "--from", "2011-01-01"])
+        .args([
+            "--observer-height-m",
+            "10,40",
+            "--distance-m",
+            "10000,30000",
+        ])
+        .assert()
+        .success();
+    crate::support::cli::assert_same_tree(&out.join("arctic"), &dir.path().join("single"));
+    let rows = read_csv(&out.join("arctic/survey.csv"));
+    let corrupt = rows
+        .iter()
+        .find(|r| !r["unusable_reason"].is_empty())
+        .unwrap();
+    assert!(
+        corrupt["unusable_reason"].starts_with(&format!("{record_name}: line ")),
+        "{corrupt:?}"
+    );
     let manifest = json_file(&out.join("manifest.json"));
     let text = manifest.to_string();
     assert!(
@@ -481,4 +500,39 @@ fn a_pipeline_survey_job_writes_what_the_command_writes() {
     assert_ne!(r.code, Some(0));
     assert!(r.stderr.contains("survey.toml:2:"), "{}", r.stderr);
     assert!(r.stderr.contains("no file matches"), "{}", r.stderr);
+}
+
+#[test]
+fn the_shipped_survey_pipeline_surveys_every_shipped_sounding() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = crate::support::data::repo_file("pipelines/survey.toml");
+    crate::support::cli::pipeline_ok(&pipeline, dir.path(), &[]);
+    let rows = read_csv(&dir.path().join("shipped/survey.csv"));
+    // 14 normalised + 6 pressure-level merges + 3 + 3 IGRA2 launches + 12 Wyoming soundings.
+    assert_eq!(rows.len(), 38);
+    let unusable: Vec<&str> = rows
+        .iter()
+        .filter(|r| !r["unusable_reason"].is_empty())
+        .map(|r| r["origin"].as_str())
+        .collect();
+    assert_eq!(
+        unusable,
+        [
+            "../tests/data/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt:318",
+            "../tests/data/soundings/raw/USM00070026-drvd_2014-09-10_excerpt.txt:220",
+        ]
+    );
+    assert!(
+        rows.iter().all(|r| r["time_utc"].len() == 13),
+        "times: {rows:?}"
+    );
+    // Files are named relative to the pipeline file, in rows and reasons, from any folder.
+    let reason = &rows
+        .iter()
+        .find(|r| !r["unusable_reason"].is_empty())
+        .unwrap()["unusable_reason"];
+    assert!(
+        reason.starts_with("../tests/data/soundings/raw/"),
+        "{reason}"
+    );
 }
