@@ -74,7 +74,7 @@ impl std::fmt::Display for AtmosphereSource {
 }
 
 /// How to build the atmosphere.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AtmosphereOptions {
     /// Smoothing scale of the sounding fit (m); see [`FitOptions::smooth_m`]. Ignored for
     /// synthetic and standard atmospheres.
@@ -90,7 +90,7 @@ pub struct AtmosphereOptions {
     pub sounding_time: Option<String>,
     /// Refuse a sounding whose levels contradict each other in the lowest kilometres instead of
     /// dropping the offending levels (see [`ReadOptions::strict`]).
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    #[serde(skip_serializing_if = "std::ops::Not::not", default)]
     pub strict: bool,
 }
 

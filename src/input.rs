@@ -93,7 +93,7 @@ pub fn read_limited(path: &Path, limit_bytes: u64) -> std::io::Result<Vec<u8>> {
     }
     let mut bytes = Vec::with_capacity(meta.len() as usize);
     std::fs::File::open(path)?
-        .take(limit_bytes + 1)
+        .take(limit_bytes.saturating_add(1))
         .read_to_end(&mut bytes)?;
     if bytes.len() as u64 > limit_bytes {
         // The file grew while it was read.
@@ -193,7 +193,7 @@ fn unzip_one(bytes: &[u8], limit_bytes: u64) -> std::io::Result<(Vec<u8>, Packin
 fn read_capped(reader: impl Read, limit_bytes: u64, what: &str) -> std::io::Result<Vec<u8>> {
     let mut out = Vec::new();
     reader
-        .take(limit_bytes + 1)
+        .take(limit_bytes.saturating_add(1))
         .read_to_end(&mut out)
         .map_err(|e| {
             std::io::Error::new(e.kind(), format!("a {what} that cannot be inflated: {e}"))
@@ -249,6 +249,15 @@ mod tests {
         assert!(err.starts_with("no file matches"), "{err}");
         assert!(glob_files(&dir.path().join("[.csv")).is_err());
         assert!(is_glob("a*") && is_glob("a?") && is_glob("[a]") && !is_glob("a.csv"));
+    }
+
+    #[test]
+    fn an_unbounded_limit_reads_the_whole_file() {
+        // `pipeline merge` copies outputs with no limit: u64::MAX must not wrap to "read 0".
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f");
+        std::fs::write(&path, b"twelve bytes").unwrap();
+        assert_eq!(read_limited(&path, u64::MAX).unwrap(), b"twelve bytes");
     }
 
     #[test]

@@ -64,6 +64,9 @@ pub enum Command {
     /// inversions, ducts, horizon dip and what an observer would see of a target and the sun;
     /// writes survey.csv, survey.parquet, survey.json and plots.
     Survey(survey::SurveyArgs),
+    /// Join the parts of a survey split with `survey --shard K/N` (or a pipeline's `parts`) into
+    /// the table and plots one unsplit run writes.
+    SurveyMerge(survey::SurveyMergeArgs),
     /// Batch runs described by a pipeline file.
     Pipeline(pipeline::PipelineArgs),
     /// Benchmarks: `bench accuracy` measures the tracer's error against its time per ray and
@@ -86,6 +89,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sequence(args) => sequence::run(args, cli.quiet),
         Command::Compare(args) => compare::run(args, cli.quiet),
         Command::Survey(args) => survey::run(args, cli.quiet),
+        Command::SurveyMerge(args) => survey::merge(args, cli.quiet),
         Command::Pipeline(args) => pipeline::run(args, cli.quiet),
         Command::Bench(args) => bench::run(args, cli.quiet),
     }

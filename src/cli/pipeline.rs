@@ -87,8 +87,13 @@ pub fn run(args: PipelineArgs, quiet: bool) -> anyhow::Result<()> {
         PipelineAction::Run(run_args) => run_pipeline(&run_args, quiet),
         PipelineAction::Merge(merge_args) => {
             let path = merge(&merge_args.dirs)?;
+            let joined = join_surveys(&merge_args.dirs[0], &path)?;
             if !quiet {
-                super::print_stdout(&format!("merged into {}\n", path.display()))?;
+                let mut text = format!("merged into {}\n", path.display());
+                for dir in joined {
+                    text.push_str(&format!("joined the survey parts into {}\n", dir.display()));
+                }
+                super::print_stdout(&text)?;
             }
             Ok(())
         }
@@ -123,6 +128,16 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     );
     let report = run_jobs(&pipeline.jobs, &options, &bar)?;
     bar.finish_and_clear();
+    // A whole run joins its split surveys; a shard leaves that to `pipeline merge`.
+    let joined = match (&report.manifest, args.shard) {
+        (Some(manifest), None) => join_surveys(&out, manifest)?,
+        _ => Vec::new(),
+    };
+    if !quiet {
+        for dir in &joined {
+            super::print_stdout(&format!("joined the survey parts into {}\n", dir.display()))?;
+        }
+    }
     if !quiet {
         super::print_stdout(&summary_table(&report, &out, args, start.elapsed()))?;
     }
@@ -234,4 +249,10 @@ fn summary_table(
         ));
     }
     text
+}
+
+/// Join the split surveys the manifest at `manifest_path` records into `out`.
+fn join_surveys(out: &Path, manifest_path: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let manifest = ghostship::jobs::manifest::Manifest::read(manifest_path)?;
+    Ok(ghostship::jobs::survey::join_split_surveys(out, &manifest)?)
 }

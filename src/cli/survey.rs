@@ -57,6 +57,10 @@ pub struct SurveyArgs {
     /// (its row says why) instead of having those levels dropped with a note.
     #[arg(long)]
     pub strict: bool,
+    /// Survey only the K-th of N contiguous runs of the soundings (every file is still read, to
+    /// number them) and add part.json; join the N folders with `ghostship survey-merge`.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<ghostship::jobs::manifest::Shard>,
     /// Output folder [default: out/survey].
     #[arg(long, value_name = "DIR", default_value = "out/survey")]
     pub out: PathBuf,
@@ -85,7 +89,11 @@ impl SurveyArgs {
             from: self.from.clone(),
             to: self.to.clone(),
         };
-        Ok(SurveyRequest::new(self.sources.clone(), dates, options)?)
+        let request = SurveyRequest::new(self.sources.clone(), dates, options)?;
+        Ok(match self.shard {
+            Some(shard) => request.with_shard(shard),
+            None => request,
+        })
     }
 }
 
@@ -121,5 +129,23 @@ pub fn run(args: SurveyArgs, quiet: bool) -> anyhow::Result<()> {
         text.push_str(&format!("unusable: {}: {reason}\n", row.origin));
     }
     super::print_stdout(&text)?;
+    super::write_into(&args.out, &products, quiet)
+}
+
+/// Arguments of `ghostship survey-merge`.
+#[derive(Debug, clap::Args)]
+pub struct SurveyMergeArgs {
+    /// The folders of the parts (`ghostship survey --shard K/N` outputs, or a pipeline's
+    /// `<name>_part_K_of_N` jobs), in any order.
+    #[arg(value_name = "PART_DIR", required = true)]
+    pub parts: Vec<PathBuf>,
+    /// Output folder for the joined survey.
+    #[arg(long, value_name = "DIR", default_value = "out/survey")]
+    pub out: PathBuf,
+}
+
+/// Run `ghostship survey-merge`.
+pub fn merge(args: SurveyMergeArgs, quiet: bool) -> anyhow::Result<()> {
+    let products = ghostship::jobs::survey::merge_parts(&args.parts)?;
     super::write_into(&args.out, &products, quiet)
 }

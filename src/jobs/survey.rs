@@ -2,11 +2,17 @@
 //! Out: the rows ([`SurveyRow`]) and the products `survey.csv`, `survey.parquet` (one row per
 //! sounding, the same columns), `survey.json` (options, the standard-atmosphere reference, counts
 //! of soundings and phenomena), and the plots `monthly.png`, `ducts.png`, `dip.png`.
+//!
+//! A survey can be split: [`SurveyRequest::with_shard`] surveys the K-th of N contiguous runs of
+//! the soundings (all files are read to number them) and adds `part.json` (its rows, exactly);
+//! [`merge_parts`] joins the N parts' `part.json` into the products one unsplit run writes,
+//! byte for byte.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
+use super::manifest::Shard;
 use super::{JobError, Product};
 use crate::sounding::ReadOptions;
 use crate::survey::sources::{DateRange, expand_files};
@@ -26,15 +32,36 @@ pub struct SurveyRequest {
     /// Rows name their files relative to this folder (a pipeline's), or as given when `None`.
     #[serde(skip)]
     pub label_base: Option<PathBuf>,
+    /// Which contiguous part of the soundings to survey (`None`: all of them).
+    pub shard: Option<Shard>,
 }
 
 /// What [`SurveyRequest::run`] found, before it becomes files.
 pub struct SurveyOutcome {
+    /// How the rows name the source files, in order.
+    pub sources: Vec<String>,
     /// One row per sounding, in source order.
     pub rows: Vec<SurveyRow>,
     /// The standard atmosphere's dip and lowest sun per observer height.
     pub reference: Reference,
+    /// The part surveyed and the number of soundings of the whole survey, for a split one.
+    pub shard: Option<(Shard, usize)>,
 }
+
+/// `part.json`: one part of a split survey, with everything [`merge_parts`] needs.
+#[derive(Debug, Serialize, Deserialize)]
+struct Part {
+    format: String,
+    shard: Shard,
+    total_soundings: usize,
+    sources: Vec<String>,
+    dates: DateRange,
+    options: SurveyOptions,
+    rows: Vec<SurveyRow>,
+}
+
+/// The `format` of `part.json`.
+const PART_FORMAT: &str = "ghostship-survey-part-1";
 
 /// Counts in `survey.json`.
 #[derive(Debug, Serialize)]
@@ -71,7 +98,17 @@ impl SurveyRequest {
             dates,
             options,
             label_base: None,
+            shard: None,
         })
+    }
+
+    /// The same request surveying only the `shard.index`-th of `shard.count` contiguous runs of
+    /// its soundings.
+    pub fn with_shard(self, shard: Shard) -> Self {
+        SurveyRequest {
+            shard: Some(shard),
+            ..self
+        }
     }
 
     /// The same request, its rows naming files relative to `folder`.
@@ -101,7 +138,13 @@ impl SurveyRequest {
         let files = self.files()?;
         let read = ReadOptions::default().strict(self.options.atmosphere.strict);
         let labels: Vec<String> = files.iter().map(|f| self.label(f)).collect();
-        let items = expand_sources(&files, &labels, &self.dates, &read);
+        let mut items = expand_sources(&files, &labels, &self.dates, &read);
+        let total = items.len();
+        if let Some(shard) = self.shard {
+            let at = |k: usize| total * k / shard.count;
+            items.truncate(at(shard.index));
+            items.drain(..at(shard.index - 1));
+        }
         progress.set_length(items.len() as u64);
         let reference = Reference::standard(&self.options)?;
         let mut rows = survey(items, &self.options, &reference, progress);
@@ -121,52 +164,209 @@ impl SurveyRequest {
                 }
             }
         }
-        Ok(SurveyOutcome { rows, reference })
+        Ok(SurveyOutcome {
+            sources: labels,
+            rows,
+            reference,
+            shard: self.shard.map(|s| (s, total)),
+        })
     }
 
-    /// The products of `outcome`.
+    /// The products of `outcome` (with `part.json` for a part of a split survey).
     pub fn products(&self, outcome: &SurveyOutcome) -> Result<Vec<Product>, JobError> {
-        let rows = &outcome.rows;
-        let columns = table::columns(&self.options);
-        let plot_err = |name: &str| {
-            let name = name.to_string();
-            move |message| JobError::from(SurveyError::Plot { name, message })
-        };
-        let files = self.files()?;
-        let summary = Summary {
-            sources: files.iter().map(|f| self.label(f)).collect(),
-            dates: &self.dates,
-            options: &self.options,
-            reference: &outcome.reference,
-            soundings: rows.len(),
-            usable: rows.iter().filter(|r| r.unusable.is_none()).count(),
-            unusable: rows
-                .iter()
-                .filter_map(|r| Some((r.origin.as_str(), r.unusable.as_deref()?)))
-                .collect(),
-            with_inversion: rows.iter().filter(|r| r.layers.inversion_count > 0).count(),
-            with_duct: rows.iter().filter(|r| r.layers.duct_count > 0).count(),
-            with_surface_duct: rows.iter().filter(|r| r.layers.surface_duct).count(),
-            columns: columns.iter().map(|c| c.name.clone()).collect(),
-        };
-        let mut json = serde_json::to_vec_pretty(&summary)?;
-        json.push(b'\n');
-        Ok(vec![
-            Product::new("survey.csv", table::to_csv(rows, &columns)?),
-            Product::new("survey.parquet", table::to_parquet(rows, &columns)?),
-            Product::new("survey.json", json),
-            Product::new(
-                "monthly.png",
-                plot::monthly_png(rows, &self.options).map_err(plot_err("monthly.png"))?,
-            ),
-            Product::new(
-                "ducts.png",
-                plot::ducts_png(rows).map_err(plot_err("ducts.png"))?,
-            ),
-            Product::new(
-                "dip.png",
-                plot::dip_png(rows, &self.options).map_err(plot_err("dip.png"))?,
-            ),
-        ])
+        let mut products = products(&self.dates, &self.options, outcome)?;
+        if let Some((shard, total_soundings)) = outcome.shard {
+            let part = Part {
+                format: PART_FORMAT.into(),
+                shard,
+                total_soundings,
+                sources: outcome.sources.clone(),
+                dates: self.dates.clone(),
+                options: self.options.clone(),
+                rows: outcome.rows.clone(),
+            };
+            products.push(Product::new("part.json", serde_json::to_vec(&part)?));
+        }
+        Ok(products)
     }
+}
+
+/// The products of a survey's rows.
+fn products(
+    dates: &DateRange,
+    options: &SurveyOptions,
+    outcome: &SurveyOutcome,
+) -> Result<Vec<Product>, JobError> {
+    let rows = &outcome.rows;
+    let columns = table::columns(options);
+    let plot_err = |name: &str| {
+        let name = name.to_string();
+        move |message| JobError::from(SurveyError::Plot { name, message })
+    };
+    let summary = Summary {
+        sources: outcome.sources.clone(),
+        dates,
+        options,
+        reference: &outcome.reference,
+        soundings: rows.len(),
+        usable: rows.iter().filter(|r| r.unusable.is_none()).count(),
+        unusable: rows
+            .iter()
+            .filter_map(|r| Some((r.origin.as_str(), r.unusable.as_deref()?)))
+            .collect(),
+        with_inversion: rows.iter().filter(|r| r.layers.inversion_count > 0).count(),
+        with_duct: rows.iter().filter(|r| r.layers.duct_count > 0).count(),
+        with_surface_duct: rows.iter().filter(|r| r.layers.surface_duct).count(),
+        columns: columns.iter().map(|c| c.name.clone()).collect(),
+    };
+    let mut json = serde_json::to_vec_pretty(&summary)?;
+    json.push(b'\n');
+    Ok(vec![
+        Product::new("survey.csv", table::to_csv(rows, &columns)?),
+        Product::new("survey.parquet", table::to_parquet(rows, &columns)?),
+        Product::new("survey.json", json),
+        Product::new(
+            "monthly.png",
+            plot::monthly_png(rows, options).map_err(plot_err("monthly.png"))?,
+        ),
+        Product::new(
+            "ducts.png",
+            plot::ducts_png(rows).map_err(plot_err("ducts.png"))?,
+        ),
+        Product::new(
+            "dip.png",
+            plot::dip_png(rows, options).map_err(plot_err("dip.png"))?,
+        ),
+    ])
+}
+
+/// Join the parts of a split survey (the folders holding each part's `part.json`, in any order)
+/// into the products one unsplit run writes. Every part must be there once, of one survey (the
+/// same sources, dates, options and number of parts), with the rows its share calls for.
+pub fn merge_parts(dirs: &[PathBuf]) -> Result<Vec<Product>, JobError> {
+    let bad = |m: String| Err(JobError::from(SurveyError::Merge(m)));
+    let mut parts = Vec::new();
+    for dir in dirs {
+        let path = dir.join("part.json");
+        let bytes = crate::input::read_limited(&path, crate::input::MAX_SOUNDING_BYTES)
+            .map_err(|e| SurveyError::Merge(format!("{}: {e}", path.display())))?;
+        let part: Part = serde_json::from_slice(&bytes)
+            .map_err(|e| SurveyError::Merge(format!("{}: {e}", path.display())))?;
+        if part.format != PART_FORMAT {
+            return bad(format!(
+                "{}: format {:?}, expected {PART_FORMAT:?}",
+                path.display(),
+                part.format
+            ));
+        }
+        parts.push((path, part));
+    }
+    parts.sort_by_key(|(_, p)| p.shard.index);
+    let Some((first_path, first)) = parts.first() else {
+        return bad("no parts given".into());
+    };
+    let count = first.shard.count;
+    for (k, (path, part)) in parts.iter().enumerate() {
+        let same = part.shard.count == count
+            && part.total_soundings == first.total_soundings
+            && part.sources == first.sources
+            && part.dates == first.dates
+            && part.options == first.options;
+        if !same {
+            return bad(format!(
+                "{} and {} are parts of different surveys",
+                first_path.display(),
+                path.display()
+            ));
+        }
+        if part.shard.index == k {
+            return bad(format!("part {k}/{count} is given twice"));
+        }
+        if part.shard.index != k + 1 {
+            return bad(format!("part {}/{count} is missing", k + 1));
+        }
+        let total = part.total_soundings;
+        let expected = total * part.shard.index / count - total * (part.shard.index - 1) / count;
+        if part.rows.len() != expected {
+            return bad(format!(
+                "{}: {} rows, its share of {total} soundings is {expected}",
+                path.display(),
+                part.rows.len()
+            ));
+        }
+    }
+    if parts.len() > count {
+        return bad(format!(
+            "{} parts given for a survey split in {count}",
+            parts.len()
+        ));
+    }
+    if parts.len() < count {
+        return bad(format!("part {}/{count} is missing", parts.len() + 1));
+    }
+    let (_, first) = &parts[0];
+    let (dates, options, sources) = (
+        first.dates.clone(),
+        first.options.clone(),
+        first.sources.clone(),
+    );
+    let rows: Vec<SurveyRow> = parts.into_iter().flat_map(|(_, p)| p.rows).collect();
+    let outcome = SurveyOutcome {
+        sources,
+        rows,
+        reference: Reference::standard(&options)?,
+        shard: None,
+    };
+    products(&dates, &options, &outcome)
+}
+
+/// Whether `dir` holds a part of a split survey.
+pub fn is_part(dir: &Path) -> bool {
+    dir.join("part.json").is_file()
+}
+
+/// The job name of part `shard` of the split survey `name`: `<name>_part_K_of_N`.
+pub fn part_name(name: &str, shard: Shard) -> String {
+    format!("{name}_part_{}_of_{}", shard.index, shard.count)
+}
+
+/// `(name, shard)` of a part's job name (`<name>_part_K_of_N`).
+fn parse_part_name(job: &str) -> Option<(&str, Shard)> {
+    let (name, rest) = job.rsplit_once("_part_")?;
+    let (k, n) = rest.split_once("_of_")?;
+    let shard: Shard = format!("{k}/{n}").parse().ok()?;
+    Some((name, shard))
+}
+
+/// Join every split survey of a run: the survey jobs of `manifest` named `<name>_part_K_of_N`
+/// whose N parts all succeeded, their outputs in `out_dir`, into `<out_dir>/<name>/`. Returns
+/// the joined folders (a survey with a part missing or failed is left as it is).
+pub fn join_split_surveys(
+    out_dir: &Path,
+    manifest: &super::manifest::Manifest,
+) -> Result<Vec<PathBuf>, JobError> {
+    let mut groups: std::collections::BTreeMap<(&str, usize), Vec<(usize, &str)>> =
+        Default::default();
+    for (job, record) in &manifest.jobs {
+        if record.kind != "survey" || record.status != super::manifest::JobStatus::Ok {
+            continue;
+        }
+        if let Some((name, shard)) = parse_part_name(job) {
+            groups
+                .entry((name, shard.count))
+                .or_default()
+                .push((shard.index, job));
+        }
+    }
+    let mut joined = Vec::new();
+    for ((name, count), parts) in groups {
+        if parts.len() != count {
+            continue;
+        }
+        let dirs: Vec<PathBuf> = parts.iter().map(|(_, job)| out_dir.join(job)).collect();
+        let products = merge_parts(&dirs)?;
+        super::writer::write_job_products(out_dir, name, &products)?;
+        joined.push(out_dir.join(name));
+    }
+    Ok(joined)
 }

@@ -89,6 +89,7 @@ pub const SURVEY_KEYS: &[&str] = &[
     "smooth_m",
     "fit",
     "strict",
+    "parts",
 ];
 /// Keys a `[[render]]` table accepts.
 pub const RENDER_KEYS: &[&str] = &[
@@ -236,6 +237,7 @@ struct RawSurvey {
     smooth_m: Option<f64>,
     fit: Option<TemperatureFit>,
     strict: Option<bool>,
+    parts: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -680,17 +682,41 @@ pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
     };
     let template = raw.name.clone().unwrap_or_else(|| "survey".into());
     let name = t.name(&template, "", "", None);
-    match SurveyRequest::new(files, dates, options) {
-        Ok(r) => vec![(
-            name,
-            JobRequest::Survey(Box::new(r.with_label_base(t.folder))),
-        )],
+    let parts = raw.parts.unwrap_or(1);
+    if !(1..=MAX_SURVEY_PARTS).contains(&parts) {
+        t.problem(
+            "parts",
+            format!("parts must be 1 to {MAX_SURVEY_PARTS}, got {parts}"),
+        );
+        return Vec::new();
+    }
+    let request = match SurveyRequest::new(files, dates, options) {
+        Ok(r) => r.with_label_base(t.folder),
         Err(e) => {
             t.problem_in_message(e.to_string());
-            Vec::new()
+            return Vec::new();
         }
+    };
+    if parts == 1 {
+        return vec![(name, JobRequest::Survey(Box::new(request)))];
     }
+    (1..=parts)
+        .map(|index| {
+            let shard = crate::jobs::manifest::Shard {
+                index,
+                count: parts,
+            };
+            let job = crate::jobs::survey::part_name(&name, shard);
+            (
+                job,
+                JobRequest::Survey(Box::new(request.clone().with_shard(shard))),
+            )
+        })
+        .collect()
 }
+
+/// Most parts a `[[survey]]` table may be split into.
+pub const MAX_SURVEY_PARTS: usize = 10_000;
 
 /// The jobs of a `[[compare]]` table: one per measured sounding.
 pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {

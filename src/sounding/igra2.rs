@@ -258,6 +258,9 @@ pub(crate) fn read_all(path: &Path, text: &str) -> Option<Vec<BlockRead>> {
     Some(blocks.collect())
 }
 
+/// A block's rows, column names and header metadata.
+pub(crate) type BlockContent = (Vec<RawRow>, ColumnNames, BTreeMap<String, String>);
+
 /// One sounding of a multi-sounding IGRA2 text, as [`read_all`] reads it.
 pub(crate) struct BlockRead {
     /// Line of its header record (1-based).
@@ -267,7 +270,7 @@ pub(crate) struct BlockRead {
     /// Data or derived file.
     pub format: SoundingFormat,
     /// Its rows, column names and header metadata, or why they cannot be read.
-    pub result: Result<(Vec<RawRow>, ColumnNames, BTreeMap<String, String>), SoundingError>,
+    pub result: Result<BlockContent, SoundingError>,
 }
 
 /// The metadata and rows of the sounding whose header is `header`: its records run from the line
@@ -291,7 +294,7 @@ fn read_block(
     }
     metadata.insert(
         "soundings_in_file".into(),
-        format!("{} ({})", available.len(), super::time::span(&available)),
+        format!("{} ({})", available.len(), super::time::span(available)),
     );
     if format == SoundingFormat::Igra2Data {
         for (key, a, b) in [("latitude", 56, 62), ("longitude", 64, 71)] {

@@ -18,7 +18,7 @@ pub mod table;
 use std::sync::Arc;
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::analysis::{TraceReport, TraceRequest, trace_report};
 use crate::atmosphere::AtmosphereOptions;
@@ -34,7 +34,7 @@ use crate::units::EARTH_RADIUS_M;
 pub use sources::{SurveyItem, expand_sources};
 
 /// How a survey looks at each sounding. Every field has the `survey` command's default.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurveyOptions {
     /// Observer heights above the surface (m), ascending.
     pub observer_heights_m: Vec<f64>,
@@ -91,6 +91,9 @@ pub enum SurveyError {
     /// The table could not be encoded.
     #[error("cannot write the survey table: {0}")]
     Table(String),
+    /// The parts of a split survey do not join into one.
+    #[error("cannot merge the survey parts: {0}")]
+    Merge(String),
     /// A plot could not be drawn.
     #[error("cannot draw the survey plot {name}: {message}")]
     Plot {
@@ -169,7 +172,7 @@ impl SurveyOptions {
 }
 
 /// The layers of one sounding, as a survey row holds them.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LayerFacts {
     /// Surface height above mean sea level (m).
     pub surface_height_m: f64,
@@ -198,7 +201,7 @@ pub struct LayerFacts {
 }
 
 /// What an observer at one height saw of the target at one distance.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CaseFacts {
     /// Observer height above the surface (m).
     pub observer_height_m: f64,
@@ -217,7 +220,7 @@ pub struct CaseFacts {
 }
 
 /// What an observer at one height saw of the horizon and the sun.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ObserverFacts {
     /// Observer height above the surface (m).
     pub observer_height_m: f64,
@@ -236,7 +239,7 @@ pub struct ObserverFacts {
 }
 
 /// One sounding's row.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurveyRow {
     /// Where the sounding is: the file, and `:line` of its header in a multi-sounding file.
     pub origin: String,

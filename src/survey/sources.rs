@@ -20,7 +20,7 @@ pub struct SurveyItem {
 }
 
 /// Inclusive range of nominal dates (`"YYYY-MM-DD"`) to keep.
-#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct DateRange {
     /// First day kept.
     pub from: Option<String>,

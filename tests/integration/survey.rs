@@ -536,3 +536,92 @@ fn the_shipped_survey_pipeline_surveys_every_shipped_sounding() {
         "{reason}"
     );
 }
+
+/// The pipeline of a split survey (`parts`), its sources beside it.
+fn split_pipeline(dir: &Path, parts: usize) -> PathBuf {
+    let (record, _) = record_with_corrupt_sounding(dir);
+    let record_name = record.file_name().unwrap().to_str().unwrap().to_string();
+    let tiksi = "Tiksi-21824_2026020600.csv";
+    std::fs::copy(sounding(tiksi), dir.join(tiksi)).unwrap();
+    let pipeline = dir.join(format!("split{parts}.toml"));
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[[survey]]\nname = \"arctic\"\nsources = [{record_name:?}, {tiksi:?}]\nparts = {parts}\n"
+        ),
+    )
+    .unwrap();
+    pipeline
+}
+
+#[test]
+fn a_survey_split_into_parts_and_shards_joins_into_the_unsplit_survey() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole");
+    crate::support::cli::pipeline_ok(&split_pipeline(dir.path(), 1), &whole, &[]);
+    // Three parts in one run: the run joins them.
+    let parts = dir.path().join("parts");
+    let r = crate::support::cli::pipeline_ok(&split_pipeline(dir.path(), 3), &parts, &[]);
+    assert!(r.stdout.contains("joined the survey parts"), "{}", r.stdout);
+    crate::support::cli::assert_same_tree(&parts.join("arctic"), &whole.join("arctic"));
+    let sizes: Vec<usize> = (1..=3)
+        .map(|k| read_csv(&parts.join(format!("arctic_part_{k}_of_3/survey.csv"))).len())
+        .collect();
+    assert_eq!(sizes, [2, 2, 2], "6 soundings in three contiguous parts");
+    // The same parts on two "machines" (shards into separate folders), then `pipeline merge`.
+    let pipeline = split_pipeline(dir.path(), 3);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let r = crate::support::cli::pipeline_ok(&pipeline, &a, &["--shard", "1/2"]);
+    assert!(
+        !r.stdout.contains("joined"),
+        "a shard does not join: {}",
+        r.stdout
+    );
+    crate::support::cli::pipeline_ok(&pipeline, &b, &["--shard", "2/2"]);
+    let r = ok(&[
+        "pipeline",
+        "merge",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]);
+    assert!(r.stdout.contains("joined the survey parts"), "{}", r.stdout);
+    crate::support::cli::assert_same_tree(&a.join("arctic"), &whole.join("arctic"));
+    // `ghostship survey --shard` and `survey-merge` do the same by hand; gaps are errors.
+    let src = |p: &str| dir.path().join(p).to_str().unwrap().to_string();
+    let record = src("USM00070026-record.txt");
+    let tiksi = src("Tiksi-21824_2026020600.csv");
+    for k in 1..=2 {
+        let out = src(&format!("hand{k}"));
+        ok(&[
+            "survey",
+            "--quiet",
+            "--shard",
+            &format!("{k}/2"),
+            "--out",
+            &out,
+            &record,
+            &tiksi,
+        ]);
+    }
+    let joined = src("hand");
+    ok(&[
+        "survey-merge",
+        &src("hand2"),
+        &src("hand1"),
+        "--out",
+        &joined,
+    ]);
+    let single = src("single");
+    ok(&["survey", "--quiet", "--out", &single, &record, &tiksi]);
+    crate::support::cli::assert_same_tree(Path::new(&joined), Path::new(&single));
+    let r = fails(&["survey-merge", &src("hand1"), "--out", &joined]);
+    assert!(r.stderr.contains("part 2/2 is missing"), "{}", r.stderr);
+    let r = fails(&[
+        "survey-merge",
+        &src("hand1"),
+        &src("hand1"),
+        "--out",
+        &joined,
+    ]);
+    assert!(r.stderr.contains("part 1/2 is given twice"), "{}", r.stderr);
+}
