@@ -225,6 +225,9 @@ pub enum JobError {
     /// A sequence's animated GIF could not be encoded.
     #[error("cannot encode GIF: {0}")]
     Gif(#[source] image::ImageError),
+    /// A sequence's plot could not be drawn.
+    #[error("cannot draw the sequence plot sun.png: {0}")]
+    Plot(String),
     /// Measured and synthetic could not be compared (images, figures).
     #[error("cannot compare: {0}")]
     Compare(String),

@@ -298,6 +298,18 @@ impl SequenceRequest {
             "frames.csv",
             frames_csv(&self.sweep, frames).into_bytes(),
         ));
+        if let Frames::Sun(sun_frames) = frames {
+            let scene = &self.render.scene;
+            let title = format!("The sun through {}", scene_name(scene));
+            let png = crate::render::sweep_plot::sun_sweep_png(
+                sun_frames,
+                scene.camera.height_m,
+                scene.earth_radius_m,
+                &title,
+            )
+            .map_err(JobError::Plot)?;
+            products.push(Product::new("sun.png", png));
+        }
         Ok(products)
     }
 }

@@ -40,6 +40,7 @@ mod shade;
 pub mod spectral;
 mod sun;
 pub mod sweep;
+pub mod sweep_plot;
 pub mod terrain;
 
 use std::io::IsTerminal;

@@ -94,6 +94,9 @@ fn sun_sweep_frames_are_the_single_renders_of_their_sun_byte_for_byte() {
     let last = std::fs::read(out.join(frame_name(3))).unwrap();
     assert_ne!(first, last);
     assert!(out.join("sequence.gif").is_file());
+    // The sun sweep's figure: the sun's band against its true elevation, strips below.
+    let plot = image::open(out.join("sun.png")).unwrap();
+    assert_eq!((plot.width(), plot.height()), (1200, 900));
 }
 
 #[test]
@@ -103,7 +106,7 @@ fn sequence_bytes_do_not_depend_on_the_thread_count() {
     sequence(&one, "-2:-1:0.25", "1");
     sequence(&two, "-2:-1:0.25", "2");
     let (a, b) = (output_tree(&one), output_tree(&two));
-    assert_eq!(a.len(), 5 + 2, "{:?}", a.keys());
+    assert_eq!(a.len(), 5 + 3, "{:?}", a.keys());
     assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
     for (name, bytes) in &a {
         assert!(bytes == &b[name], "{name} differs between 1 and 2 threads");
@@ -237,6 +240,10 @@ fn observer_sweep_frames_are_the_single_renders_at_that_height() {
     ]);
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert_eq!(csv, "frame,observer_height_m\n0,5\n1,15\n2,25\n");
+    assert!(
+        !out.join("sun.png").exists(),
+        "only sun sweeps have the sun's figure"
+    );
     // The library's render job at the same height gives the same PNG.
     let base = Scene::from_file(Path::new(&scene)).unwrap();
     let request = ghostship::jobs::RenderRequest::new(
