@@ -119,11 +119,15 @@ pub fn run(args: SurveyArgs, quiet: bool) -> anyhow::Result<()> {
     let products = request.products(&outcome)?;
     let rows = &outcome.rows;
     let usable = rows.iter().filter(|r| r.unusable.is_none()).count();
-    let mut text = format!(
-        "Surveyed {} soundings ({usable} usable) in {seconds:.2} s ({:.1} ms per sounding)\n",
-        rows.len(),
-        1e3 * seconds / rows.len().max(1) as f64
-    );
+    let mut text = if rows.is_empty() {
+        "Surveyed 0 soundings: no sounding of the sources is within the dates asked for\n".into()
+    } else {
+        format!(
+            "Surveyed {} soundings ({usable} usable) in {seconds:.2} s ({:.1} ms per sounding)\n",
+            rows.len(),
+            1e3 * seconds / rows.len() as f64
+        )
+    };
     for row in rows.iter().filter(|r| r.unusable.is_some()) {
         let reason = row.unusable.as_deref().unwrap_or_default();
         text.push_str(&format!("unusable: {}: {reason}\n", row.origin));
