@@ -132,8 +132,8 @@ impl SurveyRequest {
         Ok(expand_files(&self.sources)?)
     }
 
-    /// Read every sounding and survey it; `progress` is set to the number of soundings and
-    /// advanced once per sounding.
+    /// Read every sounding and survey it (only the shard's part of them, for a shard);
+    /// `progress` is set to the number of soundings surveyed and advanced once per sounding.
     pub fn run(&self, progress: &indicatif::ProgressBar) -> Result<SurveyOutcome, JobError> {
         let files = self.files()?;
         let read = ReadOptions::default().strict(self.options.atmosphere.strict);
@@ -141,7 +141,7 @@ impl SurveyRequest {
         let mut items = expand_sources(&files, &labels, &self.dates, &read);
         let total = items.len();
         if let Some(shard) = self.shard {
-            let at = |k: usize| total * k / shard.count;
+            let at = |k: usize| (total as u128 * k as u128 / shard.count as u128) as usize;
             items.truncate(at(shard.index));
             items.drain(..at(shard.index - 1));
         }
@@ -156,11 +156,14 @@ impl SurveyRequest {
                 .map(|(l, f)| (l.as_str(), f.display().to_string()))
                 .collect();
             for row in &mut rows {
-                let file = row.origin.rsplit_once(':').map_or(&*row.origin, |(f, _)| f);
-                let opened = shown.get(file).or_else(|| shown.get(row.origin.as_str()));
-                if let (Some(opened), Some(reason)) = (opened, row.unusable.as_mut()) {
-                    let label = file.to_string();
-                    *reason = reason.replace(opened.as_str(), &label);
+                // The origin is the file's label, or the label and `:LINE` in a record.
+                let whole = row.origin.as_str();
+                let stem = whole.rsplit_once(':').map(|(f, _)| f);
+                let matched = shown
+                    .get_key_value(whole)
+                    .or_else(|| stem.and_then(|f| shown.get_key_value(f)));
+                if let (Some((label, opened)), Some(reason)) = (matched, row.unusable.as_mut()) {
+                    *reason = reason.replace(opened.as_str(), label);
                 }
             }
         }
@@ -252,6 +255,15 @@ pub fn merge_parts(dirs: &[PathBuf]) -> Result<Vec<Product>, JobError> {
             .map_err(|e| SurveyError::Merge(format!("{}: {e}", path.display())))?;
         let part: Part = serde_json::from_slice(&bytes)
             .map_err(|e| SurveyError::Merge(format!("{}: {e}", path.display())))?;
+        let s = part.shard;
+        if s.count == 0 || s.index == 0 || s.index > s.count {
+            return bad(format!(
+                "{}: part {}/{} is not K/N with 1 ≤ K ≤ N",
+                path.display(),
+                s.index,
+                s.count
+            ));
+        }
         if part.format != PART_FORMAT {
             return bad(format!(
                 "{}: format {:?}, expected {PART_FORMAT:?}",
@@ -285,8 +297,9 @@ pub fn merge_parts(dirs: &[PathBuf]) -> Result<Vec<Product>, JobError> {
         if part.shard.index != k + 1 {
             return bad(format!("part {}/{count} is missing", k + 1));
         }
-        let total = part.total_soundings;
-        let expected = total * part.shard.index / count - total * (part.shard.index - 1) / count;
+        let total = part.total_soundings as u128;
+        let at = |k: usize| (total * k as u128 / count as u128) as usize;
+        let expected = at(part.shard.index) - at(part.shard.index - 1);
         if part.rows.len() != expected {
             return bad(format!(
                 "{}: {} rows, its share of {total} soundings is {expected}",
@@ -364,6 +377,10 @@ pub fn join_split_surveys(
             continue;
         }
         let dirs: Vec<PathBuf> = parts.iter().map(|(_, job)| out_dir.join(job)).collect();
+        if !dirs.iter().all(|d| is_part(d)) {
+            // A survey merely named like a part (`x_part_1_of_1` without `parts`).
+            continue;
+        }
         let products = merge_parts(&dirs)?;
         super::writer::write_job_products(out_dir, name, &products)?;
         joined.push(out_dir.join(name));

@@ -294,6 +294,34 @@ fn job_table(
     jobs
 }
 
+/// A split survey's joined folder `<name>/` must be no job's folder and no other split survey's.
+fn check_joined_surveys(named: &[(std::ops::Range<usize>, NamedJob)], problems: &mut Vec<Problem>) {
+    let names: BTreeSet<&str> = named.iter().map(|(_, (n, _))| n.as_str()).collect();
+    let mut joined: BTreeMap<String, usize> = BTreeMap::new();
+    for (span, (name, request)) in named {
+        let crate::jobs::JobRequest::Survey(survey) = request else {
+            continue;
+        };
+        let Some(shard) = survey.shard else {
+            continue;
+        };
+        let suffix = format!("_part_{}_of_{}", shard.index, shard.count);
+        let Some(base) = name.strip_suffix(&suffix) else {
+            continue;
+        };
+        let clash = names.contains(base)
+            || joined
+                .insert(base.to_string(), shard.count)
+                .is_some_and(|count| count != shard.count);
+        if clash && shard.index == 1 {
+            problems.push((
+                span.clone(),
+                format!("the split survey {base:?} joins into {base}/, which another job writes too; give one of them another `name`"),
+            ));
+        }
+    }
+}
+
 /// Check names are unique, hash every job's inputs and plan it.
 fn plan(
     named: Vec<(std::ops::Range<usize>, NamedJob)>,
@@ -302,6 +330,7 @@ fn plan(
 ) -> Vec<PlannedJob> {
     let mut seen = BTreeSet::new();
     let mut jobs = Vec::new();
+    check_joined_surveys(&named, problems);
     for (span, (name, request)) in named {
         if !seen.insert(name.clone()) {
             problems.push((

@@ -141,9 +141,23 @@ impl SurveyOptions {
         self.atmosphere
             .validate()
             .map_err(|e| SurveyError::Invalid(e.to_string()))?;
-        self.trace_request(self.observer_heights_m[0])
-            .validate()
-            .map_err(|e| SurveyError::Invalid(e.to_string()))
+        let max = crate::analysis::MAX_FAN_RAYS;
+        for &h in &self.observer_heights_m {
+            let dip_deg = (2.0 * h / EARTH_RADIUS_M).sqrt().to_degrees();
+            let span_deg = self.fan_top_deg + dip_deg + self.fan_below_dip_deg;
+            let rays = span_deg / self.fan_step_deg + 1.0;
+            if !(rays <= max as f64) {
+                return bad(format!(
+                    "fan_step_deg {:?} makes a fan of {rays:.3e} rays from {h} m; at most {max} \
+                     are allowed (give a larger step)",
+                    self.fan_step_deg
+                ));
+            }
+            self.trace_request(h)
+                .validate()
+                .map_err(|e| SurveyError::Invalid(e.to_string()))?;
+        }
+        Ok(())
     }
 
     /// The fan traced from `observer_height_m`: from `fan_below_dip_deg` below the straight-ray
@@ -565,5 +579,17 @@ mod tests {
         );
         assert_eq!(t("2024-02-26 11:20 UTC"), None);
         assert_eq!(t("launch at dawn"), None);
+    }
+
+    #[test]
+    fn a_time_that_is_no_date_is_kept_by_any_date_range() {
+        let range = sources::DateRange {
+            from: Some("2020-01-01".into()),
+            to: Some("2020-12-31".into()),
+        };
+        assert!(range.keeps(Some("launch at dawn, day 5")));
+        assert!(range.keeps(None));
+        assert!(range.keeps(Some("2020-06-01 12")));
+        assert!(!range.keeps(Some("2021-06-01 12")));
     }
 }

@@ -57,7 +57,13 @@ impl DateRange {
 
     /// Whether a sounding at `time` (`"YYYY-MM-DD HH"`) is kept; one of unknown time is kept.
     pub fn keeps(&self, time: Option<&str>) -> bool {
-        let Some(day) = time.and_then(|t| t.get(..10)) else {
+        let is_day = |d: &&str| {
+            d.bytes().enumerate().all(|(i, b)| match i {
+                4 | 7 => b == b'-',
+                _ => b.is_ascii_digit(),
+            })
+        };
+        let Some(day) = time.and_then(|t| t.get(..10)).filter(is_day) else {
             return true;
         };
         self.from.as_deref().is_none_or(|f| day >= f) && self.to.as_deref().is_none_or(|t| day <= t)
@@ -71,12 +77,14 @@ pub fn expand_files(sources: &[PathBuf]) -> Result<Vec<PathBuf>, SurveyError> {
     let mut files = Vec::new();
     for source in sources {
         let text = source.to_string_lossy();
-        let found = if crate::input::is_glob(&text) {
-            crate::input::glob_files(source).map_err(SurveyError::Invalid)?
+        // An existing file or folder is taken as named, even if its name holds `[`, `*` or `?`
+        // (a pipeline passes the files its globs matched).
+        let found = if source.is_file() {
+            vec![source.clone()]
         } else if source.is_dir() {
             folder_files(source)?
-        } else if source.is_file() {
-            vec![source.clone()]
+        } else if crate::input::is_glob(&text) {
+            crate::input::glob_files(source).map_err(SurveyError::Invalid)?
         } else {
             return Err(SurveyError::Invalid(format!(
                 "{}: no such file or folder",

@@ -625,3 +625,57 @@ fn a_survey_split_into_parts_and_shards_joins_into_the_unsplit_survey() {
     ]);
     assert!(r.stderr.contains("part 1/2 is given twice"), "{}", r.stderr);
 }
+
+#[test]
+fn review_edge_cases_are_errors_or_right_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    // A file whose name holds glob characters is surveyed once, as itself, beside its look-alike.
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    for name in ["a1.csv", "a[1].csv"] {
+        std::fs::copy(sounding("Tiksi-21824_2026020600.csv"), data.join(name)).unwrap();
+    }
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(&pipeline, "[[survey]]\nsources = \"data/*.csv\"\n").unwrap();
+    let out = dir.path().join("out");
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    let rows = read_csv(&out.join("survey/survey.csv"));
+    let origins: Vec<&str> = rows.iter().map(|r| r["origin"].as_str()).collect();
+    assert_eq!(origins, ["data/a1.csv", "data/a[1].csv"]);
+    // A split survey may not join into another job's folder.
+    std::fs::write(
+        &pipeline,
+        "[[survey]]\nsources = \"data/*.csv\"\nparts = 2\n[[survey]]\nsources = \"data/*.csv\"\nparts = 3\n",
+    )
+    .unwrap();
+    let r = crate::support::cli::pipeline_run(&pipeline, &out, &["--dry-run"]);
+    assert_ne!(r.code, Some(0));
+    assert!(
+        r.stderr.contains("which another job writes too"),
+        "{}",
+        r.stderr
+    );
+    // A fan step too fine for the fan limit names the option.
+    let t = data.join("a1.csv");
+    let o = dir.path().join("o");
+    let args = |extra: &[&str]| {
+        let mut a = vec!["survey", t.to_str().unwrap(), "--out", o.to_str().unwrap()];
+        a.extend_from_slice(extra);
+        a.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let a = args(&["--fan-step-deg", "1e-300"]);
+    let r = fails(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        r.stderr.contains("fan_step_deg 1e-300 makes a fan of"),
+        "{}",
+        r.stderr
+    );
+    // Shard arithmetic does not overflow.
+    let a = args(&[
+        "--quiet",
+        "--shard",
+        "9223372036854775807/9223372036854775807",
+    ]);
+    ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(read_csv(&o.join("survey.csv")).len(), 1);
+}
