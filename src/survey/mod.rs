@@ -146,7 +146,7 @@ impl SurveyOptions {
             let dip_deg = (2.0 * h / EARTH_RADIUS_M).sqrt().to_degrees();
             let span_deg = self.fan_top_deg + dip_deg + self.fan_below_dip_deg;
             let rays = span_deg / self.fan_step_deg + 1.0;
-            if !(rays <= max as f64) {
+            if rays.is_nan() || rays > max as f64 {
                 return bad(format!(
                     "fan_step_deg {:?} makes a fan of {rays:.3e} rays from {h} m; at most {max} \
                      are allowed (give a larger step)",
