@@ -611,16 +611,8 @@ pub fn sequence_jobs(t: &mut Table) -> Vec<NamedJob> {
         ..d
     };
     let scene_path = t.folder.join(&raw.scene);
-    if let Err(e) = check_file(&scene_path) {
-        t.problem("scene", e);
+    let Some(scene) = one_scene(t, &scene_path) else {
         return Vec::new();
-    }
-    let scene = match Scene::from_file(&scene_path) {
-        Ok(s) => s,
-        Err(e) => {
-            t.problem("scene", crate::jobs::run::error_text(&e));
-            return Vec::new();
-        }
     };
     let template = raw
         .name
@@ -718,6 +710,21 @@ pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
 /// Most parts a `[[survey]]` table may be split into.
 pub const MAX_SURVEY_PARTS: usize = 10_000;
 
+/// The one scene file of a `[[sequence]]` or `[[compare]]` table, loaded, or a problem at `scene`.
+fn one_scene(t: &mut Table, scene_path: &Path) -> Option<Scene> {
+    if let Err(e) = check_file(scene_path) {
+        t.problem("scene", e);
+        return None;
+    }
+    match Scene::from_file(scene_path) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            t.problem("scene", crate::jobs::run::error_text(&e));
+            None
+        }
+    }
+}
+
 /// The jobs of a `[[compare]]` table: one per measured sounding.
 pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
     let Some(raw) = t.raw::<RawCompare>() else {
@@ -739,16 +746,8 @@ pub fn compare_jobs(t: &mut Table) -> Vec<NamedJob> {
         ..d
     };
     let scene_path = t.folder.join(&raw.scene);
-    if let Err(e) = check_file(&scene_path) {
-        t.problem("scene", e);
+    let Some(scene) = one_scene(t, &scene_path) else {
         return Vec::new();
-    }
-    let scene = match Scene::from_file(&scene_path) {
-        Ok(s) => s,
-        Err(e) => {
-            t.problem("scene", crate::jobs::run::error_text(&e));
-            return Vec::new();
-        }
     };
     let synthetic = raw.synthetic.as_deref().map(|name| {
         let source = crate::atmosphere::AtmosphereSource::parse(name);
