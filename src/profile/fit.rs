@@ -403,18 +403,21 @@ impl Profile {
             tau_m,
             tau_s_m,
         };
-        let vapour_ref = vapour.as_ref();
-        let tv_above = |h: f64, p: f64| {
-            let t = blend.at(h).0;
-            let e = vapour_ref.map_or(0.0, |v| v.ratio_above(h.max(v.hi_m)) * p);
+        let (blend_above, vapour_above) = (blend.clone(), vapour.clone());
+        let tv_above = move |h: f64, p: f64| {
+            let t = blend_above.at(h).0;
+            let e = vapour_above
+                .as_ref()
+                .map_or(0.0, |v| v.ratio_above(h.max(v.hi_m)) * p);
             virtual_temperature_k(t, e, p)
         };
-        let table = HydrostaticTable::integrate(
+        // Lazy: a scene traced to a 40 km top reads little of the column up to 86 km.
+        let table = HydrostaticTable::lazy(
             top_m,
             p_top,
             MODEL_TOP_M,
             &[(top_m + 3000.0, 5.0), (f64::INFINITY, 20.0)],
-            &tv_above,
+            std::sync::Arc::new(tv_above),
         );
         let lnp_slope_term = dlnp_top - table.ln_p_and_slope(top_m).1;
         let above = AboveTop {

@@ -9,7 +9,9 @@
 //! Simpson's rule. Written by hand: a fixed-step RK4 of one scalar equation is a dozen lines, and
 //! the Hermite storage reuses the `splines`-based cubic of `monotone.rs`.
 
-use super::monotone::MonotoneCubic;
+use std::sync::{Arc, OnceLock};
+
+use super::monotone::{KnotIndex, MonotoneCubic};
 use crate::units::{DRY_AIR_GAS_CONSTANT_J_KG_K, STANDARD_GRAVITY_M_S2};
 
 /// g₀ / R_d (K m⁻¹).
@@ -58,10 +60,74 @@ pub(crate) fn integrate_ln_p(
     lnp
 }
 
-/// ln P(h) on a grid from a start height upward, Hermite-interpolated with exact slopes.
-#[derive(Debug, Clone)]
+/// ln P(h) on a grid from a start height upward, Hermite-interpolated with exact slopes. The
+/// grid is integrated in chunks of [`CHUNK_NODES`] nodes, either all at once
+/// ([`integrate`](Self::integrate)) or each when a lookup first needs it
+/// ([`lazy`](Self::lazy)): the column above a sounding runs to 86 km, and a scene traced to a
+/// 40 km top never reads most of it. Both give the same values bit for bit (the same steps in
+/// the same order, the same Hermite segments).
+#[derive(Clone)]
 pub(crate) struct HydrostaticTable {
+    /// The node heights.
+    nodes: KnotIndex,
+    /// ln P at the first node.
+    ln_p0: f64,
+    /// The virtual temperature, kept for chunks not integrated yet (`None`: all are).
+    tv: Option<VirtualTemperature>,
+    chunks: Vec<OnceLock<Chunk>>,
+}
+
+/// A virtual-temperature function T_v(h, P) a lazy table keeps.
+pub(crate) type VirtualTemperature = Arc<dyn Fn(f64, f64) -> f64 + Send + Sync>;
+
+/// Nodes (segments) per chunk.
+const CHUNK_NODES: usize = 128;
+
+/// One chunk: the Hermite over its nodes (its last node is the next chunk's first).
+#[derive(Debug, Clone)]
+struct Chunk {
     curve: MonotoneCubic,
+    last_ln_p: f64,
+}
+
+impl std::fmt::Debug for HydrostaticTable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let built = self.chunks.iter().filter(|c| c.get().is_some()).count();
+        f.debug_struct("HydrostaticTable")
+            .field("nodes", &self.nodes.knots_m().len())
+            .field("chunks", &self.chunks.len())
+            .field("integrated", &built)
+            .finish()
+    }
+}
+
+/// The node heights from `h0` to `h_end` for `grid` (see [`HydrostaticTable::integrate`]).
+fn grid_heights(h0: f64, h_end: f64, grid: &[(f64, f64)]) -> Vec<f64> {
+    let mut heights = vec![h0];
+    let mut h = h0;
+    for (i, &(up_to, step)) in grid.iter().enumerate() {
+        let stop = if i + 1 == grid.len() {
+            h_end
+        } else {
+            up_to.min(h_end)
+        };
+        let base = h;
+        let mut k = 1.0;
+        // Regular nodes, leaving a last interval between 0.5 and 1.5 steps.
+        while stop - h > 1.5 * step {
+            h = base + k * step;
+            k += 1.0;
+            heights.push(h);
+        }
+        if stop > h {
+            h = stop;
+            heights.push(h);
+        }
+    }
+    if heights.len() < 2 {
+        heights.push(h0 + grid.last().map_or(1.0, |g| g.1));
+    }
+    heights
 }
 
 impl HydrostaticTable {
@@ -75,33 +141,53 @@ impl HydrostaticTable {
         grid: &[(f64, f64)],
         tv: &dyn Fn(f64, f64) -> f64,
     ) -> Self {
-        let mut heights = vec![h0];
-        let mut h = h0;
-        for (i, &(up_to, step)) in grid.iter().enumerate() {
-            let stop = if i + 1 == grid.len() {
-                h_end
-            } else {
-                up_to.min(h_end)
-            };
-            let base = h;
-            let mut k = 1.0;
-            // Regular nodes, leaving a last interval between 0.5 and 1.5 steps.
-            while stop - h > 1.5 * step {
-                h = base + k * step;
-                k += 1.0;
-                heights.push(h);
-            }
-            if stop > h {
-                h = stop;
-                heights.push(h);
-            }
+        let table = Self::unintegrated(h0, p0, h_end, grid, None);
+        let mut ln_p = table.ln_p0;
+        for (k, cell) in table.chunks.iter().enumerate() {
+            let chunk = table.build(k, ln_p, tv);
+            ln_p = chunk.last_ln_p;
+            let _ = cell.set(chunk);
         }
-        if heights.len() < 2 {
-            heights.push(h0 + grid.last().map_or(1.0, |g| g.1));
+        table
+    }
+
+    /// As [`integrate`](Self::integrate), each chunk integrated when a lookup first reaches it.
+    pub(crate) fn lazy(
+        h0: f64,
+        p0: f64,
+        h_end: f64,
+        grid: &[(f64, f64)],
+        tv: VirtualTemperature,
+    ) -> Self {
+        Self::unintegrated(h0, p0, h_end, grid, Some(tv))
+    }
+
+    fn unintegrated(
+        h0: f64,
+        p0: f64,
+        h_end: f64,
+        grid: &[(f64, f64)],
+        tv: Option<VirtualTemperature>,
+    ) -> Self {
+        let heights = grid_heights(h0, h_end, grid);
+        let segments = heights.len() - 1;
+        HydrostaticTable {
+            nodes: KnotIndex::new(&heights),
+            ln_p0: p0.ln(),
+            tv,
+            chunks: (0..segments.div_ceil(CHUNK_NODES))
+                .map(|_| OnceLock::new())
+                .collect(),
         }
+    }
+
+    /// Chunk `k` from ln P `start` at its first node.
+    fn build(&self, k: usize, start: f64, tv: &dyn Fn(f64, f64) -> f64) -> Chunk {
+        let all = self.nodes.knots_m();
+        let heights = &all[k * CHUNK_NODES..=((k + 1) * CHUNK_NODES).min(all.len() - 1)];
         let mut ln_p = Vec::with_capacity(heights.len());
         let mut slopes = Vec::with_capacity(heights.len());
-        let mut current = p0.ln();
+        let mut current = start;
         for (i, &hh) in heights.iter().enumerate() {
             if i > 0 {
                 let prev = heights[i - 1];
@@ -111,14 +197,36 @@ impl HydrostaticTable {
             ln_p.push(current);
             slopes.push(-G_OVER_R / tv(hh, current.exp()));
         }
-        HydrostaticTable {
-            curve: MonotoneCubic::with_slopes(&heights, &ln_p, &slopes),
+        Chunk {
+            curve: MonotoneCubic::with_slopes(heights, &ln_p, &slopes),
+            last_ln_p: current,
         }
+    }
+
+    /// Chunk `k`, integrated now (with those below it) if no lookup has needed it yet.
+    fn chunk(&self, k: usize) -> &Chunk {
+        if let Some(chunk) = self.chunks[k].get() {
+            return chunk;
+        }
+        let start = if k == 0 {
+            self.ln_p0
+        } else {
+            self.chunk(k - 1).last_ln_p
+        };
+        self.chunks[k].get_or_init(|| {
+            let tv = self.tv.as_deref().expect("an eager table has every chunk");
+            self.build(k, start, tv)
+        })
     }
 
     /// ln P and d(ln P)/dh at `h` (held at the table's ends outside it).
     pub(crate) fn ln_p_and_slope(&self, h: f64) -> (f64, f64) {
-        self.curve.value_slope(h)
+        if h.is_nan() {
+            return (f64::NAN, f64::NAN);
+        }
+        self.chunk(self.nodes.segment(h) / CHUNK_NODES)
+            .curve
+            .value_slope(h)
     }
 }
 

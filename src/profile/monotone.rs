@@ -21,8 +21,8 @@ use splines::{Interpolation, Key, Spline};
 #[derive(Debug, Clone)]
 pub(crate) struct MonotoneCubic {
     spline: Spline<f64, f64>,
-    /// The keys' heights, ascending (the segment search).
-    knots_m: Vec<f64>,
+    /// The keys' heights, ascending, with the segment search over them.
+    knots: KnotIndex,
     /// (height, value, slope) of the first and last knot, for the ends the spline does not serve.
     first: (f64, f64, f64),
     last: (f64, f64, f64),
@@ -104,7 +104,7 @@ impl MonotoneCubic {
             .collect();
         MonotoneCubic {
             spline: Spline::from_vec(keys),
-            knots_m: x.to_vec(),
+            knots: KnotIndex::new(x),
             first: (x[0], y[0], m[0]),
             last: (x[n - 1], y[n - 1], m[n - 1]),
         }
@@ -124,11 +124,7 @@ impl MonotoneCubic {
             return (self.last.1, self.last.2);
         }
         // first < h < last: the segment [k, k + 1] with knot k ≤ h < knot k + 1.
-        let k = self
-            .knots_m
-            .partition_point(|&t| t <= h)
-            .clamp(1, self.knots_m.len() - 1)
-            - 1;
+        let k = self.knots.segment(h);
         let keys = self.spline.keys();
         let (k0, k1) = (&keys[k], &keys[k + 1]);
         let (a, b) = (k0.value, k1.value);
@@ -146,6 +142,82 @@ impl MonotoneCubic {
         let value = a * r * r * r + 3.0 * s * r * (u * r + v * s) + b * s * s * s;
         let slope = 3.0 * ((u - a) * r * r + 2.0 * (v - u) * r * s + (b - v) * s * s) / width;
         (value, slope)
+    }
+}
+
+/// Ascending knot heights with an O(1) segment search: a uniform grid of buckets over the
+/// knots' span, each holding how many knots lie at or below its lower edge, so a search is a
+/// bucket lookup and a binary search over the few knots inside one bucket. The answer is exactly
+/// `partition_point`'s (a bucket whose edges rounding put on the wrong side of `h` falls back to
+/// the full search). Written by hand: the refractive table's build and the tracer's closed-form
+/// climb evaluate the fitted curves hundreds of thousands of times per sounding, in ascending runs
+/// of heights, and a 150-level binary search per evaluation was the largest single cost of a
+/// survey.
+#[derive(Debug, Clone)]
+pub(crate) struct KnotIndex {
+    knots_m: Vec<f64>,
+    origin_m: f64,
+    buckets_per_m: f64,
+    /// Knots at or below each bucket's lower edge, and a last entry `knots_m.len()`.
+    below: Vec<u32>,
+}
+
+/// Buckets per knot of the segment search.
+const BUCKETS_PER_KNOT: usize = 4;
+
+impl KnotIndex {
+    /// The index of `knots_m` (ascending, finite, at least one).
+    pub(crate) fn new(knots_m: &[f64]) -> Self {
+        let n = knots_m.len();
+        let origin_m = knots_m.first().copied().unwrap_or(0.0);
+        let span_m = knots_m.last().copied().unwrap_or(0.0) - origin_m;
+        let count = (BUCKETS_PER_KNOT * n).max(1);
+        let buckets_per_m = if span_m > 0.0 {
+            count as f64 / span_m
+        } else {
+            0.0
+        };
+        let mut below: Vec<u32> = (0..count)
+            .map(|b| {
+                let edge_m = origin_m + b as f64 / buckets_per_m.max(f64::MIN_POSITIVE);
+                knots_m.partition_point(|&t| t <= edge_m) as u32
+            })
+            .collect();
+        below.push(n as u32);
+        KnotIndex {
+            knots_m: knots_m.to_vec(),
+            origin_m,
+            buckets_per_m,
+            below,
+        }
+    }
+
+    /// The knots.
+    pub(crate) fn knots_m(&self) -> &[f64] {
+        &self.knots_m
+    }
+
+    /// Number of knots ≤ `h` (as `partition_point(|&t| t <= h)`); `h` not NaN.
+    pub(crate) fn count_at_or_below(&self, h: f64) -> usize {
+        let knots = &self.knots_m;
+        let buckets = self.below.len() - 1;
+        let at = (h - self.origin_m) * self.buckets_per_m;
+        if at >= 0.0 && at < buckets as f64 {
+            let b = at as usize;
+            let (lo, hi) = (self.below[b] as usize, self.below[b + 1] as usize);
+            // The bucket's edges bracket h unless rounding moved it across one.
+            let lo_ok = lo == 0 || knots[lo - 1] <= h;
+            let hi_ok = hi == knots.len() || knots[hi] > h;
+            if lo_ok && hi_ok {
+                return lo + knots[lo..hi].partition_point(|&t| t <= h);
+            }
+        }
+        knots.partition_point(|&t| t <= h)
+    }
+
+    /// The segment [k, k + 1] holding `h`, clamped to the first and last (at least two knots).
+    pub(crate) fn segment(&self, h: f64) -> usize {
+        self.count_at_or_below(h).clamp(1, self.knots_m.len() - 1) - 1
     }
 }
 
@@ -215,5 +287,41 @@ mod tests {
         assert_eq!(c.value_slope(-5.0), (2.0, 1.0));
         let (v, s) = c.value_slope(0.25);
         assert!((v - 2.25).abs() < 1e-15 && (s - 1.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn the_bucket_search_is_partition_point() {
+        // Clustered, sparse and repeated-spacing knots, probed on, between and beyond them.
+        let mut knots = vec![
+            -3.0,
+            0.0,
+            0.001,
+            0.002,
+            0.5,
+            7.25,
+            7.5,
+            100.0,
+            1e4,
+            3e4 + 0.1,
+        ];
+        knots.extend((0..200).map(|i| 3.1e4 + i as f64 * 1e-3));
+        let index = KnotIndex::new(&knots);
+        let mut probes = knots.clone();
+        probes.extend(knots.iter().map(|k| k + 1e-9));
+        probes.extend(knots.iter().map(|k| k - 1e-9));
+        probes.extend(knots.iter().map(|&k| f64::from_bits(k.to_bits() + 1)));
+        probes.extend((0..20_000).map(|i| -10.0 + i as f64 * 1.6));
+        probes.extend([f64::NEG_INFINITY, f64::INFINITY, -1e300, 1e300]);
+        for h in probes {
+            assert_eq!(
+                index.count_at_or_below(h),
+                knots.partition_point(|&t| t <= h),
+                "h = {h:e}"
+            );
+        }
+        let single = KnotIndex::new(&[5.0]);
+        for h in [4.0, 5.0, 6.0] {
+            assert_eq!(single.count_at_or_below(h), usize::from(h >= 5.0));
+        }
     }
 }

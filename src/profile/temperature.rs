@@ -18,7 +18,7 @@
 
 use std::f64::consts::PI;
 
-use super::monotone::MonotoneCubic;
+use super::monotone::{KnotIndex, MonotoneCubic};
 
 /// How the temperature of a sounding is interpolated between its levels.
 #[derive(
@@ -180,7 +180,8 @@ enum Shape {
 /// T(h) between the lowest and highest level (see the module doc).
 #[derive(Debug, Clone)]
 pub(crate) struct TemperatureCurve {
-    heights_m: Vec<f64>,
+    /// The levels' heights (m), with the segment search over them.
+    knots: KnotIndex,
     values_k: Vec<f64>,
     shape: Shape,
     /// ln P (fitted) at each level whose pressure was measured; a gap with both ends `Some` is
@@ -210,7 +211,7 @@ impl TemperatureCurve {
             Shape::Pchip(MonotoneCubic::new(heights_m, values_k))
         };
         TemperatureCurve {
-            heights_m: heights_m.to_vec(),
+            knots: KnotIndex::new(heights_m),
             values_k: values_k.to_vec(),
             shape,
             ln_p: vec![None; heights_m.len()],
@@ -222,13 +223,13 @@ impl TemperatureCurve {
     /// fitted ln P at level i where its pressure was measured. Gaps where ln P does not decrease
     /// stay linear in height.
     pub(crate) fn set_ln_pressure(&mut self, ln_p: Vec<Option<f64>>) {
-        debug_assert_eq!(ln_p.len(), self.heights_m.len());
+        debug_assert_eq!(ln_p.len(), self.knots.knots_m().len());
         self.ln_p = ln_p;
     }
 
     /// The same curve with bump amplitudes `bumps_k` (K, one per gap).
     pub(crate) fn with_bumps(&self, bumps_k: Vec<f64>) -> Self {
-        debug_assert_eq!(bumps_k.len() + 1, self.heights_m.len().max(1));
+        debug_assert_eq!(bumps_k.len() + 1, self.knots.knots_m().len().max(1));
         TemperatureCurve {
             bumps_k,
             ..self.clone()
@@ -237,7 +238,7 @@ impl TemperatureCurve {
 
     /// Number of gaps between levels.
     pub(crate) fn gaps(&self) -> usize {
-        self.heights_m.len().saturating_sub(1)
+        self.knots.knots_m().len().saturating_sub(1)
     }
 
     /// T and dT/dh at `h` (inside the levels; clamped to them), given the fitted ln P and
@@ -269,14 +270,13 @@ impl TemperatureCurve {
 
     /// The gap [k, k + 1] holding `h` (the upper one at a level).
     fn gap_of(&self, h: f64) -> usize {
-        let n = self.heights_m.len();
-        self.heights_m.partition_point(|&x| x <= h).clamp(1, n - 1) - 1
+        self.knots.segment(h)
     }
 
     /// The coordinate u ∈ [0, 1] of gap k at `h`, and du/dh: the ln p fraction where both levels
     /// have a measured pressure (and ln P is known), else the height fraction.
     fn coordinate(&self, k: usize, h: f64, ln_p: Option<(f64, f64)>) -> (f64, f64) {
-        let (h0, h1) = (self.heights_m[k], self.heights_m[k + 1]);
+        let (h0, h1) = (self.knots.knots_m()[k], self.knots.knots_m()[k + 1]);
         if let (Some((lnp, dlnp)), Some(a), Some(b)) = (ln_p, self.ln_p[k], self.ln_p[k + 1])
             && a - b > 1e-12
         {

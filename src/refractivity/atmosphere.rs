@@ -49,6 +49,13 @@ pub struct TableSpec {
     pub tolerance_n: f64,
     /// Largest |Δ(dn/dh)| (m⁻¹) accepted in a cell before it falls back to exact evaluation.
     pub tolerance_dndh_per_m: f64,
+    /// Whether whole-column scans (Bouguer's envelope,
+    /// [`StratifiedIndex::scan_index_and_derivative`]) read the table too. Off by default, so a
+    /// scene builds table cells only where its rays go; on where the rays visit the whole column
+    /// anyway (a survey's fan climbs out to the top), which makes the scan cheap table lookups
+    /// instead of exact evaluations. The table's error must then stay far below the envelope's
+    /// slack on the invariant (1e-10 relative; the tolerances here are absolute in n).
+    pub scans_read_table: bool,
 }
 
 impl Default for TableSpec {
@@ -67,6 +74,7 @@ impl Default for TableSpec {
             coarse_top_agl_m: 40_000.0,
             tolerance_n: 1e-14,
             tolerance_dndh_per_m: 1e-14,
+            scans_read_table: false,
         }
     }
 }
@@ -414,9 +422,14 @@ impl StratifiedIndex for RefractiveAtmosphere {
     }
 
     /// n and dn/dh from the exact formula (no table cell is built; see
-    /// [`StratifiedIndex::survey_index_and_derivative`]).
-    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
-        self.exact(height_m)
+    /// [`StratifiedIndex::scan_index_and_derivative`]), or from the table when the spec says
+    /// [`scans_read_table`](TableSpec::scans_read_table).
+    fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        if self.spec.scans_read_table {
+            self.index_and_derivative(height_m)
+        } else {
+            self.exact(height_m)
+        }
     }
 
     /// The air column's breaks (heights above the surface; see

@@ -404,6 +404,7 @@ pub fn survey_table() -> TableSpec {
         coarse_step_m: 50.0,
         tolerance_n: SURVEY_TABLE_DNDH_PER_M,
         tolerance_dndh_per_m: SURVEY_TABLE_DNDH_PER_M,
+        scans_read_table: true,
         ..TableSpec::default()
     }
 }

@@ -77,7 +77,7 @@ impl BouguerEnvelope {
         let (g, slope): (Vec<f64>, Vec<f64>) = heights_m
             .par_iter()
             .map(|&h| {
-                let (n, dn) = index.survey_index_and_derivative(h);
+                let (n, dn) = index.scan_index_and_derivative(h);
                 let r = earth_radius_m + h;
                 (n * r, n + r * dn)
             })

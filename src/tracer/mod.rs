@@ -69,7 +69,7 @@ pub trait StratifiedIndex: Send + Sync {
     /// envelope): the same field as [`index_and_derivative`](Self::index_and_derivative) to
     /// within the error of any lookup table behind it, but evaluated without filling that table,
     /// so a scene builds table cells only where its rays go. Default: `index_and_derivative`.
-    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+    fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         self.index_and_derivative(height_m)
     }
     /// Heights above the surface (m, ascending, finite) where dn/dh or d²n/dh² may jump: the
@@ -92,8 +92,8 @@ impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     fn index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         (**self).index_and_derivative(height_m)
     }
-    fn survey_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
-        (**self).survey_index_and_derivative(height_m)
+    fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        (**self).scan_index_and_derivative(height_m)
     }
     fn breaks_m(&self) -> &[f64] {
         (**self).breaks_m()
