@@ -49,8 +49,8 @@ pub struct TableSpec {
     pub tolerance_n: f64,
     /// Largest |Δ(dn/dh)| (m⁻¹) accepted in a cell before it falls back to exact evaluation.
     pub tolerance_dndh_per_m: f64,
-    /// Whether whole-column scans (Bouguer's envelope,
-    /// [`StratifiedIndex::scan_index_and_derivative`]) read the table too. Off by default, so a
+    /// Whether whole-column scans (Bouguer's envelope, the regime detector;
+    /// [`RefractiveAtmosphere::scan_refractivity`]) read the table too. Off by default, so a
     /// scene builds table cells only where its rays go; on where the rays visit the whole column
     /// anyway (a survey's fan climbs out to the top), which makes the scan cheap table lookups
     /// instead of exact evaluations. The table's error must then stay far below the envelope's
@@ -393,6 +393,17 @@ impl RefractiveAtmosphere {
         Ok((s.n_minus_1, s.dn_dh_per_m))
     }
 
+    /// n − 1 and dn/dh (m⁻¹) at `height_agl_m` for a scan of the whole column (Bouguer's
+    /// envelope, the regime detector): exact, so that a scan fills no table cell, or from the
+    /// table where the spec says [`scans_read_table`](TableSpec::scans_read_table).
+    pub fn scan_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
+        if self.spec.scans_read_table {
+            self.table_refractivity(height_agl_m)
+        } else {
+            self.exact_refractivity(height_agl_m)
+        }
+    }
+
     /// n − 1 and dn/dh (m⁻¹) from the table (what [`StratifiedIndex`] returns, minus the 1).
     #[inline]
     pub fn table_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
@@ -425,11 +436,8 @@ impl StratifiedIndex for RefractiveAtmosphere {
     /// [`StratifiedIndex::scan_index_and_derivative`]), or from the table when the spec says
     /// [`scans_read_table`](TableSpec::scans_read_table).
     fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
-        if self.spec.scans_read_table {
-            self.index_and_derivative(height_m)
-        } else {
-            self.exact(height_m)
-        }
+        let (nm1, d) = self.scan_refractivity(height_m);
+        (1.0 + nm1, d)
     }
 
     /// The air column's breaks (heights above the surface; see
