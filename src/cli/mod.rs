@@ -1,8 +1,8 @@
 //! Command-line layer: raw arguments (clap; bad values are usage errors, exit status 2, through
 //! value parsers) → the typed requests of the library's jobs layer (`ghostship::jobs`) → their
 //! products, printed or written. One file per command: [`profile`] (stages 1–3 and their
-//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`sequence`] (sweeps of the sun or the
-//! observer), [`compare`]
+//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`sequence`] (sweeps of the sun, the
+//! observer, a scene key or the air between soundings), [`compare`]
 //! (measured against synthetic layers), [`pipeline`] (batch
 //! runs of all three, shards and merge) and [`bench`] (time against error, the stress suite).
 //! Errors go back to `main` as one `anyhow` chain.
@@ -53,8 +53,10 @@ pub enum Command {
     /// Render what a camera sees through the scene's atmosphere: horizon, sea, sky, cards and
     /// sun, to PNG and/or EXR.
     Render(render::RenderArgs),
-    /// Render a sequence of frames sweeping the sun's true elevation or the observer's height
-    /// (FROM:TO:STEP): numbered PNG frames, an animated GIF and a frame index CSV.
+    /// Render a sequence of frames sweeping the sun (true elevation FROM:TO:STEP, or its position
+    /// over a UTC time span), the observer's height, any numeric scene key, or the air between
+    /// two soundings: numbered PNG (and EXR) frames, an animated GIF, an MP4 when ffmpeg is on
+    /// the PATH, a frame index CSV and plots.
     Sequence(sequence::SequenceArgs),
     /// Measured against synthetic: trace and render a scene through a sounding and through
     /// synthetic layers (by default fitted to it), and report what differs: images of each
