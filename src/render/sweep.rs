@@ -92,9 +92,6 @@ pub struct SweepFrame {
     pub transfer: Option<TransferSamples>,
 }
 
-/// Rays per image row of [`transfer_samples`].
-pub const TRANSFER_RAYS_PER_ROW: u32 = 2;
-
 /// The column whose pixel centre on the middle row is nearest azimuth `azimuth_rad`, when that
 /// azimuth lies between the first and last columns' on that row; otherwise `None`.
 fn column_at_azimuth(scene: &Scene, azimuth_rad: f64) -> Option<u32> {
@@ -176,8 +173,8 @@ pub fn card_facts(scene: &Scene, card: &Card, tracer: &dyn RayTracer, x: u32) ->
     let (height_m, top_m) = (scene.camera.height_m, card.base_m + card.height_m);
     let distance = [card.distance_m];
     let (images, low, high) = runs_along(scene, x, |alpha, _| {
-        let ray = tracer.trace(height_m, alpha, &distance, false);
-        ray.heights_m[0].is_some_and(|h| h >= card.base_m && h <= top_m)
+        let heights = tracer.heights_at(height_m, alpha, &distance);
+        heights[0].is_some_and(|h| h >= card.base_m && h <= top_m)
     });
     CardFacts {
         apparent_low_rad: low,
@@ -208,29 +205,25 @@ pub fn frame_facts(scene: &Scene, tracer: &dyn RayTracer) -> FrameFacts {
     FrameFacts { sun, cards }
 }
 
-/// Heights at `distance_m` of [`TRANSFER_RAYS_PER_ROW`] rays per row, evenly spaced in apparent
-/// elevation over the centre column of `scene`'s frame (bottom edge to top edge).
-pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, distance_m: f64) -> TransferSamples {
+/// Heights at `card`'s distance of the rays through the pixel centres of its column
+/// ([`card_column`], the centre column when it is out of view), from the bottom row to the top:
+/// the rays [`card_facts`] traces, so through a [`MemoRays`] they are traced once for both.
+pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> TransferSamples {
     let cam = &scene.camera;
     let frame = cam.frame();
-    let x = 0.5 * cam.width as f64;
-    let lo = frame.view_direction(x, cam.height as f64).elevation_rad;
-    let hi = frame.view_direction(x, 0.0).elevation_rad;
-    let count = (cam.height * TRANSFER_RAYS_PER_ROW).max(2) as usize;
-    let elevations_rad: Vec<f64> = (0..count)
-        .map(|i| lo + (hi - lo) * i as f64 / (count - 1) as f64)
+    let x = card_column(scene, card).unwrap_or(cam.width / 2) as f64 + 0.5;
+    let elevations_rad: Vec<f64> = (0..cam.height)
+        .rev()
+        .map(|y| frame.view_direction(x, y as f64 + 0.5).elevation_rad)
         .collect();
+    let distance = [card.distance_m];
     let heights_m = elevations_rad
-        .par_iter()
-        .map(|&a| {
-            tracer
-                .trace(cam.height_m, a, &[distance_m], false)
-                .heights_m[0]
-        })
+        .iter()
+        .map(|&a| tracer.heights_at(cam.height_m, a, &distance)[0])
         .collect();
     TransferSamples {
         camera_height_m: cam.height_m,
-        distance_m,
+        distance_m: card.distance_m,
         elevations_rad,
         heights_m,
     }
@@ -252,7 +245,7 @@ pub fn render_shared(
         let facts = frame_facts(scene, &memo);
         let transfer = farthest_card(scene)
             .filter(|_| transfer)
-            .map(|card| transfer_samples(scene, &memo, card.distance_m));
+            .map(|card| transfer_samples(scene, &memo, card));
         Ok(SweepFrame {
             film,
             facts,

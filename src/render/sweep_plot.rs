@@ -142,7 +142,7 @@ pub fn sun_sweep_png(series: &SunSeries) -> Result<Vec<u8>, String> {
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.3))
             .label_font((PLOT_FONT, 14))
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(SeriesLabelPosition::LowerMiddle)
             .draw()
             .map_err(plot_err)?;
         let mut strips = ChartBuilder::on(&lower)

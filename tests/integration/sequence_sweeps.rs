@@ -193,7 +193,10 @@ fn a_sun_sweep_over_time_traces_its_rays_once_though_sun_and_camera_turn() {
     let (all, frames) = rays(&scenes);
     // Each further frame traces at most a fifth of the rays of a frame alone: the new rays
     // around its sun (ten frames rendered apart would trace ten times `one`).
-    assert!(5 * (all - one) <= 10 * one, "{all} rays for 11 frames, {one} for one");
+    assert!(
+        5 * (all - one) <= 10 * one,
+        "{all} rays for 11 frames, {one} for one"
+    );
     // The sun is seen through this air though its true elevation stays below −0.6°.
     let seen = frames
         .iter()
