@@ -140,7 +140,7 @@ impl SequenceRequest {
             Ok(scene)
         };
         let (frames, pair) = sweep::plan_frames(&settings.sweep, &base, &reparse)?;
-        if let Some(bad) = frames.iter().find(|f| !(f.scene.camera.height_m >= 0.0)) {
+        if let Some(bad) = frames.iter().find(|f| f.scene.camera.height_m < 0.0) {
             return Err(JobError::Invalid(format!(
                 "observer heights must be ≥ 0 m above the surface, got {}",
                 bad.scene.camera.height_m
