@@ -57,7 +57,7 @@ pub enum Command {
     /// over a UTC time span), the observer's height, any numeric scene key, or the air between
     /// two soundings: numbered PNG (and EXR) frames, an animated GIF, an MP4 when ffmpeg is on
     /// the PATH, a frame index CSV and plots.
-    Sequence(sequence::SequenceArgs),
+    Sequence(Box<sequence::SequenceArgs>),
     /// Measured against synthetic: trace and render a scene through a sounding and through
     /// synthetic layers (by default fitted to it), and report what differs: images of each
     /// target, horizons, trapped rays, ducts, RMSE/SSIM; writes compare.json and figures.
@@ -88,7 +88,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Profile(args) => profile::run(args, cli.quiet),
         Command::Trace(args) => trace::run(args, cli.quiet),
         Command::Render(args) => render::run(args, cli.quiet),
-        Command::Sequence(args) => sequence::run(args, cli.quiet),
+        Command::Sequence(args) => sequence::run(*args, cli.quiet),
         Command::Compare(args) => compare::run(args, cli.quiet),
         Command::Survey(args) => survey::run(args, cli.quiet),
         Command::SurveyMerge(args) => survey::merge(args, cli.quiet),
