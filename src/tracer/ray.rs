@@ -588,6 +588,21 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                         }
                     }
                 }
+                // The aimed step ended on or past its break (the trial step's dense output,
+                // which straddled the jump, mispredicted the crossing by more than
+                // SHORT_OF_BREAK_M): its last stage saw the other side, hence the error.
+                // Retaking it shorter, as a step that passed, ends it before the break; giving
+                // up the aim instead shrinks the step until it underflows.
+                Some(a) => {
+                    let o = sys.observe(&step.y1);
+                    if a.overshot(o.height_m)
+                        && let Polish::Retake(polished) = a.polish(o.height_m, o.elevation_rad)
+                    {
+                        rec.rejected_steps += 1;
+                        aim = Some(polished);
+                        continue;
+                    }
+                }
                 None if !bracket.is_empty() => {
                     let o1 = sys.observe(&step.y1);
                     if let Some(a) = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg) {
@@ -908,6 +923,16 @@ impl Aim {
     /// corrected step (Newton on the step length) if it missed by more than
     /// [`LANDING_TOLERANCE_M`] and the correction is well conditioned, else landed if within
     /// [`LANDING_SLACK_M`] and missed if not.
+    /// Whether a step aimed here ended on the far side of the point it aims at, half way to
+    /// the break or beyond.
+    fn overshot(&self, height_m: f64) -> bool {
+        if self.exit.up {
+            height_m > self.exit.height_m - 0.5 * SHORT_OF_BREAK_M
+        } else {
+            height_m < self.exit.height_m + 0.5 * SHORT_OF_BREAK_M
+        }
+    }
+
     fn polish(self, height_m: f64, elevation_rad: f64) -> Polish {
         let aim_m = if self.exit.up {
             self.exit.height_m - SHORT_OF_BREAK_M

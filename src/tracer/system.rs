@@ -96,7 +96,10 @@ impl<S: StratifiedIndex + ?Sized> PlanarSystem<'_, S> {
     fn radius_and_height(&self, y: &[f64; 4]) -> (f64, f64) {
         let (x, v) = (y[0], y[1]);
         let (r_e, h0) = (self.radius_m, self.observer_m);
-        let r = x.hypot(self.centre_y(y));
+        let cy = self.centre_y(y);
+        // |r| ≈ 6.4e6 m: the plain square root cannot overflow or underflow, is within an ulp
+        // of `hypot` and several times cheaper; the height does not depend on its rounding.
+        let r = (x * x + cy * cy).sqrt();
         let excess = h0 * (2.0 * r_e + h0) + v * (2.0 * (r_e + h0) + v) + x * x;
         (r, excess / (r + r_e))
     }
