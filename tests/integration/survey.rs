@@ -593,6 +593,11 @@ fn a_survey_split_into_parts_and_shards_joins_into_the_unsplit_survey() {
     assert!(r.stdout.contains("joined the survey parts"), "{}", r.stdout);
     crate::support::cli::assert_same_tree(&a.join("arctic"), &whole.join("arctic"));
     assert_manifest_lists_every_file(&a);
+    // The merged manifest, joined survey included, is the one the run in one go wrote.
+    assert_eq!(
+        json_file(&a.join("manifest.json")),
+        json_file(&parts.join("manifest.json"))
+    );
     // `ghostship survey --shard` and `survey-merge` do the same by hand; gaps are errors.
     let src = |p: &str| dir.path().join(p).to_str().unwrap().to_string();
     let record = src("USM00070026-record.txt");
