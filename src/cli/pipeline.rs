@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::Context;
 use ghostship::jobs::manifest::{Shard, merge};
 use ghostship::jobs::run::{JobOutcome, RunOptions, RunReport, run_jobs};
+use ghostship::jobs::survey::JoinOutcome;
 use ghostship::pipeline::ResolvedPipeline;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -86,16 +87,12 @@ pub fn run(args: PipelineArgs, quiet: bool) -> anyhow::Result<()> {
     match args.action {
         PipelineAction::Run(run_args) => run_pipeline(&run_args, quiet),
         PipelineAction::Merge(merge_args) => {
-            let path = merge(&merge_args.dirs)?;
-            let joined = join_surveys(&merge_args.dirs[0], &path)?;
+            let merged = merge(&merge_args.dirs)?;
             if !quiet {
-                let mut text = format!("merged into {}\n", path.display());
-                for dir in joined {
-                    text.push_str(&format!("joined the survey parts into {}\n", dir.display()));
-                }
-                super::print_stdout(&text)?;
+                let text = format!("merged into {}\n", merged.path.display());
+                super::print_stdout(&(text + &joined_text(&merged.joined)))?;
             }
-            Ok(())
+            check_joins(&merged.joined)
         }
     }
 }
@@ -128,19 +125,11 @@ fn run_pipeline(args: &RunArgs, quiet: bool) -> anyhow::Result<()> {
     );
     let report = run_jobs(&pipeline.jobs, &options, &bar)?;
     bar.finish_and_clear();
-    // A whole run joins its split surveys; a shard leaves that to `pipeline merge`.
-    let joined = match (&report.manifest, args.shard) {
-        (Some(manifest), None) => join_surveys(&out, manifest)?,
-        _ => Vec::new(),
-    };
     if !quiet {
-        for dir in &joined {
-            super::print_stdout(&format!("joined the survey parts into {}\n", dir.display()))?;
-        }
-    }
-    if !quiet {
+        super::print_stdout(&joined_text(&report.joined))?;
         super::print_stdout(&summary_table(&report, &out, args, start.elapsed()))?;
     }
+    check_joins(&report.joined)?;
     let failed: Vec<String> = report
         .jobs
         .iter()
@@ -251,8 +240,30 @@ fn summary_table(
     text
 }
 
-/// Join the split surveys the manifest at `manifest_path` records into `out`.
-fn join_surveys(out: &Path, manifest_path: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let manifest = ghostship::jobs::manifest::Manifest::read(manifest_path)?;
-    Ok(ghostship::jobs::survey::join_split_surveys(out, &manifest)?)
+/// One line per split survey joined.
+fn joined_text(joined: &[JoinOutcome]) -> String {
+    joined
+        .iter()
+        .filter(|j| j.result == Ok(true))
+        .map(|j| format!("joined the survey parts into {}\n", j.dir.display()))
+        .collect()
+}
+
+/// An error naming every split survey whose parts could not be joined.
+fn check_joins(joined: &[JoinOutcome]) -> anyhow::Result<()> {
+    let failed: Vec<String> = joined
+        .iter()
+        .filter_map(|j| {
+            let e = j.result.as_ref().err()?;
+            Some(format!("  {}: {e}", j.dir.display()))
+        })
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "cannot join {} split survey(s):\n{}",
+            failed.len(),
+            failed.join("\n")
+        );
+    }
+    Ok(())
 }

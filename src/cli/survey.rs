@@ -6,8 +6,9 @@ use std::path::PathBuf;
 
 use ghostship::atmosphere::AtmosphereOptions;
 use ghostship::jobs::SurveyRequest;
-use ghostship::survey::SurveyOptions;
+use ghostship::jobs::survey::SURVEY_FILES;
 use ghostship::survey::sources::DateRange;
+use ghostship::survey::{SurveyError, SurveyOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::profile::parse_fit;
@@ -89,7 +90,20 @@ impl SurveyArgs {
             from: self.from.clone(),
             to: self.to.clone(),
         };
-        let request = SurveyRequest::new(self.sources.clone(), dates, options)?;
+        let request = SurveyRequest::new(self.sources.clone(), dates, options).map_err(|e| {
+            // Name the flag: the library names the pipeline key.
+            let key = match &e {
+                ghostship::jobs::JobError::Survey(SurveyError::BadOption { key, .. }) => *key,
+                _ => "",
+            };
+            let flag = match key {
+                "" => return anyhow::Error::new(e),
+                "observer_height_m" => "observer-height-m".to_string(),
+                "distances_m" => "distance-m".to_string(),
+                k => k.replace('_', "-"),
+            };
+            anyhow::Error::new(e).context(format!("--{flag}"))
+        })?;
         Ok(match self.shard {
             Some(shard) => request.with_shard(shard),
             None => request,
@@ -133,7 +147,23 @@ pub fn run(args: SurveyArgs, quiet: bool) -> anyhow::Result<()> {
         text.push_str(&format!("unusable: {}: {reason}\n", row.origin));
     }
     super::print_stdout(&text)?;
-    super::write_into(&args.out, &products, quiet)
+    write_survey(&args.out, &products, quiet)
+}
+
+/// Write a survey's products into `dir`, deleting the survey files of an earlier run there that
+/// this one does not write (an unsplit survey into a part's folder leaves no `part.json`).
+fn write_survey(
+    dir: &std::path::Path,
+    products: &[ghostship::jobs::Product],
+    quiet: bool,
+) -> anyhow::Result<()> {
+    ghostship::jobs::writer::replace_products_in(dir, products, SURVEY_FILES)?;
+    if !quiet {
+        for product in products {
+            eprintln!("wrote {}", dir.join(&product.name).display());
+        }
+    }
+    Ok(())
 }
 
 /// Arguments of `ghostship survey-merge`.
@@ -150,6 +180,19 @@ pub struct SurveyMergeArgs {
 
 /// Run `ghostship survey-merge`.
 pub fn merge(args: SurveyMergeArgs, quiet: bool) -> anyhow::Result<()> {
+    // The joined survey would mix with (and delete the part.json of) a part in its folder.
+    let out = std::fs::canonicalize(&args.out).ok();
+    if let Some(part) = args
+        .parts
+        .iter()
+        .find(|p| out.is_some() && std::fs::canonicalize(p).ok() == out)
+    {
+        anyhow::bail!(
+            "--out {} is one of the parts ({}); give the joined survey a folder of its own",
+            args.out.display(),
+            part.display()
+        );
+    }
     let products = ghostship::jobs::survey::merge_parts(&args.parts)?;
-    super::write_into(&args.out, &products, quiet)
+    write_survey(&args.out, &products, quiet)
 }

@@ -1,7 +1,8 @@
 //! Jobs — the manifest. In: the record of every job a run did or skipped. Out: `manifest.json`
 //! in the output folder (or `manifest-shard-K-of-N.json` for one shard of a run): the program
-//! version, the pipeline, and per job its kind, resolved parameters, the SHA-256 of every input
-//! and of every output, and its status. The next run reads it back to skip unchanged jobs;
+//! version, the pipeline, per job its kind, resolved parameters, the SHA-256 of every input
+//! and of every output, and its status, and the SHA-256 of every file of the split surveys a
+//! whole run (or a merge) joined. The next run reads it back to skip unchanged jobs;
 //! [`merge`] combines the manifests of a run's shards. Nothing in it depends on time or on the
 //! number of threads, so repeated runs write the same bytes.
 
@@ -112,6 +113,18 @@ pub struct Manifest {
     pub jobs_in_pipeline: Vec<String>,
     /// The jobs this run (or shard) is responsible for.
     pub jobs: BTreeMap<String, JobRecord>,
+    /// The split surveys this run (or merge) joined, by the folder they were joined into.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub joined: BTreeMap<String, JoinedRecord>,
+}
+
+/// A split survey joined from its parts (`<name>_part_K_of_N` jobs) into `<name>/`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JoinedRecord {
+    /// The parts' job names, in part order.
+    pub parts: Vec<String>,
+    /// Every file of the joined survey, by path relative to the output folder.
+    pub outputs: BTreeMap<String, OutputRecord>,
 }
 
 /// A manifest could not be read or merged.
@@ -212,8 +225,8 @@ pub fn previous_records(dir: &Path) -> BTreeMap<String, JobRecord> {
 /// that they come from one pipeline split into N shards, that every shard 1…N is there exactly
 /// once, that together they hold every job of the pipeline exactly once, and that every job
 /// succeeded. Outputs recorded in another folder than the first are copied into it (and their
-/// SHA-256 checked). Returns the merged manifest's path.
-pub fn merge(dirs: &[PathBuf]) -> Result<PathBuf, ManifestError> {
+/// SHA-256 checked), then the split surveys are joined there (and recorded in the manifest).
+pub fn merge(dirs: &[PathBuf]) -> Result<Merged, ManifestError> {
     let fail = |m: String| Err(ManifestError::Merge(m));
     let Some(target) = dirs.first() else {
         return fail("give at least one folder".into());
@@ -283,15 +296,27 @@ pub fn merge(dirs: &[PathBuf]) -> Result<PathBuf, ManifestError> {
     let mut merged = first.clone();
     merged.shard = None;
     merged.jobs = BTreeMap::new();
+    merged.joined = BTreeMap::new();
     for ((name, dir), record) in jobs {
         if dir != *target {
             copy_outputs(&dir, target, &record)?;
         }
         merged.jobs.insert(name, record);
     }
+    let groups = super::survey::split_surveys_in(target, &merged);
+    let joined = super::survey::join_split_surveys(target, &groups, &mut merged, true);
     let path = target.join(MANIFEST_NAME);
     crate::output::write_atomic(&path, &merged.to_json())?;
-    Ok(path)
+    Ok(Merged { path, joined })
+}
+
+/// What [`merge`] wrote.
+#[derive(Debug)]
+pub struct Merged {
+    /// The merged manifest.
+    pub path: PathBuf,
+    /// The split surveys it joined (or why one could not be joined).
+    pub joined: Vec<super::survey::JoinOutcome>,
 }
 
 /// Every job record of the shards, keyed by name and folder; a job in two shards, or failed, is

@@ -1,7 +1,8 @@
 //! Jobs — the job loop. In: planned jobs ([`PlannedJob`]: a name, a validated request, the
 //! SHA-256 of its inputs and its resolved parameters) and [`RunOptions`] (output folder, `-j N`,
 //! `--force`, `--dry-run`, `--shard K/N`). Out: every job's outputs under `<out>/<job>/`, the
-//! manifest, and a [`RunReport`] (status, time and outputs per job).
+//! split surveys joined (a whole run), the manifest, and a [`RunReport`] (status, time and
+//! outputs per job, the joins).
 //!
 //! A job whose key (program version, kind, parameters, input hashes) matches a successful
 //! record of an earlier run, with every recorded output still present at its recorded size, is
@@ -208,6 +209,9 @@ pub struct RunReport {
     pub removed_temp_files: Vec<PathBuf>,
     /// The manifest written (`None` for a dry run).
     pub manifest: Option<PathBuf>,
+    /// The split surveys of the pipeline: joined (a whole run), or their stale joined files
+    /// removed (a shard, or a part failed), or why they could not be joined.
+    pub joined: Vec<super::survey::JoinOutcome>,
 }
 
 impl RunReport {
@@ -283,6 +287,7 @@ pub fn run_jobs(
             jobs: shared.rows.into_values().collect(),
             removed_temp_files,
             manifest: None,
+            joined: Vec::new(),
         });
     }
     // Costliest first, so the last job to finish is a short one.
@@ -294,12 +299,20 @@ pub fn run_jobs(
     );
     let state = Mutex::new(shared);
     execute(jobs, &to_run, options, progress, &state, &manifest_path)?;
-    let shared = state.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut shared = state.into_inner().unwrap_or_else(|e| e.into_inner());
+    // A whole run joins its split surveys; a shard leaves that to `pipeline merge`.
+    let joined = super::survey::join_split_surveys(
+        &options.out_dir,
+        &super::survey::split_surveys(jobs),
+        &mut shared.manifest,
+        options.shard.is_none(),
+    );
     write_atomic(&manifest_path, &shared.manifest.to_json())?;
     Ok(RunReport {
         jobs: shared.rows.into_values().collect(),
         removed_temp_files,
         manifest: Some(manifest_path),
+        joined,
     })
 }
 
@@ -362,6 +375,7 @@ fn empty_manifest(jobs: &[PlannedJob], options: &RunOptions) -> Manifest {
             .into_iter()
             .collect(),
         jobs: BTreeMap::new(),
+        joined: BTreeMap::new(),
     }
 }
 

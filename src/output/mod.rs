@@ -1,6 +1,8 @@
 //! Output — the one place that writes files. Exporters elsewhere return bytes; this module writes
 //! them atomically (temporary file in the same folder, then rename), so a failed or killed run
-//! never leaves a partly written output under its final name. Temporary files are named
+//! never leaves a partly written output under its final name; [`write_all_atomic`] writes every
+//! file of a set before it renames any, so a failed write leaves the earlier set as it was.
+//! Temporary files are named
 //! `.<name>.ghostship-tmp.<host>.<pid>`: [`remove_dead_temp_files`] finds those whose process
 //! has died on this host and deletes them.
 
@@ -26,6 +28,57 @@ pub struct WriteError {
 /// Write `bytes` to `path` atomically: the data goes to a temporary file beside `path`, is flushed
 /// to disk and then renamed over `path`. Parent folders are created.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    write_all_atomic(&[(path, bytes)], &[])
+}
+
+/// Write a set of files that belong together (one job's outputs): every file is first written
+/// to a temporary file beside its final name and flushed to disk; only when all of them are
+/// written are the files in `remove` deleted (missing ones are fine) and the temporary files
+/// renamed into place, in the order given. A failure while writing changes no file under a
+/// final name and leaves no temporary file. Parent folders are created.
+pub fn write_all_atomic(files: &[(&Path, &[u8])], remove: &[PathBuf]) -> Result<(), WriteError> {
+    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
+    let discard = |staged: &[(PathBuf, &Path)]| {
+        for (tmp, _) in staged {
+            let _ = std::fs::remove_file(tmp);
+        }
+    };
+    for &(path, bytes) in files {
+        match stage(path, bytes) {
+            Ok(tmp) => staged.push((tmp, path)),
+            Err(e) => {
+                discard(&staged);
+                return Err(e);
+            }
+        }
+    }
+    for path in remove {
+        match std::fs::remove_file(path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                discard(&staged);
+                return Err(WriteError {
+                    path: path.clone(),
+                    source: e,
+                });
+            }
+            _ => {}
+        }
+    }
+    for (k, (tmp, path)) in staged.iter().enumerate() {
+        if let Err(source) = std::fs::rename(tmp, path) {
+            discard(&staged[k..]);
+            return Err(WriteError {
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Write `bytes` to a temporary file beside `path` (parent folders created), flushed to disk;
+/// returns the temporary file's path.
+fn stage(path: &Path, bytes: &[u8]) -> Result<PathBuf, WriteError> {
     let wrap = |source| WriteError {
         path: path.to_path_buf(),
         source,
@@ -47,13 +100,13 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        f.sync_all()
     })();
-    if result.is_err() {
+    if let Err(source) = result {
         let _ = std::fs::remove_file(&tmp);
+        return Err(wrap(source));
     }
-    result.map_err(wrap)
+    Ok(tmp)
 }
 
 /// What sits between an output's name and the host and pid in its temporary file's name.

@@ -196,12 +196,19 @@ fn read_document(
         let Some(DeValue::Array(items)) = doc.get(kind).map(|v| v.get_ref()) else {
             continue;
         };
-        for item in items.iter() {
+        for (k, item) in items.iter().enumerate() {
             let DeValue::Table(own) = item.get_ref() else {
                 problems.push((item.span(), format!("{kind}: expected a table")));
                 continue;
             };
-            let jobs = job_table(kind, keys, own, item.span(), &defaults, folder, problems);
+            let table = TableRef {
+                kind,
+                ordinal: k + 1,
+                keys,
+                own,
+                span: item.span(),
+            };
+            let jobs = job_table(&table, &defaults, folder, problems);
             named.extend(jobs.into_iter().map(|j| (item.span(), j)));
         }
     }
@@ -234,16 +241,37 @@ fn check_default_keys(defaults: &DeTable, problems: &mut Vec<Problem>) {
     }
 }
 
-/// One job table: its own keys checked, the defaults it accepts merged in, expanded to jobs.
-fn job_table(
-    kind: &str,
-    keys: &[&str],
-    own: &DeTable,
+/// One `[[kind]]` table of the file, as written.
+struct TableRef<'a, 'i> {
+    /// `profile`, `trace`, …
+    kind: &'a str,
+    /// Its place among the file's tables of its kind (1-based).
+    ordinal: usize,
+    /// The keys its kind accepts.
+    keys: &'a [&'a str],
+    /// Its own keys.
+    own: &'a DeTable<'i>,
+    /// Its span.
     span: std::ops::Range<usize>,
+}
+
+/// One job table: its own keys checked, the defaults it accepts merged in, expanded to jobs.
+/// Problems with its values name the table (`[[survey]] arctic`, by its `name`, or
+/// `[[trace]] #2`, by its place among the tables of its kind).
+fn job_table(
+    table_ref: &TableRef,
     defaults: &DeTable,
     folder: &Path,
     problems: &mut Vec<Problem>,
 ) -> Vec<NamedJob> {
+    let TableRef {
+        kind,
+        ordinal,
+        keys,
+        own,
+        ..
+    } = *table_ref;
+    let span = table_ref.span.clone();
     let mut merged = DeTable::new();
     for (k, v) in defaults.iter() {
         if keys.contains(&k.get_ref().as_ref()) {
@@ -284,7 +312,16 @@ fn job_table(
         "survey" => tables::survey_jobs(&mut table),
         _ => tables::render_jobs(&mut table, &own_keys),
     };
-    problems.append(&mut table.problems);
+    let label = match merged.get("name").map(|v| v.get_ref()) {
+        Some(DeValue::String(name)) => format!("[[{kind}]] {name}"),
+        _ => format!("[[{kind}]] #{ordinal}"),
+    };
+    problems.extend(
+        table
+            .problems
+            .drain(..)
+            .map(|(at, message)| (at, format!("{label}: {message}"))),
+    );
     for (name, _) in &jobs {
         if let Err(e) = check_name(name) {
             let at = merged.get("name").map_or(table.span.clone(), |v| v.span());

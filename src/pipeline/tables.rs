@@ -25,8 +25,8 @@ use crate::jobs::{
 use crate::output::film::ImageFormat;
 use crate::profile::TemperatureFit;
 use crate::scene::Scene;
-use crate::survey::SurveyOptions;
 use crate::survey::sources::DateRange;
+use crate::survey::{SurveyError, SurveyOptions};
 use crate::tracer::TracerConfig;
 
 /// Keys a `[[profile]]` table accepts.
@@ -327,7 +327,17 @@ impl Table<'_, '_> {
             Ok(raw) => Some(raw),
             Err(e) => {
                 let span = e.span().unwrap_or_else(|| self.span.clone());
-                self.problems.push((span, e.message().to_string()));
+                // Name the key whose value is wrong (serde names only the type it expected).
+                let key = self
+                    .table
+                    .iter()
+                    .find(|(_, v)| v.span().contains(&span.start))
+                    .map(|(k, _)| k.get_ref().to_string());
+                let message = match key {
+                    Some(key) => format!("{key}: {}", e.message()),
+                    None => e.message().to_string(),
+                };
+                self.problems.push((span, message));
                 None
             }
         }
@@ -742,6 +752,10 @@ pub fn survey_jobs(t: &mut Table) -> Vec<NamedJob> {
     }
     let request = match SurveyRequest::new(files, dates, options) {
         Ok(r) => r.with_label_base(t.folder),
+        Err(crate::jobs::JobError::Survey(e @ SurveyError::BadOption { key, .. })) => {
+            t.problem(key, e.to_string());
+            return Vec::new();
+        }
         Err(e) => {
             t.problem_in_message(e.to_string());
             return Vec::new();

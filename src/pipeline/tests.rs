@@ -162,3 +162,45 @@ fn rejects_bad_values() {
         );
     }
 }
+
+#[test]
+fn survey_problems_name_the_job_and_the_key_at_its_value() {
+    let cases = [
+        "observer_height_m = [40.0, 10.0]",
+        "observer_height_m = 1e7",
+        "distances_m = [-1.0]",
+        "target_height_m = -3.0",
+        "fan_step_deg = 1e-300",
+        "layers_top_m = -5.0",
+        "tolerance_m = 0.0",
+        "wavelength_nm = 5.0",
+        "smooth_m = -1.0",
+        "strict = 3",
+        "fit = \"cubic\"",
+        "parts = 0",
+        "to = \"2001-01-01\"",
+        "from = \"2024-13\"",
+    ];
+    for bad in cases {
+        let key = bad.split(' ').next().unwrap();
+        // `from` is there so that a message merely mentioning "from" cannot catch the problem.
+        let from = if key == "from" {
+            ""
+        } else {
+            "from = \"2010-01-01\"\n"
+        };
+        let text = format!(
+            "[[survey]]\nname = \"arctic\"\nsources = \"../tests/data/soundings/public/igra2_USM00070026-data.txt\"\n{from}{bad}\n"
+        );
+        let found = problems(&text);
+        assert_eq!(found.len(), 1, "{bad}: {found:?}");
+        let line = if from.is_empty() { 4 } else { 5 };
+        let at = (found[0].line, found[0].column);
+        assert_eq!(at, (line, key.len() + 4), "{bad}: {found:?}");
+        let message = &found[0].message;
+        assert!(
+            message.contains("[[survey]] arctic") && message.contains(key),
+            "{bad}: {message}"
+        );
+    }
+}

@@ -394,11 +394,32 @@ pub fn read_soundings(
     path: &Path,
     options: &ReadOptions,
 ) -> Result<Vec<SoundingEntry>, SoundingError> {
+    let limit = crate::input::MAX_SOUNDING_BYTES;
+    let bytes = crate::input::read_limited(path, limit).map_err(|source| SoundingError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    soundings_in(path, bytes, options)
+}
+
+/// [`read_soundings`] of a file's bytes as read from `path` (still packed, if it is; the caller
+/// read them, e.g. to hash them too); `path` names the file in entries and errors.
+pub fn soundings_in(
+    path: &Path,
+    bytes: Vec<u8>,
+    options: &ReadOptions,
+) -> Result<Vec<SoundingEntry>, SoundingError> {
     let single = ReadOptions {
         sounding_time: None,
         ..options.clone()
     };
-    let (bytes, packing) = read_bytes(path)?;
+    let (bytes, packing) =
+        crate::input::unpack(bytes, crate::input::MAX_SOUNDING_BYTES).map_err(|source| {
+            SoundingError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
     if is_netcdf(&bytes) {
         let result = read_netcdf(&bytes, path, &single);
         return Ok(vec![SoundingEntry {

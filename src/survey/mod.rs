@@ -79,9 +79,18 @@ impl Default for SurveyOptions {
 /// Why survey options are unusable.
 #[derive(Debug, thiserror::Error)]
 pub enum SurveyError {
-    /// An option is out of range.
+    /// A source cannot be surveyed (no such file, no file matches).
     #[error("invalid survey option: {0}")]
     Invalid(String),
+    /// An option is out of range; the message starts with its key.
+    #[error("invalid survey option: {message}")]
+    BadOption {
+        /// The option's key in a `[[survey]]` pipeline table (`observer_height_m`, `from`, …;
+        /// empty when no one key is to blame).
+        key: &'static str,
+        /// What is wrong, starting with the key.
+        message: String,
+    },
     /// The standard-atmosphere reference could not be traced.
     #[error("cannot trace the standard-atmosphere reference")]
     Reference(#[source] crate::analysis::AnalysisError),
@@ -105,19 +114,24 @@ pub enum SurveyError {
 }
 
 impl SurveyOptions {
-    /// Check every option.
+    /// Check every option; an error names the option's key.
     pub fn validate(&self) -> Result<(), SurveyError> {
-        let bad = |m: String| Err(SurveyError::Invalid(m));
+        let bad = |key: &'static str, message: String| Err(SurveyError::BadOption { key, message });
         let ascending_positive = |v: &[f64]| {
             !v.is_empty()
                 && v.iter().all(|x| x.is_finite() && *x > 0.0)
                 && v.windows(2).all(|w| w[1] > w[0])
         };
-        if !ascending_positive(&self.observer_heights_m) {
-            return bad("observer heights must be > 0 m, finite and strictly ascending".into());
-        }
-        if !ascending_positive(&self.distances_m) {
-            return bad("distances must be > 0 m, finite and strictly ascending".into());
+        for (key, v) in [
+            ("observer_height_m", &self.observer_heights_m),
+            ("distances_m", &self.distances_m),
+        ] {
+            if !ascending_positive(v) {
+                return bad(
+                    key,
+                    format!("{key} {v:?} must be > 0 m, finite and strictly ascending"),
+                );
+            }
         }
         let positive = [
             ("target_height_m", self.target_height_m),
@@ -129,33 +143,68 @@ impl SurveyOptions {
         ];
         for (key, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return bad(format!("{key} must be finite and > 0, got {v}"));
+                return bad(key, format!("{key} must be finite and > 0, got {v}"));
             }
         }
         if !(self.fan_top_deg.is_finite() && self.fan_top_deg > 0.0 && self.fan_top_deg < 45.0) {
-            return bad(format!(
-                "fan_top_deg must be in (0, 45), got {}",
-                self.fan_top_deg
-            ));
+            let message = format!("fan_top_deg must be in (0, 45), got {}", self.fan_top_deg);
+            return bad("fan_top_deg", message);
         }
-        self.atmosphere
-            .validate()
-            .map_err(|e| SurveyError::Invalid(e.to_string()))?;
+        self.validate_atmosphere()?;
         let max = crate::analysis::MAX_FAN_RAYS;
         for &h in &self.observer_heights_m {
             let dip_deg = (2.0 * h / EARTH_RADIUS_M).sqrt().to_degrees();
             let span_deg = self.fan_top_deg + dip_deg + self.fan_below_dip_deg;
             let rays = span_deg / self.fan_step_deg + 1.0;
             if rays.is_nan() || rays > max as f64 {
-                return bad(format!(
-                    "fan_step_deg {:?} makes a fan of {rays:.3e} rays from {h} m; at most {max} \
-                     are allowed (give a larger step)",
-                    self.fan_step_deg
-                ));
+                return bad(
+                    "fan_step_deg",
+                    format!(
+                        "fan_step_deg {:?} makes a fan of {rays:.3e} rays from {h} m; at most \
+                         {max} are allowed (give a larger step)",
+                        self.fan_step_deg
+                    ),
+                );
             }
-            self.trace_request(h)
-                .validate()
-                .map_err(|e| SurveyError::Invalid(e.to_string()))?;
+            if let Err(e) = self.trace_request(h).validate() {
+                // The survey sets the tracer's tolerance; everything else follows the height.
+                let key = match e {
+                    crate::analysis::AnalysisError::Tracer(_) => "tolerance_m",
+                    _ => "observer_height_m",
+                };
+                return bad(key, format!("{key}: the fan from {h} m: {e}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Check the atmosphere options one at a time, so that an error names its key.
+    fn validate_atmosphere(&self) -> Result<(), SurveyError> {
+        let a = &self.atmosphere;
+        let d = AtmosphereOptions::default();
+        let alone = [
+            (
+                "wavelength_nm",
+                AtmosphereOptions {
+                    wavelength_nm: a.wavelength_nm,
+                    ..d.clone()
+                },
+            ),
+            (
+                "smooth_m",
+                AtmosphereOptions {
+                    smooth_m: a.smooth_m,
+                    ..d.clone()
+                },
+            ),
+            // Any other problem is the table's, not one key's.
+            ("", a.clone()),
+        ];
+        for (key, options) in alone {
+            if let Err(e) = options.validate() {
+                let message = e.to_string();
+                return Err(SurveyError::BadOption { key, message });
+            }
         }
         Ok(())
     }

@@ -1,12 +1,12 @@
 //! Survey — its inputs. In: what the user named (files, folders, glob patterns) and an optional
 //! date range. Out: [`SurveyItem`]s, one per sounding, in a fixed order (sources as given,
 //! folders and globs sorted by path, soundings in file order), each the sounding or why it
-//! cannot be read.
+//! cannot be read, and each file's size and SHA-256 ([`InputFile`]).
 
 use std::path::{Path, PathBuf};
 
 use super::SurveyError;
-use crate::sounding::{ReadOptions, Sounding, SoundingError, read_soundings};
+use crate::sounding::{ReadOptions, Sounding, SoundingError, soundings_in};
 
 /// One sounding to survey.
 #[derive(Debug)]
@@ -29,7 +29,7 @@ pub struct DateRange {
 }
 
 impl DateRange {
-    /// Check the dates' form (`YYYY-MM-DD`) and order.
+    /// Check the dates' form (`YYYY-MM-DD`) and order; an error names the key (`from`, `to`).
     pub fn validate(&self) -> Result<(), SurveyError> {
         for (key, d) in [("from", &self.from), ("to", &self.to)] {
             if let Some(d) = d {
@@ -39,18 +39,20 @@ impl DateRange {
                         _ => b.is_ascii_digit(),
                     });
                 if !ok {
-                    return Err(SurveyError::Invalid(format!(
-                        "date {key} {d:?} is not YYYY-MM-DD"
-                    )));
+                    return Err(SurveyError::BadOption {
+                        key,
+                        message: format!("date {key} {d:?} is not YYYY-MM-DD"),
+                    });
                 }
             }
         }
         if let (Some(a), Some(b)) = (&self.from, &self.to)
             && a > b
         {
-            return Err(SurveyError::Invalid(format!(
-                "date range {a} to {b} is empty"
-            )));
+            return Err(SurveyError::BadOption {
+                key: "to",
+                message: format!("date to {b} is before from {a}: the date range is empty"),
+            });
         }
         Ok(())
     }
@@ -120,37 +122,72 @@ fn folder_files(folder: &Path) -> Result<Vec<PathBuf>, SurveyError> {
     Ok(files)
 }
 
+/// One input file of a survey as it was read: how rows name it, its size and SHA-256 (`None`
+/// for a file that could not be read; its row says why).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct InputFile {
+    /// The file's label (as rows name it).
+    pub file: String,
+    /// Size in bytes, as stored (before any gzip or zip is inflated).
+    pub bytes: Option<u64>,
+    /// SHA-256 of those bytes (hex).
+    pub sha256: Option<String>,
+}
+
 /// Every sounding in `files` within `dates`, read with `read` (in parallel by file; the order
-/// is the files' and, inside a file, the soundings'). Each item's origin is its file's label in
-/// `labels` (the same order as `files`), with `:LINE` of its header in a record.
+/// is the files' and, inside a file, the soundings'), and each file's size and SHA-256. Each
+/// item's origin is its file's label in `labels` (the same order as `files`), with `:LINE` of
+/// its header in a record.
 pub fn expand_sources(
     files: &[PathBuf],
     labels: &[String],
     dates: &DateRange,
     read: &ReadOptions,
-) -> Vec<SurveyItem> {
+) -> (Vec<SurveyItem>, Vec<InputFile>) {
     use rayon::prelude::*;
-    let per_file: Vec<Vec<SurveyItem>> = files
+    let per_file: Vec<(Vec<SurveyItem>, InputFile)> = files
         .par_iter()
         .zip(labels)
         .map(|(path, label)| file_items(path, label, dates, read))
         .collect();
-    per_file.into_iter().flatten().collect()
+    let (items, inputs): (Vec<_>, Vec<_>) = per_file.into_iter().unzip();
+    (items.into_iter().flatten().collect(), inputs)
 }
 
-fn file_items(path: &Path, label: &str, dates: &DateRange, read: &ReadOptions) -> Vec<SurveyItem> {
+fn file_items(
+    path: &Path,
+    label: &str,
+    dates: &DateRange,
+    read: &ReadOptions,
+) -> (Vec<SurveyItem>, InputFile) {
     let name = label.to_string();
-    let entries = match read_soundings(path, read) {
+    let mut input = InputFile {
+        file: name.clone(),
+        bytes: None,
+        sha256: None,
+    };
+    let entries = crate::input::read_limited(path, crate::input::MAX_SOUNDING_BYTES)
+        .map_err(|source| SoundingError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+        .and_then(|bytes| {
+            input.bytes = Some(bytes.len() as u64);
+            input.sha256 = Some(crate::jobs::sha256_hex(&bytes));
+            soundings_in(path, bytes, read)
+        });
+    let entries = match entries {
         Ok(e) => e,
         Err(e) => {
-            return vec![SurveyItem {
+            let item = SurveyItem {
                 origin: name,
                 time: None,
                 sounding: Err(e),
-            }];
+            };
+            return (vec![item], input);
         }
     };
-    entries
+    let items = entries
         .into_iter()
         .map(|mut e| {
             if e.time.is_none() {
@@ -167,5 +204,6 @@ fn file_items(path: &Path, label: &str, dates: &DateRange, read: &ReadOptions) -
             time: e.time,
             sounding: e.result,
         })
-        .collect()
+        .collect();
+    (items, input)
 }

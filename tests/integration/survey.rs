@@ -539,10 +539,16 @@ fn the_shipped_survey_pipeline_surveys_every_shipped_sounding() {
 
 /// The pipeline of a split survey (`parts`), its sources beside it.
 fn split_pipeline(dir: &Path, parts: usize) -> PathBuf {
-    let (record, _) = record_with_corrupt_sounding(dir);
-    let record_name = record.file_name().unwrap().to_str().unwrap().to_string();
+    record_with_corrupt_sounding(dir);
     let tiksi = "Tiksi-21824_2026020600.csv";
     std::fs::copy(sounding(tiksi), dir.join(tiksi)).unwrap();
+    split_pipeline_keeping_record(dir, parts)
+}
+
+/// The pipeline of `split_pipeline` over the sources already in `dir`.
+fn split_pipeline_keeping_record(dir: &Path, parts: usize) -> PathBuf {
+    let record_name = "USM00070026-record.txt";
+    let tiksi = "Tiksi-21824_2026020600.csv";
     let pipeline = dir.join(format!("split{parts}.toml"));
     std::fs::write(
         &pipeline,
@@ -586,6 +592,12 @@ fn a_survey_split_into_parts_and_shards_joins_into_the_unsplit_survey() {
     ]);
     assert!(r.stdout.contains("joined the survey parts"), "{}", r.stdout);
     crate::support::cli::assert_same_tree(&a.join("arctic"), &whole.join("arctic"));
+    assert_manifest_lists_every_file(&a);
+    // The merged manifest, joined survey included, is the one the run in one go wrote.
+    assert_eq!(
+        json_file(&a.join("manifest.json")),
+        json_file(&parts.join("manifest.json"))
+    );
     // `ghostship survey --shard` and `survey-merge` do the same by hand; gaps are errors.
     let src = |p: &str| dir.path().join(p).to_str().unwrap().to_string();
     let record = src("USM00070026-record.txt");
@@ -678,4 +690,211 @@ fn review_edge_cases_are_errors_or_right_not_panics() {
     ]);
     ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(read_csv(&o.join("survey.csv")).len(), 1);
+}
+
+/// `record_with_corrupt_sounding`'s record with the temperature of the 2012 copies' third level
+/// changed: the same files, soundings and times, other values.
+fn change_the_2012_soundings(record: &Path) {
+    let text = std::fs::read_to_string(record).unwrap();
+    let mut blocks = igra2_blocks(&text);
+    for block in blocks.iter_mut().filter(|b| b[0][13..17] == *"2012") {
+        block[3].replace_range(22..27, "  -50");
+    }
+    std::fs::write(record, blocks.concat().join("\n") + "\n").unwrap();
+}
+
+/// `ghostship survey --quiet --shard K/N --out OUT SOURCES…`.
+fn survey_part(sources: &[&Path], shard: &str, out: &Path) {
+    let mut args = vec![
+        "survey",
+        "--quiet",
+        "--shard",
+        shard,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(sources.iter().map(|p| p.to_str().unwrap()));
+    ok(&args);
+}
+
+#[test]
+fn survey_merge_refuses_a_stale_part_of_other_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let (p1, p2) = (dir.path().join("p1"), dir.path().join("p2"));
+    survey_part(&[&record], "1/2", &p1);
+    survey_part(&[&record], "2/2", &p2);
+    // Part.json records each input's size and SHA-256, the request and the program.
+    let part = json_file(&p2.join("part.json"));
+    let bytes = std::fs::read(&record).unwrap();
+    let input = &part["inputs"][0];
+    assert_eq!(input["file"], record.to_str().unwrap(), "{input}");
+    assert_eq!(input["bytes"], bytes.len(), "{input}");
+    assert_eq!(
+        input["sha256"],
+        ghostship::jobs::sha256_hex(&bytes),
+        "{input}"
+    );
+    assert_eq!(
+        part["program"],
+        format!("ghostship {}", env!("CARGO_PKG_VERSION"))
+    );
+    assert_eq!(part["shard"]["count"], 2);
+    // The record changes (same soundings, other values); part 1 is surveyed again, the run of
+    // part 2 fails before writing, so p2 still holds the part of the old record.
+    change_the_2012_soundings(&record);
+    survey_part(&[&record], "1/2", &p1);
+    let r = fails(&[
+        "survey",
+        "--shard",
+        "2/2",
+        "--from",
+        "2024-13",
+        "--out",
+        p2.to_str().unwrap(),
+        record.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("is not YYYY-MM-DD"), "{}", r.stderr);
+    let joined = dir.path().join("joined");
+    let r = fails(&[
+        "survey-merge",
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "--out",
+        joined.to_str().unwrap(),
+    ]);
+    for needle in [
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "different inputs",
+    ] {
+        assert!(r.stderr.contains(needle), "{needle}: {}", r.stderr);
+    }
+    assert!(!joined.exists(), "a refused merge writes nothing");
+    // A part written by another program version is refused too.
+    survey_part(&[&record], "2/2", &p2);
+    ok(&[
+        "survey-merge",
+        "-q",
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "--out",
+        joined.to_str().unwrap(),
+    ]);
+    let mut part = json_file(&p2.join("part.json"));
+    part["program"] = "ghostship 0.0.0".into();
+    std::fs::write(p2.join("part.json"), serde_json::to_vec(&part).unwrap()).unwrap();
+    let r = fails(&[
+        "survey-merge",
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "--out",
+        joined.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("ghostship 0.0.0"), "{}", r.stderr);
+}
+
+#[test]
+fn a_folder_holds_the_files_of_one_survey_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, _) = record_with_corrupt_sounding(dir.path());
+    let (p1, p2) = (dir.path().join("p1"), dir.path().join("p2"));
+    survey_part(&[&record], "1/2", &p1);
+    survey_part(&[&record], "2/2", &p2);
+    // An unsplit survey into a part's folder leaves no part.json of the earlier run behind.
+    survey(&[&record], &p2, &[]);
+    assert!(!p2.join("part.json").exists(), "stale part.json kept");
+    let r = fails(&[
+        "survey-merge",
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "--out",
+        dir.path().join("j").to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("part.json"), "{}", r.stderr);
+    // The joined survey never goes into a part's folder (it would mix with that part).
+    survey_part(&[&record], "2/2", &p2);
+    let before = crate::support::cli::output_tree(&p1);
+    let r = fails(&[
+        "survey-merge",
+        p1.to_str().unwrap(),
+        p2.to_str().unwrap(),
+        "--out",
+        p1.to_str().unwrap(),
+    ]);
+    assert!(r.stderr.contains("is one of the parts"), "{}", r.stderr);
+    assert!(
+        crate::support::cli::output_tree(&p1) == before,
+        "the part was changed"
+    );
+}
+
+/// Every file under `out` but the manifests is listed in `out/manifest.json` (a job's outputs
+/// or a joined survey's) with its size and SHA-256.
+fn assert_manifest_lists_every_file(out: &Path) {
+    let manifest = json_file(&out.join("manifest.json"));
+    let mut listed = BTreeMap::new();
+    for record in manifest["jobs"].as_object().unwrap().values() {
+        listed.extend(record["outputs"].as_object().unwrap().clone());
+    }
+    for record in manifest["joined"]
+        .as_object()
+        .into_iter()
+        .flat_map(|m| m.values())
+    {
+        listed.extend(record["outputs"].as_object().unwrap().clone());
+    }
+    for (rel, bytes) in crate::support::cli::output_tree(out) {
+        if rel.starts_with("manifest") {
+            continue;
+        }
+        let record = listed
+            .get(&rel)
+            .unwrap_or_else(|| panic!("{rel} is not in the manifest: {manifest}"));
+        assert_eq!(
+            record["sha256"],
+            ghostship::jobs::sha256_hex(&bytes),
+            "{rel}"
+        );
+        assert_eq!(record["bytes"], bytes.len(), "{rel}");
+    }
+}
+
+#[test]
+fn a_joined_survey_is_in_the_manifest_and_never_stale() {
+    let dir = tempfile::tempdir().unwrap();
+    let pipeline = split_pipeline(dir.path(), 2);
+    let out = dir.path().join("out");
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    assert_manifest_lists_every_file(&out);
+    let manifest = json_file(&out.join("manifest.json"));
+    assert_eq!(
+        manifest["joined"]["arctic"]["parts"],
+        serde_json::json!(["arctic_part_1_of_2", "arctic_part_2_of_2"])
+    );
+    // The same after a second run that skips both parts.
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    assert_manifest_lists_every_file(&out);
+    // The record changes and part 2 cannot be written (a folder in the way of its table):
+    // the run fails, and the joined survey of the old record is gone rather than kept.
+    change_the_2012_soundings(&dir.path().join("USM00070026-record.txt"));
+    let blocker = out.join("arctic_part_2_of_2/survey.csv");
+    std::fs::remove_file(&blocker).unwrap();
+    std::fs::create_dir(&blocker).unwrap();
+    std::fs::write(blocker.join("x"), "").unwrap();
+    let r = crate::support::cli::pipeline_run(&pipeline, &out, &[]);
+    assert_ne!(r.code, Some(0));
+    assert!(
+        !out.join("arctic/survey.csv").exists(),
+        "stale joined survey kept"
+    );
+    let manifest = json_file(&out.join("manifest.json"));
+    assert!(manifest.get("joined").is_none(), "{manifest}");
+    // Fixed, the next run joins the parts again, as the unsplit survey of the new record.
+    std::fs::remove_dir_all(&blocker).unwrap();
+    crate::support::cli::pipeline_ok(&pipeline, &out, &[]);
+    assert_manifest_lists_every_file(&out);
+    let whole = dir.path().join("whole");
+    crate::support::cli::pipeline_ok(&split_pipeline_keeping_record(dir.path(), 1), &whole, &[]);
+    crate::support::cli::assert_same_tree(&out.join("arctic"), &whole.join("arctic"));
 }
