@@ -30,4 +30,5 @@ mod spectral;
 mod stress;
 mod survey;
 mod terrain;
+mod terrain_exact;
 mod tracer;
