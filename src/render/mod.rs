@@ -567,14 +567,20 @@ fn row_may_meet_terrain(view: &TerrainView<'_>, frame: &CameraFrame, y: u32, wid
     hi + pad >= view.may_hit_rad.0 && lo - pad <= view.may_hit_rad.1
 }
 
-/// Exact mode: the terrain hit of a sample along `dir`, its ray traced to the view's distances.
+/// Exact mode: the terrain hit of a sample along `dir`, its ray traced to every one of the view's
+/// traced distances.
 fn exact_terrain_hit(
     view: &TerrainView<'_>,
     tracer: &dyn RayTracer,
     camera_height_m: f64,
     dir: &ViewDirection,
 ) -> Option<terrain::TerrainHit> {
-    let ray = tracer.trace(camera_height_m, dir.elevation_rad, &view.distances_m, false);
+    let ray = tracer.trace(
+        camera_height_m,
+        dir.elevation_rad,
+        &view.traced.traced_m,
+        false,
+    );
     view.hit_traced(dir.azimuth_offset_rad(), &ray.heights_m, ray.end)
 }
 
@@ -783,6 +789,7 @@ pub fn render_scene(
             tolerance_px: options.tolerance_px,
             max_depth: options.max_refine_depth,
             brightness: scene.sky.brightness,
+            scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
         };
         TerrainView::new(t, tracer, frame, options.exact)
     });

@@ -14,6 +14,7 @@
 //! ice_rgb = [0.50, 0.64, 0.75]
 //! light_azimuth_deg = 180.0    # where the light comes from (clockwise from north, default 180)
 //! light_elevation_deg = 30.0   # and how high (default 30)
+//! fill_voids = true            # fill the model's voids from the heights around them (default)
 //! ```
 //!
 //! The terrain's surface is the sea level of the sphere (`earth.radius_m`); heights at or below
@@ -115,21 +116,33 @@ pub struct Terrain {
     /// How hits are coloured.
     #[serde(flatten)]
     pub palette: Palette,
+    /// Whether the model's voids were filled (`fill_voids`, default true; see
+    /// [`Dem::fill_voids`]); unfilled voids are no ground.
+    pub fill_voids: bool,
+    /// How many void samples were filled.
+    #[serde(skip)]
+    pub voids_filled: usize,
     /// Highest terrain height in the model (m; 0 if it is all sea).
     pub max_height_m: f64,
     /// The decoded model.
     #[serde(skip)]
     pub dem: Arc<Dem>,
+    /// The model's height gradients per sample ([`Dem::gradients`]), for slopes and normals.
+    #[serde(skip)]
+    pub gradients: Arc<Vec<[f32; 2]>>,
 }
 
 impl Terrain {
-    /// Terrain from a decoded model (the file is named for errors and the scene's record).
+    /// Terrain from a decoded model (the file is named for errors and the scene's record), its
+    /// voids filled first if `fill_voids`.
     pub fn new(
         dem_path: PathBuf,
-        dem: Dem,
+        mut dem: Dem,
         (observer_lat_deg, observer_lon_deg): (f64, f64),
         palette: Palette,
+        fill_voids: bool,
     ) -> Self {
+        let voids_filled = if fill_voids { dem.fill_voids() } else { 0 };
         let mut max_height_m = 0.0f64;
         for r in 0..dem.rows {
             for c in 0..dem.cols {
@@ -139,13 +152,17 @@ impl Terrain {
                 }
             }
         }
+        let gradients = Arc::new(dem.gradients());
         Self {
             dem_path,
             observer_lat_deg,
             observer_lon_deg,
             palette,
+            fill_voids,
+            voids_filled,
             max_height_m,
             dem: Arc::new(dem),
+            gradients,
         }
     }
 
@@ -180,9 +197,31 @@ impl Terrain {
     /// sea (≤ 0 m), voids and points off the model.
     #[inline]
     pub fn height_along(&self, azimuth_rad: f64, distance_m: f64, radius_m: f64) -> Option<f64> {
+        let (r, c) = self.grid_along(azimuth_rad, distance_m, radius_m)?;
+        self.dem.height_at_grid(r, c).filter(|&h| h > 0.0)
+    }
+
+    /// The model's fractional (row, column) of the point at ground distance `distance_m` along
+    /// `azimuth_rad`; `None` off the model.
+    #[inline]
+    pub fn grid_along(
+        &self,
+        azimuth_rad: f64,
+        distance_m: f64,
+        radius_m: f64,
+    ) -> Option<(f64, f64)> {
         let (lat, lon) = self.destination_deg(azimuth_rad, distance_m, radius_m);
-        let lon = self.wrap_lon(lon);
-        self.dem.height_at(lat, lon).filter(|&h| h > 0.0)
+        self.dem.grid_position(lat, self.wrap_lon(lon))
+    }
+
+    /// Slope (rad) and upward unit normal (east, north, up) of the ground at the model's
+    /// fractional row `r` and column `c`, on a sphere of `radius_m`: the gradients
+    /// ([`Dem::gradients`]) interpolated bilinearly; flat where unknown.
+    #[inline]
+    pub fn slope_at_grid(&self, r: f64, c: f64, radius_m: f64) -> (f64, [f64; 3]) {
+        self.dem
+            .gradient_at_grid(&self.gradients, r, c, radius_m)
+            .unwrap_or((0.0, [0.0, 0.0, 1.0]))
     }
 
     /// `lon_deg` shifted by whole turns to the model's longitudes when that puts it on the model.
