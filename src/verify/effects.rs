@@ -8,12 +8,13 @@ use crate::scene::Scene;
 
 /// The shipped scenes (file stems in `data/scenes/`) with terrain, haze or a sun, timed by the
 /// effects bench (the spectral fig13 is timed by `bench accuracy`: its bands are RGB frames).
-pub const EFFECT_SCENES: [&str; 5] = [
+pub const EFFECT_SCENES: [&str; 6] = [
     "fig12_novaya_zemlya",
     "fig12b_novaya_zemlya_strips",
     "fig14_island_terrain",
     "fig15_calm_sea",
     "fig16_sun_glitter",
+    "fig17_kauai_fata_morgana",
 ];
 
 /// One effect a scene may have.

@@ -31,4 +31,5 @@ mod stress;
 mod survey;
 mod terrain;
 mod terrain_exact;
+mod terrain_real;
 mod tracer;
