@@ -48,6 +48,7 @@ use super::ray_model::{FanEnd, RayTracer};
 use super::shade::Shader;
 use crate::scene::Terrain;
 use crate::scene::camera::ViewDirection;
+use crate::scene::terrain::GreatCircle;
 
 /// Most grid distances per frame.
 pub const MAX_TERRAIN_DISTANCES: usize = 2048;
@@ -232,6 +233,8 @@ pub(super) struct TerrainView<'a> {
     az_start_rad: f64,
     az_inv_step: f64,
     n_profiles: usize,
+    /// The great circle of each profile.
+    circles: Vec<GreatCircle>,
     /// The highest ground at each grid distance over all profiles (−∞: none).
     max_top_m: Vec<f64>,
     /// Where the rays are traced: the fan's (or in exact mode every sample's).
@@ -320,6 +323,9 @@ impl<'a> TerrainView<'a> {
             az_start_rad: az_lo,
             az_inv_step: 1.0 / az_step,
             n_profiles,
+            circles: (0..n_profiles)
+                .map(|p| terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step))
+                .collect(),
             max_top_m,
             fan: None,
             ray_grid_heights: Vec::new(),
@@ -659,13 +665,14 @@ impl<'a> TerrainView<'a> {
             })
     }
 
-    /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`.
+    /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`
+    /// (on the great circle of its profile, where the hit was found).
     pub(super) fn colour(&self, hit: TerrainHit, offset_rad: f64) -> [f64; 3] {
         let t = self.terrain;
         let radius = self.frame.earth_radius_m;
-        let az = self.frame.heading_rad + offset_rad;
-        let (slope, normal) = t
-            .grid_along(az, hit.distance_m, radius)
+        let (slope, normal) = self
+            .profile(offset_rad)
+            .and_then(|p| self.circles[p].grid_at(t, hit.distance_m, radius))
             .map_or((0.0, [0.0, 0.0, 1.0]), |(r, c)| {
                 t.slope_at_grid(r, c, radius)
             });
@@ -691,10 +698,12 @@ fn sample_profiles(
     (0..n_profiles)
         .into_par_iter()
         .flat_map_iter(|p| {
-            let az = frame.heading_rad + az_lo + p as f64 * az_step;
+            let circle = terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step);
             distances_m.iter().map(move |&d| {
-                terrain
-                    .height_along(az, d, radius)
+                circle
+                    .grid_at(terrain, d, radius)
+                    .and_then(|(r, c)| terrain.dem.height_at_grid(r, c))
+                    .filter(|&z| z > 0.0)
                     .map_or(f32::NEG_INFINITY, |z| z as f32)
             })
         })
