@@ -44,10 +44,10 @@
 use rayon::prelude::*;
 
 use super::elevation_fan::{ElevationFan, FanSpec};
+use super::objects::{Meet, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::Shader;
 use crate::scene::Terrain;
-use crate::scene::camera::ViewDirection;
 use crate::scene::terrain::GreatCircle;
 
 /// Most grid distances per frame.
@@ -710,37 +710,65 @@ fn sample_profiles(
         .collect()
 }
 
-/// Radiance of a sample along `dir` whose ray meets the ground at `hit`: the ground's colour
-/// (through the air between, with the sky's aerial perspective: along the ray's path where the
-/// hit carries its path integrals, else the straight chord) behind the cards nearer than the
-/// hit; `heights` (at the card distances `card_distances_m`) are cleared beyond it.
-pub(super) fn shade_hit(
-    shader: &Shader<'_>,
-    view: &TerrainView<'_>,
-    dir: &ViewDirection,
-    heights: &mut [Option<f64>],
-    card_distances_m: &[f64],
-    hit: TerrainHit,
-) -> [f64; 3] {
-    let mut ground = view.colour(hit, dir.azimuth_offset_rad());
-    if let Some(aerial) = &shader.aerial {
-        let tau = match hit.density_paths_m {
-            Some(d) => aerial.extinction.path_optical_depth(d),
-            None => aerial.extinction.chord_optical_depth(
-                aerial.earth_radius_m,
-                aerial.camera_height_m,
-                hit.height_m,
-                hit.distance_m,
-            ),
+impl TerrainView<'_> {
+    /// Whether a camera sample at apparent elevation `alpha` may meet the terrain (through
+    /// the fan; exact mode: always).
+    #[inline]
+    pub(super) fn may_hit(&self, alpha: f64) -> bool {
+        alpha >= self.may_hit_rad.0 && alpha <= self.may_hit_rad.1
+    }
+}
+
+impl SceneObject for TerrainView<'_> {
+    /// The ground a camera ray meets (through the fan, or along its own traced ray); a ray the
+    /// sea reflects meets no terrain (the reflections show the cards and the sky).
+    #[inline]
+    fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
+        let hit = match ray.along {
+            RayAlong::Fan { alpha, .. } => {
+                if !self.may_hit(alpha) {
+                    return None;
+                }
+                self.hit(alpha, ray.azimuth_offset_rad())?
+            }
+            RayAlong::Traced {
+                terrain: Some((heights, end)),
+                ..
+            } => self.hit_traced(ray.azimuth_offset_rad(), heights, end)?,
+            RayAlong::Traced { terrain: None, .. } | RayAlong::Reflected { .. } => return None,
         };
-        ground = aerial.extinction.attenuate(ground, 1.0, tau);
+        Some(Meet {
+            distance_m: hit.distance_m,
+            height_m: hit.height_m,
+            u: 0.0,
+            density_paths_m: hit.density_paths_m,
+        })
     }
-    for (h, &d) in heights.iter_mut().zip(card_distances_m) {
-        if d >= hit.distance_m {
-            *h = None;
+
+    /// The ground's colour through the air between (with the sky's aerial perspective: along
+    /// the ray's path where the meet carries its path integrals, else the straight chord);
+    /// opaque.
+    fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
+        let hit = TerrainHit {
+            distance_m: meet.distance_m,
+            height_m: meet.height_m,
+            density_paths_m: meet.density_paths_m,
+        };
+        let mut ground = self.colour(hit, ray.azimuth_offset_rad());
+        if let Some(aerial) = &shader.aerial {
+            let tau = match hit.density_paths_m {
+                Some(d) => aerial.extinction.path_optical_depth(d),
+                None => aerial.extinction.chord_optical_depth(
+                    aerial.earth_radius_m,
+                    aerial.camera_height_m,
+                    hit.height_m,
+                    hit.distance_m,
+                ),
+            };
+            ground = aerial.extinction.attenuate(ground, 1.0, tau);
         }
+        (ground, 1.0)
     }
-    shader.composite(dir, heights, ground)
 }
 
 #[cfg(test)]
