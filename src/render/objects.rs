@@ -180,3 +180,123 @@ pub(super) struct Composed {
     /// How many objects the ray met.
     pub(super) meets: usize,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::shade::AngleTable;
+
+    /// An object met at a fixed distance with a fixed colour and coverage.
+    struct Slab {
+        distance_m: f64,
+        rgb: [f64; 3],
+        alpha: f64,
+    }
+
+    impl SceneObject for Slab {
+        fn meet(&self, _ray: &SampleRay<'_>) -> Option<Meet> {
+            Some(Meet {
+                distance_m: self.distance_m,
+                height_m: 0.0,
+                u: 0.0,
+                density_paths_m: None,
+            })
+        }
+
+        fn shade(&self, _: &SampleRay<'_>, _: &Meet, _: &Shader<'_>) -> ([f64; 3], f64) {
+            (self.rgb.map(|c| c * self.alpha), self.alpha)
+        }
+    }
+
+    fn shader() -> Shader<'static> {
+        Shader {
+            cards: Vec::new(),
+            sky_table: AngleTable::new(0.0, 1.0, |_| [1.0; 3]),
+            sea_table: AngleTable::new(0.0, 1.0, |_| [0.0; 3]),
+            sun: None,
+            sun_transmittance: None,
+            sun_path: None,
+            heading_rad: 0.0,
+            fallback: [1.0; 3],
+            aerial: None,
+            distances_m: Vec::new(),
+            reflection: None,
+            terrain: None,
+        }
+    }
+
+    /// Front-to-back "over" of `slabs` in the given order, the reference.
+    fn over(slabs: &[&Slab]) -> ([f64; 3], f64) {
+        let (mut acc, mut t) = ([0.0; 3], 1.0);
+        for s in slabs {
+            for c in 0..3 {
+                acc[c] += t * (s.rgb[c] * s.alpha);
+            }
+            t *= 1.0 - s.alpha;
+            if t < OPAQUE {
+                break;
+            }
+        }
+        (acc, t)
+    }
+
+    #[test]
+    fn meets_are_composed_nearest_first_and_stably_also_past_the_inline_buffer() {
+        let dir = crate::scene::camera::Camera {
+            height_m: 10.0,
+            heading_rad: 0.0,
+            pitch_rad: 0.0,
+            hfov_rad: 0.1,
+            width: 4,
+            height: 2,
+            samples_per_pixel: 1,
+        }
+        .frame()
+        .view_direction(2.0, 1.0);
+        let ray = SampleRay::new(
+            &dir,
+            RayAlong::Fan {
+                alpha: 0.0,
+                card_heights: None,
+            },
+        );
+        let shader = shader();
+        for count in [3usize, 8, 9, 20] {
+            // Distances out of order, with ties (k % 5), translucent.
+            let slabs: Vec<Slab> = (0..count)
+                .map(|k| Slab {
+                    distance_m: 1_000.0 * ((k * 7) % 5) as f64,
+                    rgb: [k as f64, 1.0, 0.5],
+                    alpha: 0.3,
+                })
+                .collect();
+            let found = compose(&ray, slabs.iter().map(|s| s as &dyn SceneObject), &shader);
+            let mut sorted: Vec<&Slab> = slabs.iter().collect();
+            sorted.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m)); // stable
+            let (acc, t) = over(&sorted);
+            assert_eq!(found.meets, count);
+            assert_eq!((found.radiance, found.transmittance), (acc, t), "{count}");
+        }
+        // An opaque slab hides everything behind it, and composition stops there.
+        let slabs = [
+            Slab {
+                distance_m: 5.0,
+                rgb: [9.0; 3],
+                alpha: 1.0,
+            },
+            Slab {
+                distance_m: 2.0,
+                rgb: [1.0, 0.0, 0.0],
+                alpha: 0.5,
+            },
+            Slab {
+                distance_m: 5.0,
+                rgb: [7.0; 3],
+                alpha: 1.0,
+            },
+        ];
+        let found = compose(&ray, slabs.iter().map(|s| s as &dyn SceneObject), &shader);
+        assert_eq!(found.radiance, [0.5 + 0.5 * 9.0, 4.5, 4.5]);
+        assert_eq!(found.transmittance, 0.0);
+    }
+}

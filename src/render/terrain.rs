@@ -791,7 +791,7 @@ mod tests {
         }
         // Landing in the sea at 6.05 km after its last height at 5.8 km: down to 0 there.
         let mut landed = heights.clone();
-        for h in landed.iter_mut().skip(4) {
+        for h in landed.iter_mut().skip(5) {
             *h = None;
         }
         let end = FanEnd::Ground {
