@@ -7,15 +7,16 @@
 //! whether and at what ground distance the ray meets it (cards: the ray's height at the card's
 //! distance within its height range, the sample's azimuth within its width; terrain: the march
 //! along its profile), and [`SceneObject::shade`] gives its radiance there as seen at the ray's
-//! start (through the air between). [`compose`] orders the meets by distance (the nearest first;
-//! terrain before a card at the same distance) and composes them until nothing shows through,
+//! start (through the air between). [`compose`] composes the meets by distance (the nearest
+//! first; terrain before a card at the same distance) until nothing shows through, testing and
 //! shading only what is visible.
 
 use std::cell::Cell;
 
 use super::ray_model::FanEnd;
 use super::reflection::SeaFan;
-use super::shade::Shader;
+use super::shade::{Shader, ViewCard};
+use super::terrain::TerrainView;
 use crate::scene::camera::ViewDirection;
 
 /// How a sample's ray is known.
@@ -94,6 +95,10 @@ pub(super) struct Meet {
 
 /// A thing in the scene a ray can meet: a card or the terrain.
 pub(super) trait SceneObject: Sync {
+    /// The ground distance (m) at which every ray meets the object if it meets it at all (a
+    /// card), or `None` (the terrain: where depends on the ray).
+    fn fixed_distance_m(&self) -> Option<f64>;
+
     /// Whether and where `ray` meets the object (no shading).
     fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet>;
 
@@ -102,69 +107,146 @@ pub(super) trait SceneObject: Sync {
     fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64);
 }
 
-/// Meets held on the stack per sample (more spill to the heap).
-const INLINE_MEETS: usize = 8;
-
-/// `ray`'s meets with `objects`, nearest first (stable: at equal distances in `objects`'
-/// order), composed front to back: the premultiplied radiance and the transmittance left for
-/// what lies behind them. Stops shading once less than [`OPAQUE`] shows through.
-pub(super) fn compose<'o>(
+/// `ray`'s meets with the objects, nearest first, composed front to back: the premultiplied
+/// radiance and the transmittance left for what lies behind them. `fixed` are objects at fixed
+/// ground distances ([`SceneObject::fixed_distance_m`], the cards), in ascending order; `placed`
+/// the others (the terrain), whose meets are found first and merged in (before a fixed object
+/// at the same distance: the terrain hides a card standing where it is met). Stops shading once
+/// less than [`OPAQUE`] shows through, so objects behind an opaque one are not even tested.
+#[inline]
+pub(super) fn compose<O: SceneObject + Copy>(
     ray: &SampleRay<'_>,
-    objects: impl Iterator<Item = &'o dyn SceneObject>,
+    placed: impl Iterator<Item = O>,
+    fixed: impl Iterator<Item = O>,
     shader: &Shader<'_>,
 ) -> Composed {
-    let mut inline: [Option<(&'o dyn SceneObject, Meet)>; INLINE_MEETS] = [None; INLINE_MEETS];
-    let mut spill: Vec<(&'o dyn SceneObject, Meet)> = Vec::new();
-    let mut n = 0;
-    for obj in objects {
-        let Some(m) = obj.meet(ray) else {
-            continue;
-        };
-        if n < INLINE_MEETS {
-            // After every meet not farther than this one.
-            let at = inline[..n]
-                .iter()
-                .position(|x| x.is_some_and(|(_, x)| x.distance_m > m.distance_m))
-                .unwrap_or(n);
-            inline.copy_within(at..n, at + 1);
-            inline[at] = Some((obj, m));
-        } else {
-            if spill.is_empty() {
-                spill.extend(inline.iter().flatten().copied());
-            }
-            let at = spill.partition_point(|(_, x)| x.distance_m <= m.distance_m);
-            spill.insert(at, (obj, m));
+    // The placed objects' meets, nearest last (popped first; at equal distances the first
+    // object's first): usually none or one, held without allocating.
+    let mut pending = Pending::default();
+    for obj in placed {
+        if let Some(m) = obj.meet(ray) {
+            pending.insert(obj, m);
         }
-        n += 1;
     }
     let mut out = Composed {
         radiance: [0.0; 3],
         transmittance: 1.0,
-        meets: n,
+        meets: 0,
     };
-    // Shade one meet over what is in front; whether nothing more shows through.
-    let mut shade_one = |obj: &dyn SceneObject, m: &Meet| {
+    let add = |out: &mut Composed, obj: O, m: &Meet| {
         let (rgb, alpha) = obj.shade(ray, m, shader);
         for c in 0..3 {
             out.radiance[c] += out.transmittance * rgb[c];
         }
         out.transmittance *= 1.0 - alpha;
+        out.meets += 1;
         out.transmittance < OPAQUE
     };
-    if spill.is_empty() {
-        for (obj, m) in inline[..n].iter().flatten() {
-            if shade_one(*obj, m) {
-                break;
+    for obj in fixed {
+        let d = obj.fixed_distance_m().unwrap_or(f64::INFINITY);
+        while let Some((p, m)) = pending.pop_until(d) {
+            if add(&mut out, p, &m) {
+                return out;
             }
         }
-    } else {
-        for (obj, m) in &spill {
-            if shade_one(*obj, m) {
-                break;
-            }
+        if let Some(m) = obj.meet(ray)
+            && add(&mut out, obj, &m)
+        {
+            return out;
+        }
+    }
+    while let Some((p, m)) = pending.pop_until(f64::INFINITY) {
+        if add(&mut out, p, &m) {
+            return out;
         }
     }
     out
+}
+
+/// The placed objects' meets not yet composed: one inline, more on the heap (nearest last).
+struct Pending<O> {
+    one: Option<(O, Meet)>,
+    many: Vec<(O, Meet)>,
+}
+
+impl<O> Default for Pending<O> {
+    fn default() -> Self {
+        Self {
+            one: None,
+            many: Vec::new(),
+        }
+    }
+}
+
+impl<O: Copy> Pending<O> {
+    #[inline]
+    fn insert(&mut self, obj: O, m: Meet) {
+        if self.many.is_empty() && self.one.is_none() {
+            self.one = Some((obj, m));
+            return;
+        }
+        if let Some(first) = self.one.take() {
+            self.many.push(first);
+        }
+        // After the farther meets, before the equally far ones (they came first).
+        let at = self
+            .many
+            .partition_point(|(_, x)| x.distance_m > m.distance_m);
+        self.many.insert(at, (obj, m));
+    }
+
+    /// The nearest meet, if it is not farther than `d_m`.
+    #[inline]
+    fn pop_until(&mut self, d_m: f64) -> Option<(O, Meet)> {
+        if let Some((_, m)) = &self.one {
+            return if m.distance_m <= d_m {
+                self.one.take()
+            } else {
+                None
+            };
+        }
+        if self.many.last()?.1.distance_m <= d_m {
+            self.many.pop()
+        } else {
+            None
+        }
+    }
+}
+
+/// The frame's objects, each through [`SceneObject`] (a closed set, so the compositor's calls
+/// are direct, not through a vtable).
+#[derive(Clone, Copy)]
+pub(super) enum Object<'s, 'a> {
+    /// The terrain in view.
+    Terrain(&'s TerrainView<'a>),
+    /// A card.
+    Card(&'s ViewCard<'a>),
+}
+
+impl SceneObject for Object<'_, '_> {
+    #[inline(always)]
+    fn fixed_distance_m(&self) -> Option<f64> {
+        match self {
+            Object::Terrain(t) => t.fixed_distance_m(),
+            Object::Card(c) => c.fixed_distance_m(),
+        }
+    }
+
+    #[inline(always)]
+    fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
+        match self {
+            Object::Terrain(t) => t.meet(ray),
+            Object::Card(c) => c.meet(ray),
+        }
+    }
+
+    #[inline]
+    fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
+        match self {
+            Object::Terrain(t) => t.shade(ray, meet, shader),
+            Object::Card(c) => c.shade(ray, meet, shader),
+        }
+    }
 }
 
 /// Below this transmittance nothing behind shows: composition stops.
@@ -177,7 +259,7 @@ pub(super) struct Composed {
     pub(super) radiance: [f64; 3],
     /// What is left to see behind them (below [`OPAQUE`]: nothing).
     pub(super) transmittance: f64,
-    /// How many objects the ray met.
+    /// How many of the objects met were shaded (the rest lie behind an opaque one).
     pub(super) meets: usize,
 }
 
@@ -191,9 +273,15 @@ mod tests {
         distance_m: f64,
         rgb: [f64; 3],
         alpha: f64,
+        /// Whether it stands at a fixed distance (like a card) or is placed per ray.
+        fixed: bool,
     }
 
-    impl SceneObject for Slab {
+    impl SceneObject for &Slab {
+        fn fixed_distance_m(&self) -> Option<f64> {
+            self.fixed.then_some(self.distance_m)
+        }
+
         fn meet(&self, _ray: &SampleRay<'_>) -> Option<Meet> {
             Some(Meet {
                 distance_m: self.distance_m,
@@ -241,7 +329,7 @@ mod tests {
     }
 
     #[test]
-    fn meets_are_composed_nearest_first_and_stably_also_past_the_inline_buffer() {
+    fn meets_are_composed_nearest_first_and_stably() {
         let dir = crate::scene::camera::Camera {
             height_m: 10.0,
             heading_rad: 0.0,
@@ -261,16 +349,17 @@ mod tests {
             },
         );
         let shader = shader();
-        for count in [3usize, 8, 9, 20] {
+        for count in [1usize, 2, 3, 9, 20] {
             // Distances out of order, with ties (k % 5), translucent.
             let slabs: Vec<Slab> = (0..count)
                 .map(|k| Slab {
                     distance_m: 1_000.0 * ((k * 7) % 5) as f64,
                     rgb: [k as f64, 1.0, 0.5],
                     alpha: 0.3,
+                    fixed: false,
                 })
                 .collect();
-            let found = compose(&ray, slabs.iter().map(|s| s as &dyn SceneObject), &shader);
+            let found = compose(&ray, slabs.iter(), std::iter::empty(), &shader);
             let mut sorted: Vec<&Slab> = slabs.iter().collect();
             sorted.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m)); // stable
             let (acc, t) = over(&sorted);
@@ -283,20 +372,81 @@ mod tests {
                 distance_m: 5.0,
                 rgb: [9.0; 3],
                 alpha: 1.0,
+                fixed: false,
             },
             Slab {
                 distance_m: 2.0,
                 rgb: [1.0, 0.0, 0.0],
                 alpha: 0.5,
+                fixed: false,
             },
             Slab {
                 distance_m: 5.0,
                 rgb: [7.0; 3],
                 alpha: 1.0,
+                fixed: false,
             },
         ];
-        let found = compose(&ray, slabs.iter().map(|s| s as &dyn SceneObject), &shader);
+        let found = compose(&ray, slabs.iter(), std::iter::empty(), &shader);
         assert_eq!(found.radiance, [0.5 + 0.5 * 9.0, 4.5, 4.5]);
         assert_eq!(found.transmittance, 0.0);
+    }
+
+    #[test]
+    fn placed_meets_merge_into_fixed_ones_before_those_equally_far() {
+        let dir = crate::scene::camera::Camera {
+            height_m: 10.0,
+            heading_rad: 0.0,
+            pitch_rad: 0.0,
+            hfov_rad: 0.1,
+            width: 4,
+            height: 2,
+            samples_per_pixel: 1,
+        }
+        .frame()
+        .view_direction(2.0, 1.0);
+        let ray = SampleRay::new(
+            &dir,
+            RayAlong::Fan {
+                alpha: 0.0,
+                card_heights: None,
+            },
+        );
+        let shader = shader();
+        // Fixed slabs in ascending order (ties included), placed ones out of order, some at
+        // the fixed ones' distances; all translucent with distinct colours.
+        let fixed: Vec<Slab> = [1.0, 2.0, 2.0, 4.0, 6.0]
+            .iter()
+            .enumerate()
+            .map(|(k, &d)| Slab {
+                distance_m: 1_000.0 * d,
+                rgb: [k as f64, 0.5, 1.0],
+                alpha: 0.25,
+                fixed: true,
+            })
+            .collect();
+        for placed_km in [vec![], vec![2.0], vec![7.0, 0.5], vec![4.0, 2.0, 4.0, 3.0]] {
+            let placed: Vec<Slab> = placed_km
+                .iter()
+                .enumerate()
+                .map(|(k, &d)| Slab {
+                    distance_m: 1_000.0 * d,
+                    rgb: [0.5, k as f64 + 10.0, 2.0],
+                    alpha: 0.4,
+                    fixed: false,
+                })
+                .collect();
+            let found = compose(&ray, placed.iter(), fixed.iter(), &shader);
+            // The reference: placed ones first, then the fixed, sorted stably by distance.
+            let mut sorted: Vec<&Slab> = placed.iter().chain(fixed.iter()).collect();
+            sorted.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+            let (acc, t) = over(&sorted);
+            assert_eq!(found.meets, sorted.len(), "{placed_km:?}");
+            assert_eq!(
+                (found.radiance, found.transmittance),
+                (acc, t),
+                "{placed_km:?}"
+            );
+        }
     }
 }

@@ -15,7 +15,7 @@
 
 use rayon::prelude::*;
 
-use super::objects::{RayAlong, SampleRay, compose};
+use super::objects::{RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
 use crate::scene::camera::ViewDirection;
@@ -372,7 +372,7 @@ impl Shader<'_> {
                 },
                 az,
             );
-            let found = compose(&ray, self.objects(), self);
+            let found = self.compose(&ray);
             let covered = 1.0 - found.transmittance;
             if covered == 0.0 {
                 continue;

@@ -8,7 +8,7 @@
 use rayon::prelude::*;
 
 use super::air_paths::{AirPaths, Meets};
-use super::objects::{Meet, OPAQUE, RayAlong, SampleRay, SceneObject, compose};
+use super::objects::{Composed, Meet, OPAQUE, Object, RayAlong, SampleRay, SceneObject, compose};
 use super::ray_model::FanEnd;
 use super::sun::SunTransmittance;
 use super::terrain::TerrainView;
@@ -105,7 +105,12 @@ fn in_width(mut offset: f64, half_width: f64) -> bool {
 }
 
 impl SceneObject for ViewCard<'_> {
-    #[inline]
+    #[inline(always)]
+    fn fixed_distance_m(&self) -> Option<f64> {
+        Some(self.distance_m)
+    }
+
+    #[inline(always)]
     fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
         let (h, reflected) = match ray.along {
             RayAlong::Fan {
@@ -269,7 +274,7 @@ pub(super) fn wrap_pi(x: f64) -> f64 {
     if y.is_finite() { y } else { 0.0 }
 }
 
-impl Shader<'_> {
+impl<'a> Shader<'a> {
     /// Ground distance (m) of the cards with distance index `k`.
     #[inline]
     pub(super) fn card_distance_m(&self, k: usize) -> f64 {
@@ -341,14 +346,16 @@ impl Shader<'_> {
         self.shade_ray(&ray, || background)
     }
 
-    /// The frame's objects in the order [`compose`] keeps at equal distances: the terrain (it
-    /// hides a card standing exactly where it is met), then the cards, nearest first.
+    /// What `ray` meets of the frame's objects ([`compose`]): the terrain, placed per ray, and
+    /// the cards at their distances (`cards` is sorted by distance).
     #[inline]
-    pub(super) fn objects(&self) -> impl Iterator<Item = &dyn SceneObject> {
-        self.terrain
-            .iter()
-            .map(|t| t as &dyn SceneObject)
-            .chain(self.cards.iter().map(|c| c as &dyn SceneObject))
+    pub(super) fn compose(&self, ray: &SampleRay<'_>) -> Composed {
+        compose(
+            ray,
+            self.terrain.iter().map(Object::Terrain),
+            self.cards.iter().map(Object::Card),
+            self,
+        )
     }
 
     /// What a camera sample's `ray` meets ([`compose`]) over `background` (computed only when
@@ -359,7 +366,7 @@ impl Shader<'_> {
         ray: &SampleRay<'_>,
         background: impl FnOnce() -> [f64; 3],
     ) -> [f64; 3] {
-        let found = compose(ray, self.objects(), self);
+        let found = self.compose(ray);
         if found.meets == 0 {
             return background();
         }

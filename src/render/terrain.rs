@@ -720,6 +720,10 @@ impl TerrainView<'_> {
 }
 
 impl SceneObject for TerrainView<'_> {
+    fn fixed_distance_m(&self) -> Option<f64> {
+        None
+    }
+
     /// The ground a camera ray meets (through the fan, or along its own traced ray); a ray the
     /// sea reflects meets no terrain (the reflections show the cards and the sky).
     #[inline]
