@@ -1,18 +1,24 @@
 //! Frame time of the paper scenes with the real tracer: the fast path (elevation fan) at 400×200
 //! and 1920×1080, 1 sample per pixel, render only; a sun sequence (100 sun elevations of the
-//! Novaya Zemlya strips scene at 400×200 against one frame, both with the tracer prepared); exact per-pixel 3-D tracing at 400×200 for
-//! every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance); PNG and EXR encoding of a 1920×1080 film; the
-//! cost of terrain, haze and the sun at 1920×1080 (`effects_1920x1080`: each scene of
-//! [`EFFECT_SCENES`] plain, with each of its effects alone and as shipped; the interleaved
-//! medians of `examples/effects_cost.rs` are in `docs/effects_cost.md`); and the process's peak
-//! resident memory (VmHWM, printed at the end).
+//! Novaya Zemlya strips scene at 400×200 against one frame, both with the tracer prepared); the
+//! cost per frame of every kind of sequence (the jobs layer's frames with their facts, against
+//! one frame of the same scene, atmospheres loaded once); exact per-pixel 3-D tracing at 400×200
+//! for every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance);
+//! PNG and EXR encoding of a 1920×1080 film; the cost of terrain, haze and the sun at 1920×1080
+//! (`effects_1920x1080`: each scene of [`EFFECT_SCENES`] plain, with each of its effects alone
+//! and as shipped; the interleaved medians of `examples/effects_cost.rs` are in
+//! `docs/effects_cost.md`); and the process's peak resident memory (VmHWM, printed at the end).
 
 use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{Criterion, criterion_group};
 use ghostship::atmosphere::LoadedAtmosphere;
+use ghostship::jobs::AtmosphereCache;
 use ghostship::jobs::render::provenance;
+use ghostship::jobs::sequence::{
+    SequenceRequest, SequenceSettings, SweepKind, SweepSpec, TimeSpan, parse_key_sweep, parse_sweep,
+};
 use ghostship::output::{exr, png};
 use ghostship::render::sweep::render_sun_sweep;
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
@@ -121,6 +127,90 @@ fn sun_sequence(c: &mut Criterion) {
     group.finish();
 }
 
+/// A sequence request of `scene` at 400×200, 1 sample per pixel, sweeping `sweep`.
+fn sequence_request(scene: &str, sweep: SweepSpec) -> SequenceRequest {
+    let path = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/scenes")).join(scene);
+    let scene = Scene::from_file(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let settings = SequenceSettings {
+        size: Some((400, 200)),
+        spp: Some(1),
+        ..SequenceSettings::new(sweep)
+    };
+    SequenceRequest::new(scene, settings).unwrap()
+}
+
+/// One frame of `request`'s first scene, its tracer prepared, through the cached atmosphere.
+fn one_frame(request: &SequenceRequest, cache: &AtmosphereCache) -> ghostship::render::Film {
+    let scene = &request.frames()[0].scene;
+    let air = request.atmosphere().map(|a| cache.get(a).unwrap());
+    let opts = options(false);
+    let tracer = prepare_tracer(scene, air.as_deref().map(|a| &a.refractive), &opts).unwrap();
+    render_scene(scene, tracer.as_ref(), &opts).unwrap()
+}
+
+/// Every kind of sequence at 400×200: the frames the jobs layer renders (with their facts and,
+/// for the observer, transfer curves), atmospheres fitted once (the cache outlives the
+/// iterations), against one frame of the same scene. The sun over time: 100 frames (2 min
+/// apart, the camera turning with the sun, Danmarkshavn's sounding); observer heights, a card's
+/// distance and the air between two soundings: 10 frames.
+fn sequence_kinds(c: &mut Criterion) {
+    let time = TimeSpan::parse("2026-02-11T11:50Z/2026-02-11T15:08Z", 2.0).unwrap();
+    let cases = [
+        (
+            "sun_time",
+            sequence_request(
+                "seq_danmarkshavn_sunrise.toml",
+                SweepSpec::SunTime {
+                    span: time,
+                    lat_lon_deg: None,
+                    follow_sun: true,
+                },
+            ),
+        ),
+        (
+            "observer",
+            sequence_request(
+                "fig04_superior_mirage.toml",
+                parse_sweep(SweepKind::ObserverHeightM, "30:120:10").unwrap(),
+            ),
+        ),
+        (
+            "card_distance",
+            sequence_request(
+                "fig04_superior_mirage.toml",
+                parse_key_sweep("cards[1].distance_m=30000:75000:5000").unwrap(),
+            ),
+        ),
+        (
+            "soundings",
+            sequence_request(
+                "seq_utqiagvik_twelve_hours.toml",
+                SweepSpec::Soundings {
+                    to: PathBuf::from(concat!(
+                        env!("CARGO_MANIFEST_DIR"),
+                        "/tests/data/soundings/raw/USM00070026-data_2010-06-01_excerpt.txt"
+                    )),
+                    to_time: Some("2010-06-01 12".into()),
+                    step_min: 80.0,
+                },
+            ),
+        ),
+    ];
+    let mut group = c.benchmark_group("sequence_kinds_400x200");
+    group.sample_size(10);
+    for (name, request) in &cases {
+        let cache = AtmosphereCache::new();
+        eprintln!("{name}: {} frames", request.frame_count());
+        group.bench_function(format!("{name}_one_frame"), |b| {
+            b.iter(|| black_box(one_frame(request, &cache)))
+        });
+        group.bench_function(format!("{name}_{}_frames", request.frame_count()), |b| {
+            b.iter(|| black_box(request.render_frames(&cache).unwrap()))
+        });
+    }
+    group.finish();
+}
+
 /// Each effect scene at 1920×1080: plain (terrain, haze and sun taken out), with each of its
 /// effects alone, and as shipped.
 fn effects(c: &mut Criterion) {
@@ -171,6 +261,7 @@ criterion_group!(
     small,
     large,
     sun_sequence,
+    sequence_kinds,
     exact,
     effects,
     encoding

@@ -32,6 +32,7 @@ pub mod refractivity;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod solar;
 pub mod sounding;
 pub mod survey;
 pub mod tracer;

@@ -1,8 +1,8 @@
 //! Command-line layer: raw arguments (clap; bad values are usage errors, exit status 2, through
 //! value parsers) → the typed requests of the library's jobs layer (`ghostship::jobs`) → their
 //! products, printed or written. One file per command: [`profile`] (stages 1–3 and their
-//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`sequence`] (sweeps of the sun or the
-//! observer), [`compare`]
+//! report), [`trace`] (the transfer analysis), [`render`] (scenes to images), [`sequence`] (sweeps of the sun, the
+//! observer, a scene key or the air between soundings), [`compare`]
 //! (measured against synthetic layers), [`pipeline`] (batch
 //! runs of all three, shards and merge) and [`bench`] (time against error, the stress suite).
 //! Errors go back to `main` as one `anyhow` chain.
@@ -53,9 +53,11 @@ pub enum Command {
     /// Render what a camera sees through the scene's atmosphere: horizon, sea, sky, cards and
     /// sun, to PNG and/or EXR.
     Render(render::RenderArgs),
-    /// Render a sequence of frames sweeping the sun's true elevation or the observer's height
-    /// (FROM:TO:STEP): numbered PNG frames, an animated GIF and a frame index CSV.
-    Sequence(sequence::SequenceArgs),
+    /// Render a sequence of frames sweeping the sun (true elevation FROM:TO:STEP, or its position
+    /// over a UTC time span), the observer's height, any numeric scene key, or the air between
+    /// two soundings: numbered PNG (and EXR) frames, an animated GIF, an MP4 when ffmpeg is on
+    /// the PATH, a frame index CSV and plots.
+    Sequence(Box<sequence::SequenceArgs>),
     /// Measured against synthetic: trace and render a scene through a sounding and through
     /// synthetic layers (by default fitted to it), and report what differs: images of each
     /// target, horizons, trapped rays, ducts, RMSE/SSIM; writes compare.json and figures.
@@ -86,7 +88,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Profile(args) => profile::run(args, cli.quiet),
         Command::Trace(args) => trace::run(args, cli.quiet),
         Command::Render(args) => render::run(args, cli.quiet),
-        Command::Sequence(args) => sequence::run(args, cli.quiet),
+        Command::Sequence(args) => sequence::run(*args, cli.quiet),
         Command::Compare(args) => compare::run(args, cli.quiet),
         Command::Survey(args) => survey::run(args, cli.quiet),
         Command::SurveyMerge(args) => survey::merge(args, cli.quiet),

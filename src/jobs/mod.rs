@@ -114,7 +114,11 @@ impl JobRequest {
                 files.extend(synthetic.map(|p| p.to_path_buf()));
                 Some(&c.render)
             }
-            JobRequest::Sequence(s) => Some(&s.render),
+            JobRequest::Sequence(s) => {
+                let second = s.second_atmosphere();
+                files.extend(second.and_then(|a| a.source.path().map(|p| p.to_path_buf())));
+                Some(&s.render)
+            }
             _ => None,
         };
         if let Some(r) = render {
@@ -137,7 +141,10 @@ impl JobRequest {
             JobRequest::Sequence(s) => serde_json::to_value(serde_json::json!({
                 "settings": s.render.settings,
                 "sweep": s.sweep,
+                "exr": s.exr,
+                "mp4": s.mp4,
                 "atmosphere": s.render.atmosphere,
+                "second_atmosphere": s.second_atmosphere(),
                 "scene_sha256": s.render.scene.hash_hex,
             })),
             // The files themselves are the job's inputs (hashed in the manifest).

@@ -99,13 +99,13 @@ fn cost_estimate(request: &JobRequest) -> f64 {
                 r.settings.sizes[0].unwrap_or((r.scene.camera.width, r.scene.camera.height));
             let frame = 0.3 * (w as f64) * (h as f64) * spp;
             // A sun sweep traces its rays once; an observer sweep prepares every frame.
-            let setup = match s.sweep.kind {
-                crate::jobs::sequence::SweepKind::SunElevationDeg => 50_000.0,
-                crate::jobs::sequence::SweepKind::ObserverHeightM => {
-                    50_000.0 * s.sweep.count as f64
-                }
+            let count = s.frame_count() as f64;
+            let setup = if s.sweep.moves_sun() {
+                50_000.0
+            } else {
+                50_000.0 * count
             };
-            setup + frame * s.sweep.count as f64
+            setup + frame * count
         }
         JobRequest::Render(r) => {
             let spp = r.settings.spp.unwrap_or(r.scene.camera.samples_per_pixel) as f64;

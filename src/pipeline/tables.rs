@@ -14,7 +14,9 @@ use super::expand::{AtmosphereChoice, TimeSelection, atmospheres, check_file, gl
 use crate::atmosphere::AtmosphereOptions;
 use crate::jobs::cache::AtmosphereRequest;
 use crate::jobs::render::{RenderSettings, parse_size};
-use crate::jobs::sequence::{SequenceSettings, Sweep, SweepKind, parse_sweep};
+use crate::jobs::sequence::{
+    SequenceSettings, SweepKind, SweepSpec, TimeSpan, parse_key_sweep, parse_sweep,
+};
 use crate::jobs::trace::parse_elevation_spec;
 use crate::jobs::{
     CompareRequest, JobRequest, ProfileRequest, RenderRequest, SequenceRequest, SurveyRequest,
@@ -67,11 +69,21 @@ pub const SEQUENCE_KEYS: &[&str] = &[
     "scene",
     "sun_elevation_deg",
     "observer_height_m",
+    "sweep",
+    "time_utc",
+    "step_min",
+    "lat_deg",
+    "lon_deg",
+    "follow_sun",
+    "to_sounding",
+    "to_sounding_time",
     "size",
     "spp",
     "tolerance_m",
     "exposure",
     "straight",
+    "exr",
+    "mp4",
 ];
 /// Keys a `[[survey]]` table accepts.
 pub const SURVEY_KEYS: &[&str] = &[
@@ -213,11 +225,21 @@ struct RawSequence {
     scene: String,
     sun_elevation_deg: Option<String>,
     observer_height_m: Option<String>,
+    sweep: Option<String>,
+    time_utc: Option<String>,
+    step_min: Option<f64>,
+    lat_deg: Option<f64>,
+    lon_deg: Option<f64>,
+    follow_sun: Option<bool>,
+    to_sounding: Option<String>,
+    to_sounding_time: Option<String>,
     size: Option<String>,
     spp: Option<u32>,
     tolerance_m: Option<f64>,
     exposure: Option<f64>,
     straight: Option<bool>,
+    exr: Option<bool>,
+    mp4: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -557,30 +579,64 @@ fn render_settings(t: &mut Table, raw: &RawRender) -> Option<RenderSettings> {
     })
 }
 
-/// The one sweep of a `[[sequence]]` table, or a problem.
-fn sequence_sweep(t: &mut Table, raw: &RawSequence) -> Option<Sweep> {
-    let (key, kind, text) = match (&raw.sun_elevation_deg, &raw.observer_height_m) {
-        (Some(s), None) => ("sun_elevation_deg", SweepKind::SunElevationDeg, s),
-        (None, Some(s)) => ("observer_height_m", SweepKind::ObserverHeightM, s),
-        (Some(_), Some(_)) => {
-            t.problem(
-                "observer_height_m",
-                "give one sweep per sequence: sun_elevation_deg or observer_height_m, not both",
-            );
-            return None;
+/// The one sweep of a `[[sequence]]` table, or a problem (at the key it concerns).
+fn sequence_sweep(t: &mut Table, raw: &RawSequence) -> Option<SweepSpec> {
+    let step_min = raw.step_min.unwrap_or(f64::NAN);
+    let mut given: Vec<(&str, Result<SweepSpec, String>)> = Vec::new();
+    if let Some(s) = &raw.sun_elevation_deg {
+        given.push((
+            "sun_elevation_deg",
+            parse_sweep(SweepKind::SunElevationDeg, s),
+        ));
+    }
+    if let Some(s) = &raw.observer_height_m {
+        given.push((
+            "observer_height_m",
+            parse_sweep(SweepKind::ObserverHeightM, s),
+        ));
+    }
+    if let Some(s) = &raw.sweep {
+        given.push(("sweep", parse_key_sweep(s)));
+    }
+    if let Some(s) = &raw.time_utc {
+        let spec = TimeSpan::parse(s, step_min).map(|span| SweepSpec::SunTime {
+            span,
+            lat_lon_deg: raw.lat_deg.zip(raw.lon_deg),
+            follow_sun: raw.follow_sun.unwrap_or(false),
+        });
+        given.push(("time_utc", spec));
+    }
+    if let Some(s) = &raw.to_sounding {
+        let spec = SweepSpec::Soundings {
+            to: t.folder.join(s),
+            to_time: raw.to_sounding_time.clone(),
+            step_min,
+        };
+        given.push(("to_sounding", Ok(spec)));
+    }
+    if raw.lat_deg.is_some() != raw.lon_deg.is_some() {
+        t.problem("lat_deg", "give both lat_deg and lon_deg, or neither");
+        return None;
+    }
+    match given.len() {
+        1 => {
+            let (key, spec) = given.remove(0);
+            spec.map_err(|e| t.problem(key, e)).ok()
         }
-        (None, None) => {
+        0 => {
             t.problem(
                 "scene",
-                "give a sweep: sun_elevation_deg = \"FROM:TO:STEP\" or observer_height_m = \"FROM:TO:STEP\"",
+                "give a sweep: sun_elevation_deg, observer_height_m or sweep (FROM:TO:STEP), \
+                 time_utc or to_sounding (with step_min)",
             );
-            return None;
+            None
         }
-    };
-    match parse_sweep(kind, text) {
-        Ok(sweep) => Some(sweep),
-        Err(e) => {
-            t.problem(key, e);
+        _ => {
+            t.problem(
+                given[1].0,
+                "give one sweep per sequence: one of sun_elevation_deg, observer_height_m, \
+                 sweep, time_utc and to_sounding",
+            );
             None
         }
     }
@@ -608,6 +664,8 @@ pub fn sequence_jobs(t: &mut Table) -> Vec<NamedJob> {
         tolerance_m: raw.tolerance_m.unwrap_or(d.tolerance_m),
         exposure: raw.exposure.unwrap_or(d.exposure),
         straight: raw.straight.unwrap_or(false),
+        exr: raw.exr.unwrap_or(false),
+        mp4: raw.mp4.unwrap_or(false),
         ..d
     };
     let scene_path = t.folder.join(&raw.scene);

@@ -37,12 +37,14 @@
 
 use std::path::PathBuf;
 
-use super::hydrostatic::{G_OVER_R, HydrostaticTable, integrate_ln_p, virtual_temperature_k};
+use super::hydrostatic::{
+    G_OVER_R, HydrostaticTable, grid_with_nodes, integrate_ln_p, virtual_temperature_k,
+};
 use super::monotone::MonotoneCubic;
 use super::smooth::{local_linear, local_linear_varying};
 use super::standard::StandardAtmosphere;
 use super::temperature::{FitChoice, TemperatureCurve, TemperatureFit, choose_fit};
-use super::us1976::us1976;
+use super::us1976::{us1976, us1976_temperature};
 use super::{AirColumn, AirSample, MODEL_TOP_M, ProfileError};
 use crate::sounding::Sounding;
 
@@ -187,11 +189,11 @@ struct TemperatureBlend {
 impl TemperatureBlend {
     fn at(&self, h: f64) -> (f64, f64) {
         let x = (h - self.top_m).max(0.0);
-        let std = us1976(h);
+        let (std_t, std_dt) = us1976_temperature(h);
         let e1 = (-x / self.tau_m).exp();
         let e2 = (-x / self.tau_s_m).exp();
-        let t = std.temperature_k + self.delta_k * e1 + self.slope_term * x * e2;
-        let dt = std.dtemperature_dh_k_per_m - self.delta_k / self.tau_m * e1
+        let t = std_t + self.delta_k * e1 + self.slope_term * x * e2;
+        let dt = std_dt - self.delta_k / self.tau_m * e1
             + self.slope_term * (1.0 - x / self.tau_s_m) * e2;
         (t, dt)
     }
@@ -412,11 +414,16 @@ impl Profile {
             virtual_temperature_k(t, e, p)
         };
         // Lazy: a scene traced to a 40 km top reads little of the column up to 86 km.
+        // 10 m nodes through the blend's first 3 km (its bump decays over τₛ ≥ a few hundred
+        // metres), 100 m above, the US 1976 layer bases as nodes: within 1e-10 of a fine
+        // integration in ln P (hydrostatic.rs tests).
+        let kinks: Vec<f64> = super::us1976::layer_bases_geometric_m().collect();
+        let grid = grid_with_nodes(&[(top_m + 3000.0, 10.0), (f64::INFINITY, 100.0)], &kinks);
         let table = HydrostaticTable::lazy(
             top_m,
             p_top,
             MODEL_TOP_M,
-            &[(top_m + 3000.0, 5.0), (f64::INFINITY, 20.0)],
+            &grid,
             std::sync::Arc::new(tv_above),
         );
         let lnp_slope_term = dlnp_top - table.ln_p_and_slope(top_m).1;
@@ -515,8 +522,11 @@ const PRESSURE_WINDOW_FACTOR: f64 = 5.0;
 /// dense (1-second soundings have hundreds there; significant-level soundings a few).
 const DENSE_LEVELS: usize = 10;
 
-/// Integration step limit (m) for the hydrostatic knots.
-const HYDROSTATIC_STEP_M: f64 = 10.0;
+/// Integration step limit (m) for the hydrostatic knots. Each integration runs from one level
+/// to the next, where T_v is smooth (the fit's kinks are at the levels), so RK4 at 25 m is
+/// within 1e-11 of the exact ln P even through a strong inversion (1e-9 hPa at the surface,
+/// far below the 0.1 hPa a sounding reports; test `hydrostatic_knots_need_no_finer_steps`).
+pub(crate) const HYDROSTATIC_STEP_M: f64 = 25.0;
 
 /// ln P at every level, and whether it carries a measured pressure.
 ///

@@ -130,6 +130,26 @@ fn grid_heights(h0: f64, h_end: f64, grid: &[(f64, f64)]) -> Vec<f64> {
     heights
 }
 
+/// `grid` (as [`HydrostaticTable::integrate`] takes it) with each height of `nodes` made a node:
+/// a pair is cut in two there, so no RK4 step and no Hermite segment straddles a height where
+/// the temperature's slope jumps (the US 1976 layer bases above a sounding).
+pub(crate) fn grid_with_nodes(grid: &[(f64, f64)], nodes: &[f64]) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(grid.len() + nodes.len());
+    let mut below = f64::NEG_INFINITY;
+    for &(up_to, step) in grid {
+        let mut inside: Vec<f64> = nodes
+            .iter()
+            .copied()
+            .filter(|&h| h > below && h < up_to)
+            .collect();
+        inside.sort_by(f64::total_cmp);
+        out.extend(inside.into_iter().map(|h| (h, step)));
+        out.push((up_to, step));
+        below = up_to;
+    }
+    out
+}
+
 impl HydrostaticTable {
     /// Integrate upward from `(h0, p0)` to `h_end`. `grid` lists `(up_to_m, step_m)` pairs in
     /// increasing order: nodes are `step_m` apart until `up_to_m`, then the next pair applies
@@ -270,6 +290,87 @@ mod tests {
             let exact = 101_325.0 * ((t0 + lapse * h) / t0).powf(-G_OVER_R / lapse);
             assert!((p / exact - 1.0).abs() < 1e-10, "{h}: {p} {exact}");
         }
+    }
+
+    /// The largest error, as an error in n and in dn/dh (m⁻¹), of `table` against a 0.5 m RK4
+    /// integration of `tv` from `(h0, p0)`, every 10 m up to `h_end`. n − 1 ≤ 4.5e-4·P/P₀
+    /// (Ciddor at T ≥ 190 K), so an error δ in ln P is at most 4.5e-4·(P/P₀)·δ in n.
+    fn index_errors(
+        table: &HydrostaticTable,
+        (h0, p0, h_end): (f64, f64, f64),
+        tv: &dyn Fn(f64, f64) -> f64,
+    ) -> (f64, f64) {
+        let (mut worst_n, mut worst_dndh) = (0.0f64, 0.0f64);
+        let (mut h, mut ln_p) = (h0, p0.ln());
+        while h + 10.0 < h_end {
+            let to = h + 10.0 - if h == h0 { 3.73 } else { 0.0 };
+            ln_p = integrate_ln_p(h, ln_p, to, 0.5, tv);
+            h = to;
+            let weight = 4.5e-4 * ln_p.exp() / 101_325.0;
+            let (got, slope) = table.ln_p_and_slope(h);
+            let exact_slope = -G_OVER_R / tv(h, ln_p.exp());
+            worst_n = worst_n.max(weight * (got - ln_p).abs());
+            worst_dndh = worst_dndh.max(weight * (slope - exact_slope).abs());
+        }
+        (worst_n, worst_dndh)
+    }
+
+    #[test]
+    fn a_coarse_grid_with_the_kinks_as_nodes_stays_within_the_tables_bound() {
+        // The column above a sounding: US 1976 with a decaying offset and a slope-matching bump
+        // (the blend of fit.rs), from a 9 km top to 86 km, kinks at the layer bases. Its error
+        // in n and dn/dh must stay below the n(h) table's default bound (1e-14), which a finer
+        // grid whose steps straddle the kinks (the former 5 m / 20 m) misses.
+        let top_m = 9_000.0;
+        let tv = |h: f64, _p: f64| {
+            let x = (h - top_m).max(0.0);
+            let (t, _) = crate::profile::us1976::us1976_temperature(h);
+            t + 4.0 * (-x / 2_000.0).exp() + 0.02 * x * (-x / 200.0).exp()
+        };
+        let span = (top_m, 30_000.0, 86_000.0);
+        let kinks: Vec<f64> = crate::profile::us1976::layer_bases_geometric_m().collect();
+        let grid = grid_with_nodes(&[(top_m + 3000.0, 10.0), (f64::INFINITY, 100.0)], &kinks);
+        let table = HydrostaticTable::integrate(top_m, 30_000.0, 86_000.0, &grid, &tv);
+        let (dn, ddndh) = index_errors(&table, span, &tv);
+        assert!(
+            dn < 1e-14 && ddndh < 1e-14,
+            "with the kinks: {dn:e}, {ddndh:e}"
+        );
+        let straddling = [(top_m + 3000.0, 5.0), (f64::INFINITY, 20.0)];
+        let old = HydrostaticTable::integrate(top_m, 30_000.0, 86_000.0, &straddling, &tv);
+        let (dn, ddndh) = index_errors(&old, span, &tv);
+        assert!(dn > 1e-14 && ddndh > 1e-14, "straddling: {dn:e}, {ddndh:e}");
+    }
+
+    #[test]
+    fn hydrostatic_knots_need_no_finer_steps() {
+        // One gap between two sounding levels 800 m apart holding a +12 K surface inversion
+        // with curvature (a PCHIP-like cubic in height): the fit's step limit must match a
+        // 0.5 m integration (itself within 2e-14 of the exact integral) to 1e-11 in ln P.
+        let cubic = |h: f64| {
+            let u = h / 800.0;
+            255.0 + 12.0 * (3.0 * u * u - 2.0 * u * u * u) + 0.8 * u * (1.0 - u) * (0.5 - u)
+        };
+        let tv = |h: f64, _p: f64| cubic(h);
+        let ln_p0 = 101_000f64.ln();
+        let coarse = integrate_ln_p(
+            0.0,
+            ln_p0,
+            800.0,
+            crate::profile::fit::HYDROSTATIC_STEP_M,
+            &tv,
+        );
+        let fine = integrate_ln_p(0.0, ln_p0, 800.0, 0.5, &tv);
+        assert!((coarse - fine).abs() < 1e-11, "{:e}", coarse - fine);
+        // Twice the step limit does not: the test can tell.
+        let double = integrate_ln_p(
+            0.0,
+            ln_p0,
+            800.0,
+            2.0 * crate::profile::fit::HYDROSTATIC_STEP_M,
+            &tv,
+        );
+        assert!((double - fine).abs() > 1e-11, "{:e}", double - fine);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! layers and refractive regimes found in it; and ([`ensemble`]) perturbed member profiles for
 //! sensitivity studies.
 
+mod blend;
 pub mod ensemble;
 mod error;
 mod fit;
@@ -18,6 +19,7 @@ mod synthetic;
 mod temperature;
 pub mod us1976;
 
+pub use blend::TimeBlend;
 pub use error::ProfileError;
 pub use fit::{FitOptions, Profile, ProfileKnot};
 pub use inversion::{InversionOptions, detect_inversions};

@@ -39,7 +39,7 @@ use toml::Spanned;
 
 use super::error::line_column;
 use super::hydrostatic::{HydrostaticTable, virtual_temperature_k};
-use super::us1976::us1976;
+use super::us1976::us1976_temperature;
 use super::{AirColumn, AirSample, MODEL_TOP_M, ProfileError};
 use crate::units::{
     celsius_to_kelvin, hpa_to_pa, kelvin_to_celsius, saturation_vapour_pressure_pa,
@@ -450,19 +450,19 @@ impl SyntheticAtmosphere {
                 } else {
                     let at_tropopause = self.surface_temperature_k
                         + lapse_rate_k_per_m * (tropopause_m - self.surface_height_m);
-                    let std = us1976(h);
+                    let (std_t, std_dt) = us1976_temperature(h);
                     (
-                        at_tropopause + std.temperature_k - us1976(tropopause_m).temperature_k,
-                        std.dtemperature_dh_k_per_m,
+                        at_tropopause + std_t - us1976_temperature(tropopause_m).0,
+                        std_dt,
                     )
                 }
             }
             Background::Us1976 => {
-                let std = us1976(h);
+                let (std_t, std_dt) = us1976_temperature(h);
                 (
-                    self.surface_temperature_k + std.temperature_k
-                        - us1976(self.surface_height_m).temperature_k,
-                    std.dtemperature_dh_k_per_m,
+                    self.surface_temperature_k + std_t
+                        - us1976_temperature(self.surface_height_m).0,
+                    std_dt,
                 )
             }
         };
@@ -652,7 +652,7 @@ mod tests {
         // Above the tropopause: the US1976 shape (isothermal from 11 km geopotential).
         let above = a.air_at(10_000.0);
         let trop = t0 + 5.0 - 0.0065 * 9000.0;
-        let shape = us1976(10_000.0).temperature_k - us1976(9000.0).temperature_k;
+        let shape = us1976_temperature(10_000.0).0 - us1976_temperature(9000.0).0;
         assert!((above.temperature_k - (trop + shape)).abs() < 1e-9);
         assert!(matches!(
             a.background(),

@@ -99,11 +99,41 @@ pub fn us1976(height_m: f64) -> StandardAir {
     air
 }
 
-fn layer_state(base_t: f64, base_p: f64, lapse: f64, dh: f64, g_over_r: f64) -> (f64, f64) {
+/// The standard atmosphere's temperature (K) and dT/dh (K per geometric m) at a geometric
+/// height (m): exactly [`us1976`]'s, without the pressure (no `powf` per layer), for the
+/// temperature blend above a sounding's top, which the hydrostatic column evaluates thousands
+/// of times per sounding.
+pub fn us1976_temperature(height_m: f64) -> (f64, f64) {
+    let h = geometric_to_geopotential_m(height_m).clamp(-5_000.0, US1976_TOP_GEOPOTENTIAL_M);
+    let mut base_t = US1976_SEA_LEVEL_TEMPERATURE_K;
+    let mut index = 0;
+    while index + 1 < LAYERS.len() && h >= LAYERS[index + 1].0 {
+        let (base_h, lapse) = LAYERS[index];
+        base_t = layer_temperature(base_t, lapse, LAYERS[index + 1].0 - base_h);
+        index += 1;
+    }
+    let (base_h, lapse) = LAYERS[index];
+    let ratio = US1976_EARTH_RADIUS_M / (US1976_EARTH_RADIUS_M + height_m);
+    (
+        layer_temperature(base_t, lapse, h - base_h),
+        lapse * (ratio * ratio),
+    )
+}
+
+/// The temperature `dh` above a layer base, as [`layer_state`] computes it.
+fn layer_temperature(base_t: f64, lapse: f64, dh: f64) -> f64 {
     if lapse == 0.0 {
-        (base_t, base_p * (-g_over_r * dh / base_t).exp())
+        base_t
     } else {
-        let t = base_t + lapse * dh;
+        base_t + lapse * dh
+    }
+}
+
+fn layer_state(base_t: f64, base_p: f64, lapse: f64, dh: f64, g_over_r: f64) -> (f64, f64) {
+    let t = layer_temperature(base_t, lapse, dh);
+    if lapse == 0.0 {
+        (t, base_p * (-g_over_r * dh / base_t).exp())
+    } else {
         (t, base_p * (base_t / t).powf(g_over_r / lapse))
     }
 }
@@ -111,6 +141,22 @@ fn layer_state(base_t: f64, base_p: f64, lapse: f64, dh: f64, g_over_r: f64) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_temperature_alone_is_the_full_models_bit_for_bit() {
+        for i in 0..=20_000 {
+            // −6 km to 88 km: every layer, the clamps at both ends.
+            let h = -6_000.0 + f64::from(i) * 4.7;
+            let full = us1976(h);
+            let (t, dt) = us1976_temperature(h);
+            assert_eq!(t.to_bits(), full.temperature_k.to_bits(), "T at {h} m");
+            assert_eq!(
+                dt.to_bits(),
+                full.dtemperature_dh_k_per_m.to_bits(),
+                "dT at {h} m"
+            );
+        }
+    }
 
     fn standard(h: f64) -> StandardAir {
         us1976_at_geopotential(h, US1976_SEA_LEVEL_TEMPERATURE_K, STANDARD_PRESSURE_PA)

@@ -27,7 +27,7 @@ use super::ciddor::{CiddorDispersion, DEFAULT_CO2_PPM};
 use super::dual::Dual;
 use super::table::{GridError, HermiteGrid, Lookup};
 use crate::profile::{AirColumn, AirSample};
-use crate::tracer::{MinorBreak, StratifiedIndex};
+use crate::tracer::{MinorBreak, ScanGrid, StratifiedIndex};
 
 /// Lowest and highest wavelength (nm) the Ciddor formula is fitted for.
 pub const WAVELENGTH_RANGE_NM: (f64, f64) = (300.0, 1700.0);
@@ -49,8 +49,8 @@ pub struct TableSpec {
     pub tolerance_n: f64,
     /// Largest |Δ(dn/dh)| (m⁻¹) accepted in a cell before it falls back to exact evaluation.
     pub tolerance_dndh_per_m: f64,
-    /// Whether whole-column scans (Bouguer's envelope,
-    /// [`StratifiedIndex::scan_index_and_derivative`]) read the table too. Off by default, so a
+    /// Whether whole-column scans (Bouguer's envelope, the regime detector;
+    /// [`RefractiveAtmosphere::scan_refractivity`]) read the table too. Off by default, so a
     /// scene builds table cells only where its rays go; on where the rays visit the whole column
     /// anyway (a survey's fan climbs out to the top), which makes the scan cheap table lookups
     /// instead of exact evaluations. The table's error must then stay far below the envelope's
@@ -245,6 +245,9 @@ impl RefractiveAtmosphere {
             Ok((s.n_minus_1, s.dn_dh_per_m))
         };
         validate_column(&exact, spec.coarse_step_m, spec.coarse_top_agl_m)?;
+        let (breaks_agl_m, minor_breaks) = split_breaks(column.breaks_m(), surface_m, &exact)?;
+        let mut cuts: Vec<f64> = breaks_agl_m.clone();
+        cuts.extend(minor_breaks.iter().map(|b| b.height_m));
         let fine_cells = (spec.fine_top_agl_m / spec.fine_step_m).round() as usize;
         let fine_top = fine_cells as f64 * spec.fine_step_m;
         let fine = HermiteGrid::new(
@@ -253,7 +256,8 @@ impl RefractiveAtmosphere {
             fine_cells,
             spec.tolerance_n,
             spec.tolerance_dndh_per_m,
-        );
+        )
+        .with_breaks(cuts.clone());
         let coarse_cells =
             ((spec.coarse_top_agl_m - fine_top) / spec.coarse_step_m).round() as usize;
         let coarse = HermiteGrid::new(
@@ -262,8 +266,8 @@ impl RefractiveAtmosphere {
             coarse_cells,
             spec.tolerance_n,
             spec.tolerance_dndh_per_m,
-        );
-        let (breaks_agl_m, minor_breaks) = split_breaks(column.breaks_m(), surface_m, &exact)?;
+        )
+        .with_breaks(cuts);
         Ok(Self {
             surface_m,
             wavelength_nm,
@@ -393,6 +397,17 @@ impl RefractiveAtmosphere {
         Ok((s.n_minus_1, s.dn_dh_per_m))
     }
 
+    /// n − 1 and dn/dh (m⁻¹) at `height_agl_m` for a scan of the whole column (Bouguer's
+    /// envelope, the regime detector): exact, so that a scan fills no table cell, or from the
+    /// table where the spec says [`scans_read_table`](TableSpec::scans_read_table).
+    pub fn scan_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
+        if self.spec.scans_read_table {
+            self.table_refractivity(height_agl_m)
+        } else {
+            self.exact_refractivity(height_agl_m)
+        }
+    }
+
     /// n − 1 and dn/dh (m⁻¹) from the table (what [`StratifiedIndex`] returns, minus the 1).
     #[inline]
     pub fn table_refractivity(&self, height_agl_m: f64) -> (f64, f64) {
@@ -425,10 +440,24 @@ impl StratifiedIndex for RefractiveAtmosphere {
     /// [`StratifiedIndex::scan_index_and_derivative`]), or from the table when the spec says
     /// [`scans_read_table`](TableSpec::scans_read_table).
     fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
+        let (nm1, d) = self.scan_refractivity(height_m);
+        (1.0 + nm1, d)
+    }
+
+    /// The table's node spacing, breaks added, where scans read the table
+    /// ([`TableSpec::scans_read_table`]): a lookup at a node returns the exact value stored
+    /// there, and between nodes the table is a smooth quintic up to the next break. Otherwise
+    /// [`ScanGrid::DEFAULT`].
+    fn scan_grid(&self) -> ScanGrid {
         if self.spec.scans_read_table {
-            self.index_and_derivative(height_m)
+            ScanGrid {
+                fine_step_m: self.spec.fine_step_m,
+                fine_top_m: self.spec.fine_top_agl_m,
+                coarse_step_m: self.spec.coarse_step_m,
+                with_breaks: true,
+            }
         } else {
-            self.exact(height_m)
+            ScanGrid::DEFAULT
         }
     }
 

@@ -139,7 +139,6 @@ pub fn critical_temperature_gradient_k_per_m(
 struct Sample {
     h_agl: f64,
     dndh_km: f64,
-    dtdh: f64,
     m: f64,
     class: Option<RegimeKind>,
 }
@@ -177,7 +176,9 @@ fn crossing(a: &Sample, b: &Sample, threshold: f64) -> f64 {
 }
 
 /// Find the trapping, super-refractive and inferior-mirage layers between the surface and
-/// `top_m` (above mean sea level), sampling the exact dn/dh every `options.step_m`. Layers are
+/// `top_m` (above mean sea level), sampling dn/dh every `options.step_m` as the atmosphere's
+/// scans do ([`RefractiveAtmosphere::scan_refractivity`]: exact, or the table where its spec
+/// says so). Layers are
 /// returned bottom to top. A non-positive or NaN range or step gives an empty list.
 pub fn detect_regimes(
     atm: &RefractiveAtmosphere,
@@ -196,13 +197,12 @@ pub fn detect_regimes(
     let samples: Vec<Sample> = (0..=count)
         .map(|i| {
             let h_agl = (i as f64 * options.step_m).min(top_agl);
-            let s = atm.sample_at(surface + h_agl);
-            let dndh_km = s.dn_dh_per_m * 1e9;
+            let (n_minus_1, dn_dh_per_m) = atm.scan_refractivity(h_agl);
+            let dndh_km = dn_dh_per_m * 1e9;
             Sample {
                 h_agl,
                 dndh_km,
-                dtdh: s.air.dtemperature_dh_k_per_m,
-                m: s.n_minus_1 * 1e6 + h_agl / r * 1e6,
+                m: n_minus_1 * 1e6 + h_agl / r * 1e6,
                 class: if dndh_km.is_finite() {
                     classify(dndh_km, trap)
                 } else {
@@ -256,6 +256,11 @@ pub fn detect_regimes(
             .iter()
             .find(|s| s.dndh_km == extreme)
             .map_or(run[0].h_agl, |s| s.h_agl);
+        // dT/dh only inside the layer: a scan that reads the table has no air.
+        let dtdh: Vec<f64> = run
+            .iter()
+            .map(|s| atm.sample_at(surface + s.h_agl).air.dtemperature_dh_k_per_m)
+            .collect();
         let air = atm.sample_at(surface + at).air;
         let critical = critical_temperature_gradient_k_per_m(
             air.temperature_k,
@@ -274,8 +279,8 @@ pub fn detect_regimes(
             top_agl_m: top_agl_layer,
             min_dndh_per_km: min_dndh,
             max_dndh_per_km: max_dndh,
-            min_dtdh_k_per_m: fold(|s| s.dtdh, f64::min, f64::INFINITY),
-            max_dtdh_k_per_m: fold(|s| s.dtdh, f64::max, f64::NEG_INFINITY),
+            min_dtdh_k_per_m: dtdh.iter().copied().fold(f64::INFINITY, f64::min),
+            max_dtdh_k_per_m: dtdh.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             critical_gradient_k_per_m: critical,
             duct,
         });

@@ -13,6 +13,13 @@
 //! next to a real kink gets a wrong value there, and the cell check below sends those cells to
 //! the exact formula.
 //!
+//! A cell holding one declared break of the profile (a sounding level, a layer edge: dn/dh or
+//! d²n/dh² jumps there) is cut in two at the break, with a quintic on each side built from
+//! one-sided values at the break, each checked like a whole cell. Without the cut every such
+//! cell evaluated the exact formula, and a sounding has a break every few hundred metres: the
+//! climb out of escaping rays and every step that lands on a break evaluated the exact formula
+//! near each one.
+//!
 //! Written by hand: `splines` has no derivative and does an O(log n) search per call, and the
 //! tracer's hot loop wants an O(1) index with a per-cell fallback, which no crate offers.
 
@@ -33,7 +40,10 @@ pub struct GridError {
     /// exact formula instead (typically cells containing a kink of the profile: a knot of a C¹ fit
     /// or a lapse-rate change of the standard atmosphere).
     pub exact_cells: usize,
-    /// Number of check points (three per cell: quarter, mid and three-quarter point).
+    /// Cells cut in two at a break of the profile, a quintic on each side (see the module docs).
+    pub cut_cells: usize,
+    /// Number of check points (three per cell or piece of a cut cell: quarter, mid and
+    /// three-quarter point).
     pub samples: usize,
     /// Largest |Δn| the table returns at the check points (interpolated cells only; exact cells
     /// are exact).
@@ -70,6 +80,8 @@ pub(crate) struct HermiteGrid {
     cells: usize,
     tolerance_n: f64,
     tolerance_dndh: f64,
+    /// The profile's breaks (m, grid heights, ascending): a cell holding one is cut there.
+    breaks_m: Vec<f64>,
     chunks: Vec<OnceLock<Chunk>>,
 }
 
@@ -83,8 +95,45 @@ pub(crate) const CHUNK_CELLS: usize = 64;
 #[derive(Debug, Clone)]
 struct Chunk {
     cells: [[f64; 6]; CHUNK_CELLS],
+    /// Cells cut at a break (their entry in `cells` is NaN, as for an exact cell).
+    split: Vec<SplitCell>,
     raw_error: Vec<(f64, f64)>,
 }
+
+/// A cell cut in two at a break: a quintic below it and one above it.
+#[derive(Debug, Clone)]
+struct SplitCell {
+    /// Index of the cell in its chunk.
+    index: usize,
+    /// The break (m, grid height): heights at or above it take the upper piece.
+    break_m: f64,
+    lower: Piece,
+    upper: Piece,
+}
+
+/// A quintic Hermite over [start_m, start_m + width].
+#[derive(Debug, Clone, Copy)]
+struct Piece {
+    start_m: f64,
+    inv_width: f64,
+    coefficients: [f64; 6],
+}
+
+impl Piece {
+    #[inline]
+    fn evaluate(&self, height_m: f64) -> (f64, f64) {
+        let t = (height_m - self.start_m) * self.inv_width;
+        evaluate(&self.coefficients, t, self.inv_width)
+    }
+}
+
+/// Distance (m) a break must keep from a cell's nodes to be cut at: the central difference of
+/// a node reaches ±[`SECOND_DERIVATIVE_STEP_M`], and a node that sees the break is not used.
+const BREAK_CLEARANCE_M: f64 = 2.0 * SECOND_DERIVATIVE_STEP_M;
+
+/// How far (m) from a break its one-sided values are taken (then carried to the break along
+/// the slope and curvature): clear of the rounding of heights (~1e-9 m) on the right side.
+const ONE_SIDED_OFFSET_M: f64 = 1e-6;
 
 /// The coefficients of a cell that evaluates the exact formula.
 const EXACT_CELL: [f64; 6] = [f64::NAN; 6];
@@ -112,14 +161,55 @@ fn quintic(a: [f64; 3], b: [f64; 3]) -> [f64; 6] {
 /// A node function failed (non-finite or invalid air); carries its error.
 pub(crate) type NodeResult<E> = Result<(f64, f64), E>;
 
-/// A node at `h`: (n − 1, slope, second derivative), the slope and second derivative scaled to
-/// a cell of `step_m`.
-fn node<E>(exact: &dyn Fn(f64) -> NodeResult<E>, h: f64, step_m: f64) -> Result<[f64; 3], E> {
+/// (n − 1, dn/dh, d²n/dh²) at `h`, the last a central difference.
+fn raw_node<E>(exact: &dyn Fn(f64) -> NodeResult<E>, h: f64) -> Result<[f64; 3], E> {
     let (v, d) = exact(h)?;
     let (_, below) = exact(h - SECOND_DERIVATIVE_STEP_M)?;
     let (_, above) = exact(h + SECOND_DERIVATIVE_STEP_M)?;
-    let second = (above - below) / (2.0 * SECOND_DERIVATIVE_STEP_M);
-    Ok([v, d * step_m, second * step_m * step_m])
+    Ok([v, d, (above - below) / (2.0 * SECOND_DERIVATIVE_STEP_M)])
+}
+
+/// A raw node with its derivatives scaled to a cell of `width_m`.
+fn scaled([v, d, second]: [f64; 3], width_m: f64) -> [f64; 3] {
+    [v, d * width_m, second * width_m * width_m]
+}
+
+/// (n − 1, dn/dh, d²n/dh²) at the break `b` from one side (`side` −1 below, +1 above): the
+/// values a little way off it, the second derivative by a one-sided second-order difference,
+/// carried back to the break.
+fn one_sided_node<E>(
+    exact: &dyn Fn(f64) -> NodeResult<E>,
+    b: f64,
+    side: f64,
+) -> Result<[f64; 3], E> {
+    let (h, k) = (SECOND_DERIVATIVE_STEP_M, side * ONE_SIDED_OFFSET_M);
+    let (v0, d0) = exact(b + k)?;
+    let (_, d1) = exact(b + k + side * h)?;
+    let (_, d2) = exact(b + k + 2.0 * side * h)?;
+    let second = side * (-3.0 * d0 + 4.0 * d1 - d2) / (2.0 * h);
+    let slope = d0 - k * second;
+    Ok([v0 - k * d0 + 0.5 * k * k * second, slope, second])
+}
+
+/// The worst (|Δn|, |Δ(dn/dh)|) of `evaluate_at` against `exact` at a piece's quarter, mid and
+/// three-quarter points (NaN if `exact` fails there).
+fn check<E>(
+    exact: &dyn Fn(f64) -> NodeResult<E>,
+    start_m: f64,
+    width_m: f64,
+    evaluate_at: impl Fn(f64) -> (f64, f64),
+) -> (f64, f64) {
+    let mut worst = (0.0f64, 0.0f64);
+    for frac in [0.25, 0.5, 0.75] {
+        let h = start_m + frac * width_m;
+        let Ok((n_ex, d_ex)) = exact(h) else {
+            return (f64::NAN, f64::NAN);
+        };
+        let (n_t, d_t) = evaluate_at(h);
+        worst.0 = worst.0.max((n_t - n_ex).abs());
+        worst.1 = worst.1.max((d_t - d_ex).abs());
+    }
+    worst
 }
 
 impl HermiteGrid {
@@ -140,10 +230,73 @@ impl HermiteGrid {
             cells,
             tolerance_n,
             tolerance_dndh,
+            breaks_m: Vec::new(),
             chunks: (0..cells.div_ceil(CHUNK_CELLS))
                 .map(|_| OnceLock::new())
                 .collect(),
         }
+    }
+
+    /// The same grid, cutting each cell that holds one of `breaks_m` (m, grid heights) there.
+    pub(crate) fn with_breaks(self, mut breaks_m: Vec<f64>) -> Self {
+        breaks_m.retain(|b| b.is_finite());
+        breaks_m.sort_by(f64::total_cmp);
+        Self { breaks_m, ..self }
+    }
+
+    /// The one break cell `[x0, x1]` may be cut at: strictly inside, clear of both nodes, and
+    /// alone (no other break within reach of the cell's nodes).
+    fn cut_of(&self, x0: f64, x1: f64) -> Option<f64> {
+        let lo = self
+            .breaks_m
+            .partition_point(|&b| b <= x0 - BREAK_CLEARANCE_M);
+        let near = &self.breaks_m[lo..];
+        let count = near.partition_point(|&b| b < x1 + BREAK_CLEARANCE_M);
+        match near[..count] {
+            [b] if b > x0 + BREAK_CLEARANCE_M && b < x1 - BREAK_CLEARANCE_M => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Cell `[x0, x1]` cut at `b` from its raw end nodes, with its worst check error (both
+    /// pieces); `None` where a one-sided value cannot be evaluated.
+    fn split_cell<E>(
+        &self,
+        exact: &dyn Fn(f64) -> NodeResult<E>,
+        (x0, x1, b): (f64, f64, f64),
+        (a, z): ([f64; 3], [f64; 3]),
+    ) -> Option<(Piece, Piece, (f64, f64))> {
+        let below = one_sided_node(exact, b, -1.0).ok()?;
+        let above = one_sided_node(exact, b, 1.0).ok()?;
+        let piece = |start_m: f64, end_m: f64, p: [f64; 3], q: [f64; 3]| {
+            let width = end_m - start_m;
+            Piece {
+                start_m,
+                inv_width: 1.0 / width,
+                coefficients: quintic(scaled(p, width), scaled(q, width)),
+            }
+        };
+        let (lower, upper) = (piece(x0, b, a, below), piece(b, x1, above, z));
+        let worst_lower = check(exact, x0, b - x0, |h| lower.evaluate(h));
+        let worst_upper = check(exact, b, x1 - b, |h| upper.evaluate(h));
+        let worst = (
+            worst_lower.0.max(worst_upper.0),
+            worst_lower.1.max(worst_upper.1),
+        );
+        Some((lower, upper, worst))
+    }
+
+    /// Whether a cell (or cut cell) with check error `worst` and `coefficients` is kept.
+    fn passes<'c>(
+        &self,
+        worst: (f64, f64),
+        mut coefficients: impl Iterator<Item = &'c f64>,
+    ) -> bool {
+        worst.0 <= self.tolerance_n
+            && worst.1 <= self.tolerance_dndh
+            && worst.0.is_finite()
+            && worst.1.is_finite()
+            && coefficients.all(|c| c.is_finite())
     }
 
     /// Build chunk `c`: the nodes from `exact`, the quintic of each cell, then the
@@ -156,34 +309,41 @@ impl HermiteGrid {
         let count = CHUNK_CELLS.min(self.cells - first);
         let height = |i: usize, frac: f64| self.start_m + (i as f64 + frac) * self.step_m;
         let nodes: Result<Vec<[f64; 3]>, E> = (first..=first + count)
-            .map(|i| node(exact, height(i, 0.0), self.step_m))
+            .map(|i| raw_node(exact, height(i, 0.0)))
             .collect();
         let mut chunk = Chunk {
             cells: [EXACT_CELL; CHUNK_CELLS],
+            split: Vec::new(),
             raw_error: vec![(f64::NAN, f64::NAN); count],
         };
         let Ok(nodes) = nodes else {
             return chunk;
         };
         for (k, w) in nodes.windows(2).enumerate() {
-            let coefficients = quintic(w[0], w[1]);
-            let mut worst = (0.0f64, 0.0f64);
-            for frac in [0.25, 0.5, 0.75] {
-                let Ok((n_ex, d_ex)) = exact(height(first + k, frac)) else {
-                    worst = (f64::NAN, f64::NAN);
-                    break;
+            let (x0, x1) = (height(first + k, 0.0), height(first + k + 1, 0.0));
+            if let Some(b) = self.cut_of(x0, x1) {
+                let Some((lower, upper, worst)) = self.split_cell(exact, (x0, x1, b), (w[0], w[1]))
+                else {
+                    continue;
                 };
-                let (n_t, d_t) = evaluate(&coefficients, frac, self.inv_step);
-                worst.0 = worst.0.max((n_t - n_ex).abs());
-                worst.1 = worst.1.max((d_t - d_ex).abs());
+                let all = lower.coefficients.iter().chain(&upper.coefficients);
+                if self.passes(worst, all) {
+                    let (index, break_m) = (k, b);
+                    chunk.split.push(SplitCell {
+                        index,
+                        break_m,
+                        lower,
+                        upper,
+                    });
+                }
+                chunk.raw_error[k] = worst;
+                continue;
             }
-            let (dn, dd) = worst;
-            let interpolated = dn <= self.tolerance_n
-                && dd <= self.tolerance_dndh
-                && dn.is_finite()
-                && dd.is_finite()
-                && coefficients.iter().all(|c| c.is_finite());
-            if interpolated {
+            let coefficients = quintic(scaled(w[0], self.step_m), scaled(w[1], self.step_m));
+            let worst = check(exact, x0, self.step_m, |h| {
+                evaluate(&coefficients, (h - x0) * self.inv_step, self.inv_step)
+            });
+            if self.passes(worst, coefficients.iter()) {
                 chunk.cells[k] = coefficients;
             }
             chunk.raw_error[k] = worst;
@@ -212,10 +372,12 @@ impl HermiteGrid {
         };
         for c in 0..self.chunks.len() {
             let chunk = self.chunk(c, exact);
-            for (&(dn, dd), cell) in chunk.raw_error.iter().zip(&chunk.cells) {
+            report.cut_cells += chunk.split.len();
+            report.samples += 3 * chunk.split.len();
+            for (k, (&(dn, dd), cell)) in chunk.raw_error.iter().zip(&chunk.cells).enumerate() {
                 report.raw_max_abs_dn = report.raw_max_abs_dn.max(dn);
                 report.raw_max_abs_ddndh_per_m = report.raw_max_abs_ddndh_per_m.max(dd);
-                if cell[0].is_nan() {
+                if cell[0].is_nan() && !chunk.split.iter().any(|cut| cut.index == k) {
                     report.exact_cells += 1;
                 } else {
                     report.max_abs_dn = report.max_abs_dn.max(dn);
@@ -258,11 +420,27 @@ impl HermiteGrid {
             }
             i = cells - 1;
         }
-        let cell = &self.chunk(i / CHUNK_CELLS, exact).cells[i % CHUNK_CELLS];
+        let chunk = self.chunk(i / CHUNK_CELLS, exact);
+        let cell = &chunk.cells[i % CHUNK_CELLS];
         if cell[0].is_nan() {
-            return Lookup::Exact;
+            return Self::split_lookup(chunk, i % CHUNK_CELLS, height_m);
         }
         let (v, d) = evaluate(cell, u - i as f64, self.inv_step);
+        Lookup::Value(v, d)
+    }
+
+    /// A cell with no single quintic: one of the chunk's cut cells, or exact.
+    #[cold]
+    fn split_lookup(chunk: &Chunk, index: usize, height_m: f64) -> Lookup {
+        let Some(cut) = chunk.split.iter().find(|c| c.index == index) else {
+            return Lookup::Exact;
+        };
+        let piece = if height_m < cut.break_m {
+            &cut.lower
+        } else {
+            &cut.upper
+        };
+        let (v, d) = piece.evaluate(height_m);
         Lookup::Value(v, d)
     }
 }
@@ -330,6 +508,42 @@ mod tests {
         let err = grid.error(&f);
         assert_eq!(err.exact_cells, 1, "{err:?}");
         assert!(err.raw_max_abs_ddndh_per_m > 1e-7);
+    }
+
+    /// A declared break inside a cell cuts it: both sides interpolate to the tolerance, where
+    /// the same cell without the break evaluates the exact formula; two breaks in one cell do not
+    /// cut it.
+    #[test]
+    fn a_declared_break_cuts_its_cell() {
+        // dn/dh jumps at 10.3 and d²n/dh² is nonzero on both sides (a cubic each side).
+        let f = |h: f64| -> NodeResult<()> {
+            let x = h - 10.3;
+            if x < 0.0 {
+                Ok((1e-4 - 2e-8 * x + 1e-9 * x * x * x, -2e-8 + 3e-9 * x * x))
+            } else {
+                Ok((1e-4 - 5e-8 * x - 2e-9 * x * x, -5e-8 - 4e-9 * x))
+            }
+        };
+        let grid = HermiteGrid::new(0.0, 1.0, 20, 1e-15, 1e-15).with_breaks(vec![10.3]);
+        for h in [10.0, 10.1, 10.299_999, 10.3, 10.300_001, 10.7, 10.999] {
+            let Lookup::Value(v, d) = grid.lookup(h, &f) else {
+                panic!("{h} is not interpolated")
+            };
+            let (ve, de) = f(h).unwrap();
+            assert!(
+                (v - ve).abs() < 1e-15 && (d - de).abs() < 1e-15,
+                "{h}: {v} {ve} {d} {de}"
+            );
+        }
+        let err = grid.error(&f);
+        assert_eq!((err.exact_cells, err.cut_cells), (0, 1), "{err:?}");
+        assert!(err.max_abs_ddndh_per_m < 1e-15, "{err:?}");
+        let unbroken = HermiteGrid::new(0.0, 1.0, 20, 1e-15, 1e-15);
+        assert_eq!(unbroken.lookup(10.5, &f), Lookup::Exact);
+        let two = HermiteGrid::new(0.0, 1.0, 20, 1e-15, 1e-15).with_breaks(vec![10.3, 10.6]);
+        assert_eq!(two.lookup(10.5, &f), Lookup::Exact);
+        let at_node = HermiteGrid::new(0.0, 1.0, 20, 1e-15, 1e-15).with_breaks(vec![10.0005]);
+        assert_eq!(at_node.error(&f).cut_cells, 0);
     }
 
     /// A chunk where the exact formula fails evaluates exactly (and reports NaN-free maxima).

@@ -148,6 +148,8 @@ thread_local! {
 #[derive(Clone)]
 pub struct CurvedRays<'a, S: StratifiedIndex + ?Sized> {
     tracer: Tracer<'a, S>,
+    /// The same tracer stopping after the last distance asked for ([`RayTracer::heights_at`]).
+    stopping: Tracer<'a, S>,
     fates: Fates,
 }
 
@@ -158,8 +160,13 @@ impl<'a, S: StratifiedIndex + ?Sized> CurvedRays<'a, S> {
     /// without cards.
     pub fn new(index: &'a S, config: TracerConfig, cards_top_m: f64) -> Result<Self, TracerError> {
         let fates = Fates::new(index, &config, cards_top_m);
+        let stopping = TracerConfig {
+            stop_after_last_target: true,
+            ..config.clone()
+        };
         Ok(Self {
             tracer: Tracer::new(index, config)?,
+            stopping: Tracer::new(index, stopping)?,
             fates,
         })
     }
@@ -307,6 +314,28 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
             // Re-entered on this thread (cannot happen through the renderer): no scratch.
             Err(_) => run(&mut RayRecord::default()),
         })
+    }
+
+    fn heights_at(&self, h: f64, elevation_rad: f64, distances_m: &[f64]) -> Vec<Option<f64>> {
+        // The fate rule of `trace` without the sky direction (rays above everything stop), on
+        // the tracer that also stops past the last distance.
+        let mut watch = self
+            .fates
+            .watch(self.tracer.field(), h, elevation_rad, distances_m, false);
+        let mut record = RayRecord::default();
+        let traced =
+            self.stopping
+                .trace_into(h, elevation_rad, distances_m, &mut watch, &mut record, None);
+        let mut heights: Vec<Option<f64>> = match traced {
+            Ok(()) => record
+                .heights_m
+                .iter()
+                .map(|h| h.filter(|v| v.is_finite()))
+                .collect(),
+            Err(_) => Vec::new(),
+        };
+        heights.resize(distances_m.len(), None);
+        heights
     }
 }
 

@@ -47,6 +47,7 @@ pub struct MemoRays<'a> {
     /// Keyed with both scale heights (the second in `distances`).
     paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
+    heights: Mutex<HashMap<Key, Vec<Option<f64>>>>,
 }
 
 impl<'a> MemoRays<'a> {
@@ -57,6 +58,7 @@ impl<'a> MemoRays<'a> {
             traces: Mutex::new(HashMap::new()),
             paths: Mutex::new(HashMap::new()),
             paths_along: Mutex::new(HashMap::new()),
+            heights: Mutex::new(HashMap::new()),
         }
     }
 
@@ -147,6 +149,19 @@ impl RayTracer for MemoRays<'_> {
                 distances_m,
                 scale_heights_m,
             )
+        })
+    }
+
+    fn heights_at(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+    ) -> Vec<Option<f64>> {
+        let key = Key::new(camera_height_m, elevation_rad, distances_m, 2);
+        remembered(&self.heights, key, || {
+            self.inner
+                .heights_at(camera_height_m, elevation_rad, distances_m)
         })
     }
 }

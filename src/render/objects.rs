@@ -135,8 +135,8 @@ pub(super) fn compose<O: SceneObject + Copy>(
     };
     let add = |out: &mut Composed, obj: O, m: &Meet| {
         let (rgb, alpha) = obj.shade(ray, m, shader);
-        for c in 0..3 {
-            out.radiance[c] += out.transmittance * rgb[c];
+        for (acc, v) in out.radiance.iter_mut().zip(rgb) {
+            *acc += out.transmittance * v;
         }
         out.transmittance *= 1.0 - alpha;
         out.meets += 1;
@@ -317,8 +317,8 @@ mod tests {
     fn over(slabs: &[&Slab]) -> ([f64; 3], f64) {
         let (mut acc, mut t) = ([0.0; 3], 1.0);
         for s in slabs {
-            for c in 0..3 {
-                acc[c] += t * (s.rgb[c] * s.alpha);
+            for (a, v) in acc.iter_mut().zip(s.rgb) {
+                *a += t * (v * s.alpha);
             }
             t *= 1.0 - s.alpha;
             if t < OPAQUE {

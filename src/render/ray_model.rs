@@ -114,6 +114,19 @@ pub trait RayTracer: Sync {
     ) -> Option<RayDensityPaths> {
         None
     }
+
+    /// Only the ray's heights at `distances_m` (ascending), as [`Self::trace`] reports them;
+    /// a tracer may stop the ray once it has passed the last distance. Default: [`Self::trace`]
+    /// without the sky direction.
+    fn heights_at(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+    ) -> Vec<Option<f64>> {
+        self.trace(camera_height_m, elevation_rad, distances_m, false)
+            .heights_m
+    }
 }
 
 /// The parameters of a closed-form ray model were invalid.

@@ -1,25 +1,32 @@
-//! Stage 5c — render a sun sweep. In: a [`Scene`] with a sun, its [`RayTracer`], render options
-//! and a list of true sun elevations. Out: one [`SunFrame`] per elevation — the [`Film`] that
-//! [`render_scene`] gives for the scene with the sun there, and the sun's [`SunFacts`] read
-//! from the traced map.
+//! Stage 5c — render the frames of a sweep. In: scenes that share one view of the air (the
+//! same atmosphere, camera height, Earth and highest card: one prepared [`RayTracer`]), render
+//! options. Out: one [`SweepFrame`] per scene — the [`Film`] that [`render_scene`] gives for it
+//! and the facts read from the traced map ([`FrameFacts`]: the sun's apparent band and strips,
+//! each card's images), plus, when asked, the frame's transfer curve at a card's distance.
 //!
-//! **What is shared.** Moving the sun changes neither the camera, nor the atmosphere, nor the
-//! cards: every ray from the camera is the same ray in every frame. The frames are rendered
+//! **What is shared.** The tracer depends only on what the scenes share, and every ray in a
+//! spherically stratified atmosphere depends only on its apparent elevation (and the camera
+//! height): moving the sun (in elevation or azimuth), turning the camera, moving a card or
+//! changing the sky leaves every ray from the camera the same ray. The frames are rendered
 //! through one [`MemoRays`], so each ray (of the elevation fan, of the sun's transmittance, of
-//! the sea's reflections and glitter, of the haze) is traced once for the whole sweep and
-//! looked up by every later frame. Each frame still builds its own fan (refined around its own
-//! sun, from remembered rays) and shades every pixel, so it is bit for bit the frame a single
-//! render of that sun position gives. The union of the frames' fans is the fan widened to the
-//! whole sweep, traced once. The first frame is rendered alone (its fan is traced in parallel),
-//! then the others in parallel, each frame on its own: the films do not depend on the thread
-//! count.
+//! the sea's reflections and glitter, of the haze, of the facts) is traced once for the whole
+//! sweep and looked up by every later frame that asks for it with the same arguments. Each
+//! frame still builds its own fan (refined around its own sun, from remembered rays) and
+//! shades every pixel, so it is bit for bit the frame a single render gives. For a sun sweep
+//! the union of the frames' fans is the fan widened to the whole sweep, traced once; frames
+//! whose fans share no ray (a swept pitch, field of view or card distance) gain nothing but
+//! lose nothing either. The first frame is rendered alone (its fan is traced in parallel), then
+//! the others in parallel, each frame on its own: the films do not depend on the thread count.
 //!
 //! **Facts from the traced map.** [`SunFacts`] come from the rays through the pixel centres of
 //! one column — the column through the sun's azimuth on the middle row, or the centre column
 //! when the sun's azimuth is outside the frame: a row *shows the sun* when its ray leaves the
 //! atmosphere in a direction inside the sun's disc (cards, terrain and extinction are not
 //! considered: a sun dimmed to nothing still counts). Strips are the maximal runs of
-//! consecutive rows that show it.
+//! consecutive rows that show it. [`CardFacts`] likewise, along the column through the card's
+//! centre (none when that is outside the frame): a row *shows the card* when its ray passes the
+//! card's distance between its base and top (nearer cards and terrain not considered); each
+//! maximal run of such rows is one image.
 
 use rayon::prelude::*;
 
@@ -27,7 +34,7 @@ use super::memo::MemoRays;
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::wrap_pi;
 use super::{Film, RenderError, RenderOptions, render_scene};
-use crate::scene::{Scene, Sun};
+use crate::scene::{Card, Scene, Sun};
 
 /// What the traced map says of the sun in one frame, along the column of [`sun_column`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -40,67 +47,249 @@ pub struct SunFacts {
     pub strips: usize,
 }
 
-/// One frame of a sun sweep.
+/// What the traced map says of one card in one frame, along the column of [`card_column`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CardFacts {
+    /// Apparent elevation (rad) of the pixel centre of the lowest row that shows the card.
+    pub apparent_low_rad: Option<f64>,
+    /// Apparent elevation (rad) of the pixel centre of the highest row that shows the card.
+    pub apparent_high_rad: Option<f64>,
+    /// Number of separate runs of rows that show the card: its images (0 when none).
+    pub images: usize,
+}
+
+/// The facts of one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameFacts {
+    /// The sun's, when the scene has one.
+    pub sun: Option<SunFacts>,
+    /// Each card's, in scene order; `None` when the card's centre is outside the frame.
+    pub cards: Vec<Option<CardFacts>>,
+}
+
+/// A frame's transfer curve: where the rays through the centre column pass one ground distance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransferSamples {
+    /// The camera height (m).
+    pub camera_height_m: f64,
+    /// The ground distance (m).
+    pub distance_m: f64,
+    /// Apparent elevations (rad), from the bottom of the frame to its top.
+    pub elevations_rad: Vec<f64>,
+    /// Height (m above the surface) of each ray at the distance; `None` when it ended before.
+    pub heights_m: Vec<Option<f64>>,
+}
+
+/// One frame of a sweep.
 #[derive(Debug, Clone)]
-pub struct SunFrame {
-    /// The sun's true elevation (rad) in this frame.
-    pub sun_elevation_rad: f64,
-    /// The image: the same as [`render_scene`] of the scene with the sun at that elevation.
+pub struct SweepFrame {
+    /// The image: the same as [`render_scene`] of the frame's scene.
     pub film: Film,
-    /// The sun in the traced map.
-    pub facts: SunFacts,
+    /// The sun and the cards in the traced map.
+    pub facts: FrameFacts,
+    /// The transfer curve at the farthest card's distance, when asked for and the scene has a
+    /// card.
+    pub transfer: Option<TransferSamples>,
+}
+
+/// The column whose pixel centre on the middle row is nearest azimuth `azimuth_rad`, when that
+/// azimuth lies between the first and last columns' on that row; otherwise `None`.
+fn column_at_azimuth(scene: &Scene, azimuth_rad: f64) -> Option<u32> {
+    let cam = &scene.camera;
+    let frame = cam.frame();
+    let y = 0.5 * cam.height as f64;
+    let offset = |x: u32| wrap_pi(frame.direction(x as f64 + 0.5, y).0 - azimuth_rad);
+    let (first, last) = (offset(0), offset(cam.width - 1));
+    if first.min(last) > 0.0 || first.max(last) < 0.0 {
+        return None;
+    }
+    (0..cam.width).min_by(|&a, &b| offset(a).abs().total_cmp(&offset(b).abs()))
 }
 
 /// The column whose facts [`SunFacts`] reports: the one whose pixel centre on the middle row is
 /// nearest the sun's azimuth, when that azimuth lies between the first and last columns' on
 /// that row; otherwise the centre column.
 pub fn sun_column(scene: &Scene, sun: &Sun) -> u32 {
+    column_at_azimuth(scene, sun.azimuth_rad).unwrap_or(scene.camera.width / 2)
+}
+
+/// The column through `card`'s centre (as [`sun_column`] for its azimuth), or `None` when that
+/// is outside the frame.
+pub fn card_column(scene: &Scene, card: &Card) -> Option<u32> {
+    column_at_azimuth(scene, card.azimuth_rad)
+}
+
+/// Runs of consecutive rows (top row first) for which `shows(alpha)` holds, with the apparent
+/// elevations of the lowest and highest such rows, along column `x`.
+fn runs_along(
+    scene: &Scene,
+    x: u32,
+    shows: impl Fn(f64, f64) -> bool,
+) -> (usize, Option<f64>, Option<f64>) {
     let cam = &scene.camera;
     let frame = cam.frame();
-    let y = 0.5 * cam.height as f64;
-    let offset = |x: u32| wrap_pi(frame.direction(x as f64 + 0.5, y).0 - sun.azimuth_rad);
-    let (first, last) = (offset(0), offset(cam.width - 1));
-    if first.min(last) > 0.0 || first.max(last) < 0.0 {
-        return cam.width / 2;
+    let (mut runs, mut low, mut high) = (0, None, None);
+    let mut previous = false;
+    for y in 0..cam.height {
+        let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
+        let alpha = frame.view_direction(fx, fy).elevation_rad;
+        let azimuth = frame.direction(fx, fy).0;
+        let now = shows(alpha, azimuth);
+        if now {
+            high.get_or_insert(alpha);
+            low = Some(alpha);
+            if !previous {
+                runs += 1;
+            }
+        }
+        previous = now;
     }
-    (0..cam.width)
-        .min_by(|&a, &b| offset(a).abs().total_cmp(&offset(b).abs()))
-        .unwrap_or(cam.width / 2)
+    (runs, low, high)
 }
 
 /// The sun's facts in `scene` (which has `sun`) along column `x`, from rays traced through
 /// `tracer` (need_sky_direction: their final directions).
 pub fn sun_facts(scene: &Scene, sun: &Sun, tracer: &dyn RayTracer, x: u32) -> SunFacts {
-    let cam = &scene.camera;
-    let frame = cam.frame();
     let radius = 0.5 * sun.angular_diameter_rad;
-    let mut facts = SunFacts {
-        apparent_low_rad: None,
-        apparent_high_rad: None,
-        strips: 0,
-    };
-    let mut previous = false;
-    // Top row first: the first row that shows the sun is the highest.
-    for y in 0..cam.height {
-        let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
-        let alpha = frame.view_direction(fx, fy).elevation_rad;
-        let azimuth = frame.direction(fx, fy).0;
-        let shows = match tracer.trace(cam.height_m, alpha, &[], true).end {
+    let height_m = scene.camera.height_m;
+    let (strips, low, high) = runs_along(scene, x, |alpha, azimuth| {
+        match tracer.trace(height_m, alpha, &[], true).end {
             FanEnd::Sky { elevation_rad } => {
                 angle_between(azimuth, elevation_rad, sun.azimuth_rad, sun.elevation_rad) <= radius
             }
             _ => false,
-        };
-        if shows {
-            facts.apparent_high_rad.get_or_insert(alpha);
-            facts.apparent_low_rad = Some(alpha);
-            if !previous {
-                facts.strips += 1;
-            }
         }
-        previous = shows;
+    });
+    SunFacts {
+        apparent_low_rad: low,
+        apparent_high_rad: high,
+        strips,
     }
-    facts
+}
+
+/// `card`'s facts in `scene` along column `x`, from rays traced through `tracer` to the card's
+/// distance.
+pub fn card_facts(scene: &Scene, card: &Card, tracer: &dyn RayTracer, x: u32) -> CardFacts {
+    let (height_m, top_m) = (scene.camera.height_m, card.base_m + card.height_m);
+    let distance = [card.distance_m];
+    let (images, low, high) = runs_along(scene, x, |alpha, _| {
+        let heights = tracer.heights_at(height_m, alpha, &distance);
+        heights[0].is_some_and(|h| h >= card.base_m && h <= top_m)
+    });
+    CardFacts {
+        apparent_low_rad: low,
+        apparent_high_rad: high,
+        images,
+    }
+}
+
+/// The card farthest from the observer (the first of equals), if any: the target of the
+/// transfer curve.
+pub fn farthest_card(scene: &Scene) -> Option<&Card> {
+    scene
+        .cards
+        .iter()
+        .reduce(|a, b| if b.distance_m > a.distance_m { b } else { a })
+}
+
+/// The facts of `scene` from rays traced through `tracer`.
+pub fn frame_facts(scene: &Scene, tracer: &dyn RayTracer) -> FrameFacts {
+    let sun = scene
+        .sun
+        .map(|sun| sun_facts(scene, &sun, tracer, sun_column(scene, &sun)));
+    let cards = scene
+        .cards
+        .iter()
+        .map(|card| card_column(scene, card).map(|x| card_facts(scene, card, tracer, x)))
+        .collect();
+    FrameFacts { sun, cards }
+}
+
+/// Heights at `card`'s distance of the rays through the pixel centres of its column
+/// ([`card_column`], the centre column when it is out of view), from the bottom row to the top:
+/// the rays [`card_facts`] traces, so through a [`MemoRays`] they are traced once for both.
+pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> TransferSamples {
+    let cam = &scene.camera;
+    let frame = cam.frame();
+    let x = card_column(scene, card).unwrap_or(cam.width / 2) as f64 + 0.5;
+    let elevations_rad: Vec<f64> = (0..cam.height)
+        .rev()
+        .map(|y| frame.view_direction(x, y as f64 + 0.5).elevation_rad)
+        .collect();
+    let distance = [card.distance_m];
+    let heights_m = elevations_rad
+        .iter()
+        .map(|&a| tracer.heights_at(cam.height_m, a, &distance)[0])
+        .collect();
+    TransferSamples {
+        camera_height_m: cam.height_m,
+        distance_m: card.distance_m,
+        elevations_rad,
+        heights_m,
+    }
+}
+
+/// Render every scene of `scenes` through one ray cache over `tracer` (module docs). The
+/// scenes must all be renderable by `tracer` (same atmosphere, camera height, Earth radius and
+/// highest card or terrain): then each film is the one [`render_scene`] gives with `tracer`.
+/// `transfer`: also sample each frame's transfer curve at its farthest card's distance.
+pub fn render_shared(
+    scenes: &[Scene],
+    tracer: &dyn RayTracer,
+    options: &RenderOptions,
+    transfer: bool,
+) -> Result<Vec<SweepFrame>, RenderError> {
+    let memo = MemoRays::new(tracer);
+    let render_one = |scene: &Scene| -> Result<SweepFrame, RenderError> {
+        let film = render_scene(scene, &memo, options)?;
+        let facts = frame_facts(scene, &memo);
+        let transfer = farthest_card(scene)
+            .filter(|_| transfer)
+            .map(|card| transfer_samples(scene, &memo, card));
+        Ok(SweepFrame {
+            film,
+            facts,
+            transfer,
+        })
+    };
+    let Some((first, rest)) = scenes.split_first() else {
+        return Ok(Vec::new());
+    };
+    let mut frames = vec![render_one(first)?];
+    let rest: Vec<SweepFrame> = rest.par_iter().map(render_one).collect::<Result<_, _>>()?;
+    frames.extend(rest);
+    Ok(frames)
+}
+
+/// Render `scene` once per true sun elevation in `sun_elevations_rad` through one ray cache
+/// ([`render_shared`]). Errors if the scene has no sun, an elevation is outside −90°…90°, or a
+/// frame cannot be rendered.
+pub fn render_sun_sweep(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    options: &RenderOptions,
+    sun_elevations_rad: &[f64],
+) -> Result<Vec<SweepFrame>, RenderError> {
+    let sun = scene.sun.ok_or(RenderError::NoSun)?;
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    if let Some(&bad) = sun_elevations_rad
+        .iter()
+        .find(|e| !(e.is_finite() && e.abs() <= half_pi))
+    {
+        return Err(RenderError::SunElevation(bad));
+    }
+    let scenes: Vec<Scene> = sun_elevations_rad
+        .iter()
+        .map(|&elevation_rad| {
+            let mut s = scene.clone();
+            s.sun = Some(Sun {
+                elevation_rad,
+                ..sun
+            });
+            s
+        })
+        .collect();
+    render_shared(&scenes, tracer, options, false)
 }
 
 /// Great-circle angle (rad) between two directions given as (azimuth, elevation), by the
@@ -110,52 +299,6 @@ fn angle_between(az1: f64, el1: f64, az2: f64, el2: f64) -> f64 {
     let s_az = (0.5 * (az1 - az2)).sin();
     let h = s_el * s_el + el1.cos() * el2.cos() * s_az * s_az;
     2.0 * h.sqrt().min(1.0).asin()
-}
-
-/// Render `scene` once per true sun elevation in `sun_elevations_rad` (module docs: the rays
-/// are traced once for the whole sweep). Errors if the scene has no sun, an elevation is
-/// outside −90°…90°, or a frame cannot be rendered.
-pub fn render_sun_sweep(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    options: &RenderOptions,
-    sun_elevations_rad: &[f64],
-) -> Result<Vec<SunFrame>, RenderError> {
-    let sun = scene.sun.ok_or(RenderError::NoSun)?;
-    let half_pi = std::f64::consts::FRAC_PI_2;
-    if let Some(&bad) = sun_elevations_rad
-        .iter()
-        .find(|e| !(e.is_finite() && e.abs() <= half_pi))
-    {
-        return Err(RenderError::SunElevation(bad));
-    }
-    let memo = MemoRays::new(tracer);
-    let column = sun_column(scene, &sun);
-    let render_one = |elevation_rad: f64| -> Result<SunFrame, RenderError> {
-        let sun = Sun {
-            elevation_rad,
-            ..sun
-        };
-        let mut frame_scene = scene.clone();
-        frame_scene.sun = Some(sun);
-        let film = render_scene(&frame_scene, &memo, options)?;
-        let facts = sun_facts(&frame_scene, &sun, &memo, column);
-        Ok(SunFrame {
-            sun_elevation_rad: elevation_rad,
-            film,
-            facts,
-        })
-    };
-    let Some((&first, rest)) = sun_elevations_rad.split_first() else {
-        return Ok(Vec::new());
-    };
-    let mut frames = vec![render_one(first)?];
-    let rest: Vec<SunFrame> = rest
-        .par_iter()
-        .map(|&e| render_one(e))
-        .collect::<Result<_, _>>()?;
-    frames.extend(rest);
-    Ok(frames)
 }
 
 #[cfg(test)]

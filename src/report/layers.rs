@@ -341,11 +341,13 @@ pub fn summary_text(report: &LayersReport) -> String {
     let t = &report.table_error;
     let _ = writeln!(
         o,
-        "Index table: max |Δn| {:.1e}, max |Δdn/dh| {:.1e} /m, {} of {} cells exact",
+        "Index table: max |Δn| {:.1e}, max |Δdn/dh| {:.1e} /m, {} of {} cells exact, {} cut at a \
+         level",
         t.max_abs_dn(),
         t.max_abs_ddndh_per_m(),
         t.exact_cells(),
-        t.fine.cells + t.coarse.cells
+        t.fine.cells + t.coarse.cells,
+        t.fine.cut_cells + t.coarse.cut_cells
     );
     o
 }

@@ -81,6 +81,7 @@ pub const MAX_SPECTRAL_BANDS: u32 = 60;
 pub mod assets;
 pub mod camera;
 pub mod card;
+pub mod keys;
 pub mod sea;
 pub mod sky;
 pub mod terrain;

@@ -5,9 +5,10 @@
 //! g falls to c, and escapes if there is none; a descending ray likewise turns or meets the
 //! ground. A ray with a turning point on both sides oscillates between them for ever: trapped.
 //!
-//! In: a [`StratifiedIndex`] and the Earth radius. Out: a [`BouguerEnvelope`] — g on a grid
-//! (0.25 m to 4 km above the surface, 5 m above) with running minima from the ground up and from
-//! the top down, and a bound on how far g can dip between two nodes — and [`Fate`] queries.
+//! In: a [`StratifiedIndex`] and the Earth radius. Out: a [`BouguerEnvelope`] — g on the
+//! index's [`ScanGrid`](super::ScanGrid) (by default 0.25 m to 4 km above the surface, 5 m
+//! above; a sounding surveyed through its table: the table's nodes and every break) with running
+//! minima from the ground up and from the top down, and a bound on how far g can dip between two nodes — and [`Fate`] queries.
 //! A fate is only claimed when the grid proves it: "turns" needs a node with g < c; "does not
 //! turn" needs every node above (or below) to clear c by more than the dip bound. Otherwise the
 //! answer is [`Fate::Undecided`] and the caller keeps integrating.
@@ -24,11 +25,6 @@ use rayon::prelude::*;
 
 use super::StratifiedIndex;
 use super::ray::{HookAction, RayHook, RayPoint};
-
-/// Node spacing (m) up to [`FINE_TOP_M`], then [`COARSE_STEP_M`].
-const FINE_STEP_M: f64 = 0.25;
-const FINE_TOP_M: f64 = 4_000.0;
-const COARSE_STEP_M: f64 = 5.0;
 
 /// Relative slack on the invariant (its drift along a traced ray is ~1e-12).
 const INVARIANT_SLACK: f64 = 1e-10;
@@ -61,19 +57,10 @@ pub struct BouguerEnvelope {
 }
 
 impl BouguerEnvelope {
-    /// Scan `index` from the ground to `top_m` over a sphere of `earth_radius_m`.
+    /// Scan `index` from the ground to `top_m` over a sphere of `earth_radius_m`, at the nodes
+    /// of its [`scan_grid`](StratifiedIndex::scan_grid).
     pub fn new<S: StratifiedIndex + ?Sized>(index: &S, earth_radius_m: f64, top_m: f64) -> Self {
-        let mut heights_m = Vec::new();
-        let mut h = 0.0;
-        while h < top_m {
-            heights_m.push(h);
-            h += if h < FINE_TOP_M {
-                FINE_STEP_M
-            } else {
-                COARSE_STEP_M
-            };
-        }
-        heights_m.push(top_m);
+        let heights_m = scan_heights(index, top_m);
         let (g, slope): (Vec<f64>, Vec<f64>) = heights_m
             .par_iter()
             .map(|&h| {
@@ -161,6 +148,27 @@ impl BouguerEnvelope {
             _ => Fate::Undecided,
         }
     }
+}
+
+/// The scan's node heights from the ground to `top_m` (see [`ScanGrid`](super::ScanGrid)).
+fn scan_heights<S: StratifiedIndex + ?Sized>(index: &S, top_m: f64) -> Vec<f64> {
+    let grid = index.scan_grid();
+    let (fine, coarse) = (grid.fine_step_m.max(1e-3), grid.coarse_step_m.max(1e-3));
+    let mut heights_m = Vec::new();
+    let mut h = 0.0;
+    while h < top_m {
+        heights_m.push(h);
+        h += if h < grid.fine_top_m { fine } else { coarse };
+    }
+    heights_m.push(top_m);
+    if grid.with_breaks {
+        let breaks = index.breaks_m().iter().copied();
+        let minor = index.minor_breaks().iter().map(|b| b.height_m);
+        heights_m.extend(breaks.chain(minor).filter(|&b| b > 0.0 && b < top_m));
+        heights_m.sort_by(f64::total_cmp);
+        heights_m.dedup();
+    }
+    heights_m
 }
 
 /// The Bouguer fate rule along one ray (a [`RayHook`]); see the module docs.

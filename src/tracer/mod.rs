@@ -72,6 +72,13 @@ pub trait StratifiedIndex: Send + Sync {
     fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         self.index_and_derivative(height_m)
     }
+    /// The node layout of a whole-column scan (Bouguer's envelope): where a lookup table
+    /// stands behind [`scan_index_and_derivative`](Self::scan_index_and_derivative), its own
+    /// node spacing, since a scan between its nodes learns nothing the nodes do not hold.
+    /// Default: [`ScanGrid::DEFAULT`].
+    fn scan_grid(&self) -> ScanGrid {
+        ScanGrid::DEFAULT
+    }
     /// Heights above the surface (m, ascending, finite) where dn/dh or d²n/dh² may jump: the
     /// knots of a piecewise fit, the edges of constant-gradient layers, the standard
     /// atmosphere's layer bases. A Runge–Kutta step that straddles such a level drops to first
@@ -95,12 +102,42 @@ impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     fn scan_index_and_derivative(&self, height_m: f64) -> (f64, f64) {
         (**self).scan_index_and_derivative(height_m)
     }
+    fn scan_grid(&self) -> ScanGrid {
+        (**self).scan_grid()
+    }
     fn breaks_m(&self) -> &[f64] {
         (**self).breaks_m()
     }
     fn minor_breaks(&self) -> &[MinorBreak] {
         (**self).minor_breaks()
     }
+}
+
+/// Node spacing of a whole-column scan ([`StratifiedIndex::scan_grid`]): `fine_step_m` up to
+/// `fine_top_m` above the surface, `coarse_step_m` above, and — where `with_breaks` — every
+/// break of the field a node too, so that no cell straddles a jump of dn/dh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanGrid {
+    /// Node spacing near the ground (m).
+    pub fine_step_m: f64,
+    /// Top of the fine spacing (m above the surface).
+    pub fine_top_m: f64,
+    /// Node spacing above it (m).
+    pub coarse_step_m: f64,
+    /// Whether the field's breaks ([`StratifiedIndex::breaks_m`] and
+    /// [`StratifiedIndex::minor_breaks`]) are nodes too.
+    pub with_breaks: bool,
+}
+
+impl ScanGrid {
+    /// 0.25 m up to 4 km, 5 m above, breaks not added: fine enough for the thin smooth
+    /// (tanh) layers of synthetic atmospheres, which declare no breaks.
+    pub const DEFAULT: ScanGrid = ScanGrid {
+        fine_step_m: 0.25,
+        fine_top_m: 4_000.0,
+        coarse_step_m: 5.0,
+        with_breaks: false,
+    };
 }
 
 /// A stratified index seen as a 3-D field about Earth's centre: ∇n = dn/dh · r̂.

@@ -805,7 +805,7 @@ fn climb_to_top<const N: usize, Sys: RaySystem<N>>(
     let radius_m = sys.radius_m()?;
     let out = climb_out(
         |h| sys.index_at(h).unwrap_or((f64::NAN, f64::NAN)),
-        sys.major_breaks(),
+        sys.breaks(),
         radius_m,
         obs.height_m,
         obs.elevation_rad,

@@ -53,10 +53,6 @@ pub(crate) trait RaySystem<const N: usize> {
     fn invariant_scale(&self, y: &[f64; N]) -> f64;
     /// Heights (m above the ground, ascending) where the field is not smooth.
     fn breaks(&self) -> &[f64];
-    /// The breaks where dn/dh itself may jump (a subset of [`breaks`](Self::breaks)).
-    fn major_breaks(&self) -> &[f64] {
-        self.breaks()
-    }
     /// The index and dn/dh at `height_m` above the ground, for a closed-form climb out of a spherically
     /// symmetric field (`climb_out`); `None` where the system has no radial profile (flat
     /// ground). For a 3-D field it is sampled above the observer, so it only means something
@@ -157,9 +153,6 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
     }
     fn breaks(&self) -> &[f64] {
         self.breaks
-    }
-    fn major_breaks(&self) -> &[f64] {
-        self.field.breaks_m()
     }
     fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
         Some(self.field.index_and_derivative(height_m))

@@ -26,6 +26,7 @@ mod render;
 mod scenes;
 mod sea;
 mod sequence;
+mod sequence_sweeps;
 mod spectral;
 mod stress;
 mod survey;

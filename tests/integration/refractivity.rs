@@ -221,11 +221,11 @@ fn the_table_is_built_lazily_and_the_same_whatever_the_order() {
     assert_eq!(lazy.table_max_error(), eager.table_max_error());
 }
 
-/// US1976 has six lapse-rate changes below 80 km where dn/dh jumps; only the cells holding them
-/// (one, or two where a kink falls on a node) fall back to the exact formula, and every kink is
-/// in one.
+/// US1976 has six lapse-rate changes below 80 km where dn/dh jumps; the cells holding them are
+/// cut at the kink, a quintic on each side, so no cell falls back to the exact formula and the
+/// table keeps the jump of dn/dh within its bound on both sides.
 #[test]
-fn us1976_kinks_are_the_only_exact_cells() {
+fn us1976_kinks_cut_their_cells() {
     // A table up to 80 km (the default stops at the tracer's 40 km top) holds all six.
     let atm = atmosphere(StandardAtmosphereColumn {
         surface_height_m: 0.0,
@@ -236,24 +236,38 @@ fn us1976_kinks_are_the_only_exact_cells() {
     })
     .expect("valid spec");
     let err = atm.table_max_error();
-    // The jump of dn/dh at a kink is (n−1)/T·Δ(dT/dh): 2.9e-9 m⁻¹ at 11 km, 9e-11 at 20 km,
-    // ~1e-12 higher up: all far above the 1e-14 the quintic cells are held to.
-    assert!(
-        err.coarse.exact_cells >= 6 && err.coarse.exact_cells <= 12 && err.fine.exact_cells == 0,
+    assert_eq!(
+        (
+            err.coarse.cut_cells,
+            err.coarse.exact_cells,
+            err.fine.exact_cells
+        ),
+        (6, 0, 0),
         "{err:?}"
     );
-    // Plain Hermite across the 11 km kink is off by ~1e-9 in dn/dh: the fallback matters.
-    assert!(err.coarse.raw_max_abs_ddndh_per_m > 1e-10, "{err:?}");
-    // Each layer base (geopotential → geometric) is in an exact cell, and is a break.
+    assert!(
+        err.max_abs_dn() <= 1e-14 && err.max_abs_ddndh_per_m() <= 1e-14,
+        "{err:?}"
+    );
+    // Each layer base (geopotential → geometric) is a break; the table holds the jump of dn/dh
+    // there ((n−1)/T·Δ(dT/dh): 2.9e-9 m⁻¹ at 11 km, 9e-11 at 20 km, ~1e-12 higher up) to its
+    // bound on each side.
     let r = ghostship::profile::us1976::US1976_EARTH_RADIUS_M;
     for base in [11_000.0, 20_000.0, 32_000.0, 47_000.0, 51_000.0, 71_000.0] {
         let kink = r * base / (r - base);
-        assert_eq!(atm.table_refractivity(kink), atm.exact_refractivity(kink));
         assert!(
             atm.breaks_m().iter().any(|b| (b - kink).abs() < 1e-6),
             "{kink}: {:?}",
             atm.breaks_m()
         );
+        for offset_m in [-2.0, -0.01, 0.01, 2.0] {
+            let h = kink + offset_m;
+            let (table, exact) = (atm.table_refractivity(h), atm.exact_refractivity(h));
+            assert!(
+                (table.0 - exact.0).abs() <= 1e-14 && (table.1 - exact.1).abs() <= 1e-14,
+                "{h} m: {table:?} vs {exact:?}"
+            );
+        }
     }
 }
 

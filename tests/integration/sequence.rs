@@ -1,12 +1,14 @@
-//! `ghostship sequence`: sun-sweep frames are the single renders of the same sun position, byte
-//! for byte; the frame index's strip counts follow the traced map (the analysis tracer, not the
-//! renderer); bad sweeps are clear errors; the bytes do not depend on the thread count.
+//! `ghostship sequence`: frames of every kind of sweep are the single renders of the same scene,
+//! byte for byte; the frame index's strip and image counts follow the traced map (the analysis
+//! tracer, not the renderer); the sun's position over time matches the NREL SPA paper; sweeps
+//! over time share their rays; bad sweeps are clear errors; the bytes do not depend on the
+//! thread count.
 
 use std::path::Path;
 
 use ghostship::jobs::AtmosphereCache;
 use ghostship::jobs::sequence::{
-    Frames, SequenceRequest, SequenceSettings, SweepKind, frame_name, parse_sweep,
+    SequenceRequest, SequenceSettings, SweepKind, frame_name, parse_sweep,
 };
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::render_tracer_config;
@@ -152,28 +154,23 @@ fn frame_index_strips_match_the_traced_map() {
         },
     )
     .unwrap();
-    let Frames::Sun(frames) = request.render_frames(&AtmosphereCache::new()).unwrap() else {
-        panic!("a sun sweep has sun facts");
-    };
+    let frames = request.render_frames(&AtmosphereCache::new()).unwrap();
     let atm = atmosphere(&scene);
     let tracer = Tracer::new(&atm, render_tracer_config(scene.earth_radius_m)).unwrap();
     let scenes = request.frame_scenes();
     let mut counts = Vec::new();
     for (frame, scene) in frames.iter().zip(&scenes) {
         let want = traced_strips(scene, &tracer);
-        assert_eq!(
-            frame.facts.strips,
-            want,
-            "sun at {:.3}°",
-            frame.sun_elevation_rad.to_degrees()
-        );
-        assert_eq!(frame.facts.apparent_low_rad.is_some(), want > 0);
+        let facts = frame.facts.sun.expect("the scene has a sun");
+        let elevation = scene.sun.unwrap().elevation_rad.to_degrees();
+        assert_eq!(facts.strips, want, "sun at {elevation:.3}°");
+        assert_eq!(facts.apparent_low_rad.is_some(), want > 0);
         counts.push(want);
     }
     // The sweep shows the stacked strips: several strips in some frame, none in the first.
     assert_eq!(counts[0], 0, "{counts:?}");
     assert!(counts.iter().any(|&n| n >= 3), "{counts:?}");
-    let csv = ghostship::jobs::sequence::frames_csv(&sweep, &Frames::Sun(frames));
+    let csv = request.frames_csv(&frames);
     assert!(csv.starts_with(
         "frame,sun_true_elevation_deg,sun_apparent_low_deg,sun_apparent_high_deg,sun_strips\n"
     ));
@@ -239,11 +236,23 @@ fn observer_sweep_frames_are_the_single_renders_at_that_height() {
         "--quiet",
     ]);
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
-    assert_eq!(csv, "frame,observer_height_m\n0,5\n1,15\n2,25\n");
+    let heights: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap())
+        .collect();
+    assert_eq!(heights, ["5", "15", "25"], "{csv}");
+    assert!(
+        csv.starts_with("frame,observer_height_m,card0_images,card0_apparent_low_deg,"),
+        "{csv}"
+    );
     assert!(
         !out.join("sun.png").exists(),
-        "only sun sweeps have the sun's figure"
+        "only sweeps that move the sun have the sun's figure"
     );
+    // The transfer curves against observer height.
+    let plot = image::open(out.join("transfer.png")).unwrap();
+    assert_eq!((plot.width(), plot.height()), (1200, 800));
     // The library's render job at the same height gives the same PNG.
     let base = Scene::from_file(Path::new(&scene)).unwrap();
     let request = ghostship::jobs::RenderRequest::new(
