@@ -2,9 +2,12 @@
 //! and 1920×1080, 1 sample per pixel, render only; a sun sequence (100 sun elevations of the
 //! Novaya Zemlya strips scene at 400×200 against one frame, both with the tracer prepared); the
 //! cost per frame of every kind of sequence (the jobs layer's frames with their facts, against
-//! one frame of the same scene, atmospheres loaded once); exact per-pixel 3-D tracing at 400×200 for
-//! every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance); PNG and EXR encoding of a 1920×1080 film; and the process's peak resident memory
-//! (VmHWM, printed at the end).
+//! one frame of the same scene, atmospheres loaded once); exact per-pixel 3-D tracing at 400×200
+//! for every curved-ray scene (the baseline of the fan's speed-up, same 1 cm tracer tolerance);
+//! PNG and EXR encoding of a 1920×1080 film; the cost of terrain, haze and the sun at 1920×1080
+//! (`effects_1920x1080`: each scene of [`EFFECT_SCENES`] plain, with each of its effects alone
+//! and as shipped; the interleaved medians of `examples/effects_cost.rs` are in
+//! `docs/effects_cost.md`); and the process's peak resident memory (VmHWM, printed at the end).
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -20,6 +23,7 @@ use ghostship::output::{exr, png};
 use ghostship::render::sweep::render_sun_sweep;
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
+use ghostship::verify::effects::{EFFECT_SCENES, effects_of, with_effects};
 
 const SCENES: [&str; 9] = [
     "fig01_horizon_straight",
@@ -207,6 +211,34 @@ fn sequence_kinds(c: &mut Criterion) {
     group.finish();
 }
 
+/// Each effect scene at 1920×1080: plain (terrain, haze and sun taken out), with each of its
+/// effects alone, and as shipped.
+fn effects(c: &mut Criterion) {
+    let mut group = c.benchmark_group("effects_1920x1080");
+    group.sample_size(10);
+    let opts = options(false);
+    for name in EFFECT_SCENES {
+        let (scene, atm) = load(name, 1920, 1080);
+        let present = effects_of(&scene);
+        let mut variants = vec![("plain".to_string(), with_effects(&scene, (1920, 1080), &[]))];
+        for &e in &present {
+            variants.push((
+                e.label().to_string(),
+                with_effects(&scene, (1920, 1080), &[e]),
+            ));
+        }
+        variants.push(("shipped".to_string(), scene.clone()));
+        for (label, variant) in variants {
+            let tracer =
+                prepare_tracer(&variant, atm.as_ref().map(|a| &a.refractive), &opts).unwrap();
+            group.bench_function(format!("{name}/{label}"), |b| {
+                b.iter(|| black_box(render_scene(&variant, tracer.as_ref(), &opts).unwrap()))
+            });
+        }
+    }
+    group.finish();
+}
+
 fn encoding(c: &mut Criterion) {
     let (scene, atm) = load("fig10_fata_morgana", 1920, 1080);
     let opts = options(false);
@@ -231,6 +263,7 @@ criterion_group!(
     sun_sequence,
     sequence_kinds,
     exact,
+    effects,
     encoding
 );
 

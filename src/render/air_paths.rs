@@ -24,7 +24,14 @@ pub(super) struct AirPaths {
     alphas: Vec<f64>,
     /// One [`RayDensityPaths`] per elevation.
     rays: Vec<RayDensityPaths>,
+    /// For each of [`GUIDE_PER_RAY`] × rays uniform buckets of elevation from the first: the
+    /// index of the first elevation in it (a lookup starts there and steps on: O(1)).
+    guide: Vec<u32>,
+    guide_inv_width: f64,
 }
+
+/// Guide buckets per integrated ray.
+const GUIDE_PER_RAY: usize = 4;
 
 /// Where a sample's ray meets something.
 #[derive(Debug, Clone, Copy)]
@@ -51,10 +58,45 @@ impl AirPaths {
             .collect();
         let rays: Option<Vec<RayDensityPaths>> = rays.into_iter().collect();
         let rays = rays?;
-        (!rays.is_empty()).then(|| AirPaths {
-            alphas: alphas_rad.to_vec(),
+        (!rays.is_empty()).then(|| Self::with_guide(alphas_rad.to_vec(), rays))
+    }
+
+    /// The table of `rays` at the ascending, non-empty `alphas`, with its guide.
+    fn with_guide(alphas: Vec<f64>, rays: Vec<RayDensityPaths>) -> Self {
+        let span = (alphas[alphas.len() - 1] - alphas[0]).max(1e-300);
+        let buckets = (GUIDE_PER_RAY * alphas.len()).min(1 << 22);
+        let guide_inv_width = buckets as f64 / span;
+        let guide = (0..=buckets)
+            .map(|b| {
+                let x = alphas[0] + b as f64 / guide_inv_width;
+                alphas.partition_point(|&a| a < x) as u32
+            })
+            .collect();
+        AirPaths {
+            alphas,
             rays,
-        })
+            guide,
+            guide_inv_width,
+        }
+    }
+
+    /// The first index whose elevation is not below `alpha` (as `partition_point`), in O(1).
+    #[inline]
+    fn first_not_below(&self, alpha: f64) -> usize {
+        let b = ((alpha - self.alphas[0]) * self.guide_inv_width)
+            .max(0.0)
+            .min((self.guide.len() - 1) as f64);
+        let b = if b.is_nan() { 0 } else { b as i32 as usize };
+        // Buckets are ascending; the bucket's start never passes `alpha`'s index: step back
+        // over equal-or-greater elevations, then on over smaller ones.
+        let mut i = self.guide[b] as usize;
+        while i > 0 && self.alphas[i - 1] >= alpha {
+            i -= 1;
+        }
+        while i < self.alphas.len() && self.alphas[i] < alpha {
+            i += 1;
+        }
+        i
     }
 
     /// Number of integrated rays.
@@ -74,7 +116,7 @@ impl AirPaths {
     /// the sea: linear between the two neighbouring integrated rays where both have a value,
     /// else the one that has; `None` if neither does.
     pub(super) fn at(&self, alpha: f64, meets: Meets) -> Option<[f64; 2]> {
-        let i = self.alphas.partition_point(|&a| a < alpha);
+        let i = self.first_not_below(alpha);
         let (lo, hi) = (i.saturating_sub(1), i.min(self.alphas.len() - 1));
         match (self.value(lo, meets), self.value(hi, meets)) {
             (Some(a), Some(b)) if hi > lo => {
@@ -84,6 +126,30 @@ impl AirPaths {
             }
             (Some(a), _) => Some(a),
             (None, b) => b,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_guided_lookup_is_the_partition_point() {
+        let alphas: Vec<f64> = (0..300)
+            .map(|i| -0.01 + 1e-4 * f64::from(i) + 1e-5 * f64::from(i % 7))
+            .collect();
+        let paths = AirPaths::with_guide(alphas.clone(), Vec::new());
+        for k in 0..5000 {
+            let x = -0.012 + 0.036 * f64::from(k) / 5000.0;
+            assert_eq!(
+                paths.first_not_below(x),
+                alphas.partition_point(|&a| a < x),
+                "{x}"
+            );
+        }
+        for &a in &alphas {
+            assert_eq!(paths.first_not_below(a), alphas.partition_point(|&b| b < a));
         }
     }
 }

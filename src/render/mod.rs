@@ -34,6 +34,7 @@ mod air_paths;
 pub mod curved;
 pub mod elevation_fan;
 mod memo;
+mod objects;
 pub mod ray_model;
 mod reflection;
 mod shade;
@@ -56,6 +57,7 @@ use air_paths::AirPaths;
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use memo::MemoRays;
+use objects::{RayAlong, SampleRay};
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
 use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
 use sun::SunTransmittance;
@@ -567,15 +569,69 @@ fn row_may_meet_terrain(view: &TerrainView<'_>, frame: &CameraFrame, y: u32, wid
     hi + pad >= view.may_hit_rad.0 && lo - pad <= view.may_hit_rad.1
 }
 
-/// Exact mode: the terrain hit of a sample along `dir`, its ray traced to the view's distances.
-fn exact_terrain_hit(
-    view: &TerrainView<'_>,
-    tracer: &dyn RayTracer,
-    camera_height_m: f64,
+/// A camera sample shaded from the fan: the objects its interpolated ray meets (cards only
+/// where `may_meet_card`) over the sea or sky; a sample that can meet nothing takes the
+/// background alone.
+#[inline]
+fn shade_fan_sample(
+    shader: &Shader<'_>,
+    fan: &ElevationFan,
     dir: &ViewDirection,
-) -> Option<terrain::TerrainHit> {
-    let ray = tracer.trace(camera_height_m, dir.elevation_rad, &view.distances_m, false);
-    view.hit_traced(dir.azimuth_offset_rad(), &ray.heights_m, ray.end)
+    may_meet_card: bool,
+    heights: &mut [Option<f64>],
+) -> [f64; 3] {
+    let alpha = dir.elevation_rad;
+    let may_meet_terrain = shader.terrain.as_ref().is_some_and(|t| t.may_hit(alpha));
+    if !may_meet_card && !may_meet_terrain {
+        return shader.background(dir, fan.interpolate_end(alpha));
+    }
+    let end = fan.interpolate(alpha, heights);
+    let ray = SampleRay::new(
+        dir,
+        RayAlong::Fan {
+            alpha,
+            card_heights: may_meet_card.then_some(&*heights),
+        },
+    );
+    shader.shade_ray(&ray, || shader.background(dir, end))
+}
+
+/// What [`shade_traced_sample`] needs of the frame (exact mode).
+struct TracedSample<'a> {
+    tracer: &'a dyn RayTracer,
+    camera_height_m: f64,
+    /// The card distances.
+    distances_m: &'a [f64],
+    need_sky_direction: bool,
+}
+
+/// Exact mode: a camera sample's ray traced on its own to the card distances (and, with
+/// terrain, to every one of the terrain's traced distances), and what it meets over the sea or
+/// sky.
+fn shade_traced_sample(
+    shader: &Shader<'_>,
+    ctx: &TracedSample<'_>,
+    dir: &ViewDirection,
+) -> [f64; 3] {
+    let alpha = dir.elevation_rad;
+    let trace = |distances: &[f64], sky: bool| {
+        let mut ray = ctx.tracer.trace(ctx.camera_height_m, alpha, distances, sky);
+        ray.heights_m.resize(distances.len(), None);
+        ray
+    };
+    let ray = trace(ctx.distances_m, ctx.need_sky_direction);
+    let terrain_ray = shader
+        .terrain
+        .as_ref()
+        .map(|t| trace(&t.traced.traced_m, false));
+    let sample = SampleRay::new(
+        dir,
+        RayAlong::Traced {
+            card_heights: &ray.heights_m,
+            terrain: terrain_ray.as_ref().map(|r| (&r.heights_m[..], r.end)),
+        },
+    );
+    shader.shade_ray(&sample, || shader.background(dir, ray.end))
 }
 
 /// The final elevations (rad) at which rays may show the sun: its disc and two pixels.
@@ -763,6 +819,7 @@ pub fn render_scene(
         max_top_m[k] = max_top_m[k].max(top_m);
         cards.push(ViewCard {
             distance_index: k,
+            distance_m: c.distance_m,
             offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),
             half_width_rad,
             base_m: c.base_m,
@@ -783,6 +840,7 @@ pub fn render_scene(
             tolerance_px: options.tolerance_px,
             max_depth: options.max_refine_depth,
             brightness: scene.sky.brightness,
+            scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
         };
         TerrainView::new(t, tracer, frame, options.exact)
     });
@@ -890,6 +948,7 @@ pub fn render_scene(
     let shader = Shader {
         distances_m: distances_m.clone(),
         reflection,
+        terrain,
         cards,
         sky_table,
         sea_table,
@@ -916,6 +975,12 @@ pub fn render_scene(
         }),
     };
 
+    let traced_sample = TracedSample {
+        tracer,
+        camera_height_m: cam.height_m,
+        distances_m: &distances_m,
+        need_sky_direction,
+    };
     let bar = if options.quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
     } else {
@@ -945,7 +1010,8 @@ pub fn render_scene(
             |scratch, (y, row)| {
                 if let Some(fan) = &fan
                     && n == 1
-                    && terrain
+                    && shader
+                        .terrain
                         .as_ref()
                         .is_none_or(|t| !row_may_meet_terrain(t, &frame, y as u32, width))
                     && shade_flat_row(
@@ -996,51 +1062,9 @@ pub fn render_scene(
                         let c = match &fan {
                             Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
                             Some(fan) => {
-                                match terrain.as_ref().and_then(|t| {
-                                    Some((t, t.hit(alpha, dir.azimuth_offset_rad())?))
-                                }) {
-                                    Some((t, hit)) => {
-                                        fan.interpolate(alpha, heights);
-                                        terrain::shade_hit(
-                                            &shader,
-                                            t,
-                                            dir,
-                                            heights,
-                                            &distances_m,
-                                            hit,
-                                        )
-                                    }
-                                    None if !may_meet_card => {
-                                        shader.background(dir, fan.interpolate_end(alpha))
-                                    }
-                                    None => {
-                                        let end = fan.interpolate(alpha, heights);
-                                        shader.shade(dir, heights, end)
-                                    }
-                                }
+                                shade_fan_sample(&shader, fan, dir, may_meet_card, heights)
                             }
-                            None => {
-                                let mut ray = tracer.trace(
-                                    cam.height_m,
-                                    alpha,
-                                    &distances_m,
-                                    need_sky_direction,
-                                );
-                                ray.heights_m.resize(n_dist, None);
-                                match terrain.as_ref().and_then(|t| {
-                                    Some((t, exact_terrain_hit(t, tracer, cam.height_m, dir)?))
-                                }) {
-                                    Some((t, hit)) => terrain::shade_hit(
-                                        &shader,
-                                        t,
-                                        dir,
-                                        &mut ray.heights_m,
-                                        &distances_m,
-                                        hit,
-                                    ),
-                                    None => shader.shade(dir, &ray.heights_m, ray.end),
-                                }
-                            }
+                            None => shade_traced_sample(&shader, &traced_sample, dir),
                         };
                         let c = if c.iter().all(|v| v.is_finite()) {
                             c

@@ -15,6 +15,7 @@
 
 use rayon::prelude::*;
 
+use super::objects::{RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
 use crate::scene::camera::ViewDirection;
@@ -349,9 +350,7 @@ impl Shader<'_> {
             }
             offset.abs() <= card.half_width_rad
         };
-        let beyond = |card: &super::shade::ViewCard<'_>| {
-            self.card_distance_m(card.distance_index) > distance_m
-        };
+        let beyond = |card: &super::shade::ViewCard<'_>| card.distance_m > distance_m;
         if !self.cards.iter().any(beyond) {
             return out;
         }
@@ -364,64 +363,26 @@ impl Shader<'_> {
                 continue;
             }
             let e = node.reflected_elevation_rad;
-            let (acc, covered) =
-                self.reflected_cards(fan, e, distance_m, az, |c, a| beyond(c) && in_range(c, a));
+            let ray = SampleRay::with_azimuth(
+                dir,
+                RayAlong::Reflected {
+                    fan,
+                    elevation_rad: e,
+                    from_m: distance_m,
+                },
+                az,
+            );
+            let found = self.compose(&ray);
+            let covered = 1.0 - found.transmittance;
             if covered == 0.0 {
                 continue;
             }
             let sky = refl.sky_table.at(e);
             let wf = node.weight * node.reflectance;
             for c in 0..3 {
-                out[c] += wf * (acc[c] - covered * sky[c]);
+                out[c] += wf * (found.radiance[c] - covered * sky[c]);
             }
         }
         out
-    }
-
-    /// The cards a reflected ray launched at `elevation_rad` from the sea at `distance_m` meets
-    /// (`visible` filters them), front to back: premultiplied radiance and the coverage of what
-    /// is behind them.
-    fn reflected_cards(
-        &self,
-        fan: &SeaFan,
-        elevation_rad: f64,
-        distance_m: f64,
-        azimuth: f64,
-        visible: impl Fn(&super::shade::ViewCard<'_>, f64) -> bool,
-    ) -> ([f64; 3], f64) {
-        let mut acc = [0.0f64; 3];
-        let mut transmit = 1.0f64;
-        for card in &self.cards {
-            if !visible(card, azimuth) {
-                continue;
-            }
-            let range_m = self.card_distance_m(card.distance_index) - distance_m;
-            let Some(h) = fan.height(elevation_rad, range_m) else {
-                continue;
-            };
-            if h < card.base_m || h > card.top_m {
-                continue;
-            }
-            let offset = super::shade::wrap_pi(azimuth - card.offset_rad);
-            let u = 0.5 + 0.5 * offset / card.half_width_rad;
-            let v = (card.top_m - h) / card.height_m;
-            let t = card.texture.sample(u, v);
-            let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
-            if let (Some(aerial), Some(refl)) = (&self.aerial, &self.reflection) {
-                let tau =
-                    aerial
-                        .extinction
-                        .chord_optical_depth(refl.earth_radius_m, 0.0, h, range_m);
-                rgb = aerial.extinction.attenuate(rgb, t[3] as f64, tau);
-            }
-            for c in 0..3 {
-                acc[c] += transmit * rgb[c];
-            }
-            transmit *= 1.0 - t[3] as f64;
-            if transmit < 1e-6 {
-                break;
-            }
-        }
-        (acc, 1.0 - transmit)
     }
 }

@@ -8,8 +8,10 @@
 use rayon::prelude::*;
 
 use super::air_paths::{AirPaths, Meets};
+use super::objects::{Composed, Meet, OPAQUE, Object, RayAlong, SampleRay, SceneObject, compose};
 use super::ray_model::FanEnd;
 use super::sun::SunTransmittance;
+use super::terrain::TerrainView;
 use crate::scene::Texture;
 use crate::scene::camera::ViewDirection;
 use crate::scene::sky::{Extinction, SunDisc};
@@ -57,6 +59,8 @@ impl AerialShading {
 /// A card prepared for shading.
 pub(super) struct ViewCard<'a> {
     pub(super) distance_index: usize,
+    /// Its ground distance (m).
+    pub(super) distance_m: f64,
     /// Azimuth of the card centre relative to the camera heading (rad, in (−π, π]).
     pub(super) offset_rad: f64,
     pub(super) half_width_rad: f64,
@@ -64,6 +68,124 @@ pub(super) struct ViewCard<'a> {
     pub(super) top_m: f64,
     pub(super) height_m: f64,
     pub(super) texture: &'a Texture,
+}
+
+impl ViewCard<'_> {
+    /// The sample's azimuth offset from the card's centre, and the card's horizontal texture
+    /// coordinate there, if within its width. A camera ray wraps the offset only when it is
+    /// beyond ±π, a reflected ray always (as each path always has).
+    #[inline]
+    fn across(&self, azimuth: f64, always_wrap: bool) -> Option<f64> {
+        let mut offset = azimuth - self.offset_rad;
+        if always_wrap {
+            if !in_width(offset, self.half_width_rad) {
+                return None;
+            }
+            offset = wrap_pi(offset);
+        } else {
+            if offset.abs() > std::f64::consts::PI {
+                offset = wrap_pi(offset);
+            }
+            if offset.abs() > self.half_width_rad {
+                return None;
+            }
+        }
+        Some(0.5 + 0.5 * offset / self.half_width_rad)
+    }
+}
+
+/// Whether azimuth offset `offset` (rad) lies within `half_width` of a card's centre, wrapped
+/// into (−π, π] when it is beyond.
+#[inline]
+fn in_width(mut offset: f64, half_width: f64) -> bool {
+    if offset.abs() > std::f64::consts::PI {
+        offset = wrap_pi(offset);
+    }
+    offset.abs() <= half_width
+}
+
+impl SceneObject for ViewCard<'_> {
+    #[inline(always)]
+    fn fixed_distance_m(&self) -> Option<f64> {
+        Some(self.distance_m)
+    }
+
+    #[inline(always)]
+    fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
+        let (h, reflected) = match ray.along {
+            RayAlong::Fan {
+                card_heights: Some(heights),
+                ..
+            }
+            | RayAlong::Traced {
+                card_heights: heights,
+                ..
+            } => (heights[self.distance_index]?, false),
+            RayAlong::Fan { .. } => return None,
+            RayAlong::Reflected {
+                fan,
+                elevation_rad,
+                from_m,
+            } => {
+                // Beyond the reflection point and in the card's azimuth range first (cheap).
+                if self.distance_m <= from_m
+                    || !in_width(
+                        ray.azimuth_offset_rad() - self.offset_rad,
+                        self.half_width_rad,
+                    )
+                {
+                    return None;
+                }
+                (fan.height(elevation_rad, self.distance_m - from_m)?, true)
+            }
+        };
+        if h < self.base_m || h > self.top_m {
+            return None;
+        }
+        let u = self.across(ray.azimuth_offset_rad(), reflected)?;
+        Some(Meet {
+            distance_m: self.distance_m,
+            height_m: h,
+            u,
+            density_paths_m: None,
+        })
+    }
+
+    #[inline]
+    fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
+        let v = (self.top_m - meet.height_m) / self.height_m;
+        let t = self.texture.sample(meet.u, v);
+        let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
+        let alpha = t[3] as f64;
+        match (ray.along, &shader.aerial, &shader.reflection) {
+            (RayAlong::Reflected { from_m, .. }, Some(aerial), Some(refl)) => {
+                // From the card to the sea (the chord); the sea's own haze is added after.
+                let range_m = self.distance_m - from_m;
+                let tau = aerial.extinction.chord_optical_depth(
+                    refl.earth_radius_m,
+                    0.0,
+                    meet.height_m,
+                    range_m,
+                );
+                rgb = aerial.extinction.attenuate(rgb, alpha, tau);
+            }
+            (RayAlong::Reflected { .. }, _, _) => {}
+            (_, Some(aerial), _) => {
+                let k = self.distance_index;
+                let d = aerial.distances_m[k];
+                rgb = aerial.seen(
+                    rgb,
+                    alpha,
+                    ray.dir.elevation_rad,
+                    Meets::Card(k),
+                    meet.height_m,
+                    d,
+                );
+            }
+            _ => {}
+        }
+        (rgb, alpha)
+    }
 }
 
 /// A smooth function of one angle, tabulated uniformly and interpolated linearly (the sky and the
@@ -141,6 +263,8 @@ pub(super) struct Shader<'a> {
     pub(super) distances_m: Vec<f64>,
     /// The sea's reflections of the cards and the sun (`None`: the sky reflection alone).
     pub(super) reflection: Option<super::reflection::Reflection>,
+    /// The terrain in view, if any.
+    pub(super) terrain: Option<TerrainView<'a>>,
 }
 
 #[inline]
@@ -150,7 +274,7 @@ pub(super) fn wrap_pi(x: f64) -> f64 {
     if y.is_finite() { y } else { 0.0 }
 }
 
-impl Shader<'_> {
+impl<'a> Shader<'a> {
     /// Ground distance (m) of the cards with distance index `k`.
     #[inline]
     pub(super) fn card_distance_m(&self, k: usize) -> f64 {
@@ -203,18 +327,6 @@ impl Shader<'_> {
         })
     }
 
-    /// Radiance of a sample looking along `dir` along a ray with `heights` at the card distances
-    /// and end `end`.
-    #[inline]
-    pub(super) fn shade(
-        &self,
-        dir: &ViewDirection,
-        heights: &[Option<f64>],
-        end: FanEnd,
-    ) -> [f64; 3] {
-        self.composite_with(dir, heights, || self.background(dir, end))
-    }
-
     /// The cards a sample along `dir` meets (`heights` at the card distances), front to back,
     /// over `background`.
     #[inline]
@@ -224,56 +336,46 @@ impl Shader<'_> {
         heights: &[Option<f64>],
         background: [f64; 3],
     ) -> [f64; 3] {
-        self.composite_with(dir, heights, || background)
+        let ray = SampleRay::new(
+            dir,
+            RayAlong::Fan {
+                alpha: dir.elevation_rad,
+                card_heights: Some(heights),
+            },
+        );
+        self.shade_ray(&ray, || background)
     }
 
-    /// As [`Self::composite`] with the background computed only when a card lets light through.
-    /// The azimuth is computed only when a card's height range is met.
+    /// What `ray` meets of the frame's objects ([`compose`]): the terrain, placed per ray, and
+    /// the cards at their distances (`cards` is sorted by distance).
     #[inline]
-    fn composite_with(
+    pub(super) fn compose(&self, ray: &SampleRay<'_>) -> Composed {
+        compose(
+            ray,
+            self.terrain.iter().map(Object::Terrain),
+            self.cards.iter().map(Object::Card),
+            self,
+        )
+    }
+
+    /// What a camera sample's `ray` meets ([`compose`]) over `background` (computed only when
+    /// something shows through).
+    #[inline]
+    pub(super) fn shade_ray(
         &self,
-        dir: &ViewDirection,
-        heights: &[Option<f64>],
+        ray: &SampleRay<'_>,
         background: impl FnOnce() -> [f64; 3],
     ) -> [f64; 3] {
-        let mut acc = [0.0f64; 3];
-        let mut transmit = 1.0f64;
-        let mut azimuth_cache: Option<f64> = None;
-        let mut azimuth = || *azimuth_cache.get_or_insert_with(|| dir.azimuth_offset_rad());
-        for card in &self.cards {
-            let Some(h) = heights[card.distance_index] else {
-                continue;
-            };
-            if h < card.base_m || h > card.top_m {
-                continue;
-            }
-            let mut offset = azimuth() - card.offset_rad;
-            if offset.abs() > std::f64::consts::PI {
-                offset = wrap_pi(offset);
-            }
-            if offset.abs() > card.half_width_rad {
-                continue;
-            }
-            let u = 0.5 + 0.5 * offset / card.half_width_rad;
-            let v = (card.top_m - h) / card.height_m;
-            let t = card.texture.sample(u, v);
-            let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
-            if let Some(aerial) = &self.aerial {
-                let k = card.distance_index;
-                let d = aerial.distances_m[k];
-                rgb = aerial.seen(rgb, t[3] as f64, dir.elevation_rad, Meets::Card(k), h, d);
-            }
-            for c in 0..3 {
-                acc[c] += transmit * rgb[c];
-            }
-            transmit *= 1.0 - t[3] as f64;
-            if transmit < 1e-6 {
-                return acc;
-            }
+        let found = self.compose(ray);
+        if found.meets == 0 {
+            return background();
         }
-        let background = background();
-        for c in 0..3 {
-            acc[c] += transmit * background[c];
+        let mut acc = found.radiance;
+        if found.transmittance >= OPAQUE {
+            let background = background();
+            for c in 0..3 {
+                acc[c] += found.transmittance * background[c];
+            }
         }
         acc
     }

@@ -1,7 +1,7 @@
 //! Render — terrain. In: the scene's [`Terrain`] (elevation model, observer, palette), the
 //! [`RayTracer`], the frame's azimuth and elevation ranges. Out: a [`TerrainView`] that tells
-//! for one sample (apparent elevation, azimuth) whether and where its ray meets the ground, and
-//! the ground's colour there.
+//! for one sample (apparent elevation, azimuth) whether and where its ray meets the ground, the
+//! air along the ray up to there, and the ground's colour.
 //!
 //! In a stratified atmosphere a ray's height against ground distance, h(d; α), depends only on
 //! its apparent elevation α, and it stays on the great circle through the observer along its
@@ -11,8 +11,16 @@
 //!   [`MAX_TERRAIN_DISTANCES`] points);
 //! * terrain **profiles** z(dⱼ) along azimuths one pixel (or less) apart across the frame
 //!   (bilinear in the model; sea, voids and points off the model are no ground);
-//! * an [`ElevationFan`] of its own, traced at those distances and refined (by the fan's rules)
-//!   wherever rays pass below the highest terrain at a distance.
+//! * an [`ElevationFan`] of its own, refined (by the fan's rules) wherever rays pass below the
+//!   highest terrain near a distance, traced to the **traced distances** ([`TracedGrid`]):
+//!   points at most [`MAX_APPROACH_STEP_M`] apart from the camera to the land, then every
+//!   `stride`-th grid distance (and the last). Between traced distances a ray's height is
+//!   interpolated linearly. The stride is [`MAX_TRACED_STEP_M`] over the grid spacing; if a
+//!   ray that comes below the highest terrain near a traced distance shows there, by the
+//!   second difference of its heights at three traced distances, |Δ²h|/8, an interpolation
+//!   error above the fan's tolerance at the nearest land (tolerance_px pixels there), the fan
+//!   is traced again at stride 1 (every grid distance). Locating the requested distances is
+//!   most of a terrain ray's cost, so a coarse stride that passes traces several times fewer.
 //!
 //! A sample then takes the profile nearest its azimuth and marches its ray (interpolated in the
 //! fan between the two neighbouring rays, as for cards) along the grid: the first grid interval
@@ -21,16 +29,26 @@
 //! skipped whole. A ray that reaches the sea first (its heights end) meets no terrain beyond.
 //! The ground distance of the hit orders terrain against cards and the sea.
 //!
+//! **The air to the hit.** With the sky's aerial perspective, the density-weighted path
+//! lengths D_k = ∫ e^(−h/H_k) ds (H = 8 km and the aerosol scale height) from the camera to
+//! every traced distance are summed once per fan ray along its own traced heights (each piece's
+//! height linear along it, integrated in closed form; the piece's length from its ground and
+//! height steps), and a hit takes them at its distance (linear between traced distances and
+//! between the two neighbouring rays). So terrain is seen through the air of the refracted
+//! path, as cards are ([`super::air_paths`]). In exact mode every sample's own ray is traced to
+//! every grid distance (stride 1) and summed the same way.
+//!
 //! Distances are the renderer's ground distances: arc lengths on the scene's sphere (and for
 //! the constant-curvature model, its horizontal coordinate, as for cards).
 
 use rayon::prelude::*;
 
 use super::elevation_fan::{ElevationFan, FanSpec};
+use super::objects::{Meet, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::Shader;
 use crate::scene::Terrain;
-use crate::scene::camera::ViewDirection;
+use crate::scene::terrain::GreatCircle;
 
 /// Most grid distances per frame.
 pub const MAX_TERRAIN_DISTANCES: usize = 2048;
@@ -38,6 +56,11 @@ pub const MAX_TERRAIN_DISTANCES: usize = 2048;
 pub const MAX_TERRAIN_PROFILES: usize = 8192;
 /// Grid intervals per skip block.
 pub const BLOCK: usize = 16;
+/// Longest step (m) between the traced distances from the camera to the land (they carry only
+/// the air along the way: a ray's sag between them, κd²/8, is centimetres there).
+pub const MAX_APPROACH_STEP_M: f64 = 2_000.0;
+/// Longest step (m) between traced distances over the land the stride starts from.
+pub const MAX_TRACED_STEP_M: f64 = 1_000.0;
 
 /// What [`TerrainView::new`] needs of the frame.
 pub(super) struct TerrainFrame {
@@ -52,6 +75,9 @@ pub(super) struct TerrainFrame {
     pub(super) max_depth: u32,
     /// Sky brightness (scales the palette).
     pub(super) brightness: f64,
+    /// Scale heights (m) of the aerial perspective's extinction (Rayleigh, aerosol); `None`
+    /// without haze (no path integrals).
+    pub(super) scale_heights_m: Option<[f64; 2]>,
 }
 
 /// A terrain hit.
@@ -61,6 +87,136 @@ pub struct TerrainHit {
     pub distance_m: f64,
     /// Height of the ground there (m).
     pub height_m: f64,
+    /// The density-weighted path lengths (m) from the camera along the ray to the hit, for the
+    /// Rayleigh and aerosol scale heights (`None` without haze, or where unknown).
+    pub density_paths_m: Option<[f64; 2]>,
+}
+
+/// The distances a terrain ray is traced to, and how the grid distances lie between them.
+#[derive(Debug, Clone)]
+pub(super) struct TracedGrid {
+    /// Ascending: approach points before the land, then grid distances.
+    pub(super) traced_m: Vec<f64>,
+    /// For each grid distance: the traced interval c (traced_m[c] ≤ dⱼ ≤ traced_m[c + 1], or c
+    /// the last) and the fraction of the way through it.
+    map: Vec<(usize, f64)>,
+    /// The grid distances.
+    grid_m: Vec<f64>,
+}
+
+impl TracedGrid {
+    /// Approach points at most [`MAX_APPROACH_STEP_M`] apart up to the first grid distance, then
+    /// every `stride`-th grid distance and the last.
+    pub(super) fn new(grid_m: &[f64], stride: usize) -> Self {
+        let lo = grid_m[0];
+        let steps = (lo / MAX_APPROACH_STEP_M).ceil().max(1.0) as usize;
+        let mut traced_m: Vec<f64> = (1..steps).map(|i| lo * i as f64 / steps as f64).collect();
+        let first_land = traced_m.len();
+        let n = grid_m.len();
+        let mut land: Vec<usize> = (0..n).step_by(stride.max(1)).collect();
+        if land.last() != Some(&(n - 1)) {
+            land.push(n - 1);
+        }
+        traced_m.extend(land.iter().map(|&j| grid_m[j]));
+        let mut map = Vec::with_capacity(n);
+        let mut c = 0;
+        for (j, &d) in grid_m.iter().enumerate() {
+            while c + 1 < land.len() && land[c + 1] <= j {
+                c += 1;
+            }
+            let (a, w) = if c + 1 < land.len() {
+                let (j0, j1) = (land[c], land[c + 1]);
+                (first_land + c, (d - grid_m[j0]) / (grid_m[j1] - grid_m[j0]))
+            } else {
+                (first_land + c, 0.0)
+            };
+            map.push((a, w));
+        }
+        Self {
+            traced_m,
+            map,
+            grid_m: grid_m.to_vec(),
+        }
+    }
+
+    /// Height at grid distance j of a ray with `heights` at the traced distances that ended
+    /// with `end`: linear between traced distances; between the last traced height and a
+    /// landing in the sea, linear down to the landing point; `None` past the ray's end.
+    #[inline]
+    pub(super) fn height(&self, heights: &[Option<f64>], end: FanEnd, j: usize) -> Option<f64> {
+        let (c, w) = self.map[j];
+        let h0 = heights[c]?;
+        if w == 0.0 {
+            return Some(h0);
+        }
+        match heights[c + 1] {
+            Some(h1) => Some(h0 + (h1 - h0) * w),
+            None => {
+                let FanEnd::Ground { distance_m: ds, .. } = end else {
+                    return None;
+                };
+                let (d0, d) = (self.traced_m[c], self.grid_m[j]);
+                (ds > d0 && d <= ds).then(|| h0 * (ds - d) / (ds - d0))
+            }
+        }
+    }
+
+    /// The traced interval holding ground distance `d_m` (the last traced distance at or before
+    /// it; 0 before the first).
+    #[inline]
+    fn interval(&self, d_m: f64) -> usize {
+        self.traced_m
+            .partition_point(|&t| t <= d_m)
+            .saturating_sub(1)
+    }
+}
+
+/// Density-weighted lengths [D_R, D_A] (m) of the straight piece from (`d0`, `h0`) to (`d1`,
+/// `h1`) (ground distance, height) over a sphere of `radius_m`, its height linear along it:
+/// L·e^(−h₀/H)·(1 − e^(−Δh/H))/(Δh/H) for each scale height H.
+#[inline]
+fn piece_density(
+    (d0, h0): (f64, f64),
+    (d1, h1): (f64, f64),
+    radius_m: f64,
+    scales_m: [f64; 2],
+) -> [f64; 2] {
+    let dh = h1 - h0;
+    let length = ((d1 - d0) * (1.0 + 0.5 * (h0 + h1) / radius_m)).hypot(dh);
+    scales_m.map(|scale| {
+        let x = dh / scale;
+        let mean = if x.abs() < 1e-9 {
+            1.0 - 0.5 * x
+        } else {
+            -(-x).exp_m1() / x
+        };
+        length * (-h0 / scale).exp() * mean
+    })
+}
+
+/// Cumulative density-weighted lengths from the camera (`h_cam` at distance 0) to every traced
+/// distance of a ray with `heights` (NaN from the first distance it does not reach).
+fn cumulative_density(
+    traced_m: &[f64],
+    heights: &[Option<f64>],
+    camera_height_m: f64,
+    radius_m: f64,
+    scales_m: [f64; 2],
+) -> Vec<[f32; 2]> {
+    let mut out = Vec::with_capacity(traced_m.len());
+    let mut prev = (0.0, camera_height_m);
+    let mut sum = [0.0f64; 2];
+    for (&d, h) in traced_m.iter().zip(heights) {
+        let Some(h) = *h else {
+            out.resize(traced_m.len(), [f32::NAN; 2]);
+            break;
+        };
+        let piece = piece_density(prev, (d, h), radius_m, scales_m);
+        sum = [sum[0] + piece[0], sum[1] + piece[1]];
+        out.push(sum.map(|v| v as f32));
+        prev = (d, h);
+    }
+    out
 }
 
 /// Terrain prepared for one frame (see the module docs).
@@ -77,23 +233,35 @@ pub(super) struct TerrainView<'a> {
     az_start_rad: f64,
     az_inv_step: f64,
     n_profiles: usize,
+    /// The great circle of each profile.
+    circles: Vec<GreatCircle>,
+    /// The highest ground at each grid distance over all profiles (−∞: none).
+    max_top_m: Vec<f64>,
+    /// Where the rays are traced: the fan's (or in exact mode every sample's).
+    pub(super) traced: TracedGrid,
     /// The terrain fan (None in exact mode: rays are traced per sample).
     fan: Option<ElevationFan>,
+    /// Every fan ray's height at every grid distance ([`TracedGrid::height`]; NaN past its
+    /// end), `distances_m.len()` per ray.
+    ray_grid_heights: Vec<f32>,
     /// Lowest height of each fan ray in each block (−∞ if the ray ends inside it).
     ray_block_min: Vec<f32>,
+    /// Per fan ray, [`cumulative_density`] at every traced distance (empty without haze).
+    ray_density: Vec<[f32; 2]>,
     /// Samples outside this elevation range (rad) meet no terrain.
     pub(super) may_hit_rad: (f64, f64),
 }
 
-/// Lowest height of `heights` in each block (−∞ where one is missing).
-fn block_minima(heights: &[Option<f64>], n_blocks: usize) -> impl Iterator<Item = f32> + '_ {
-    (0..n_blocks).map(move |b| {
-        let end = ((b + 1) * BLOCK + 1).min(heights.len());
-        heights[b * BLOCK..end]
-            .iter()
-            .map(|h| h.map_or(f32::NEG_INFINITY, |h| h as f32))
-            .fold(f32::INFINITY, f32::min)
-    })
+/// Lowest height of each block of grid distances for a ray (−∞ where one is missing).
+fn block_minima(height: impl Fn(usize) -> Option<f64>, n: usize, n_blocks: usize) -> Vec<f32> {
+    (0..n_blocks)
+        .map(|b| {
+            let end = ((b + 1) * BLOCK + 1).min(n);
+            (b * BLOCK..end)
+                .map(|j| height(j).map_or(f32::NEG_INFINITY, |h| h as f32))
+                .fold(f32::INFINITY, f32::min)
+        })
+        .collect()
 }
 
 impl<'a> TerrainView<'a> {
@@ -113,7 +281,6 @@ impl<'a> TerrainView<'a> {
         let n = (((hi - lo) / spacing).ceil() as usize + 1).clamp(2, MAX_TERRAIN_DISTANCES);
         let step = (hi - lo) / (n - 1) as f64;
         let distances_m: Vec<f64> = (0..n).map(|j| lo + j as f64 * step).collect();
-
         let (az_lo, az_hi) = match frame.azimuth_span_rad {
             Some((a, b)) => (a - 2.0 * frame.pixel_rad, b + 2.0 * frame.pixel_rad),
             None => (-std::f64::consts::PI, std::f64::consts::PI),
@@ -121,17 +288,7 @@ impl<'a> TerrainView<'a> {
         let n_profiles = (((az_hi - az_lo) / frame.pixel_rad).ceil() as usize + 1)
             .clamp(2, MAX_TERRAIN_PROFILES);
         let az_step = (az_hi - az_lo) / (n_profiles - 1) as f64;
-        let profiles: Vec<f32> = (0..n_profiles)
-            .into_par_iter()
-            .flat_map_iter(|p| {
-                let az = frame.heading_rad + az_lo + p as f64 * az_step;
-                distances_m.iter().map(move |&d| {
-                    terrain
-                        .height_along(az, d, radius)
-                        .map_or(f32::NEG_INFINITY, |z| z as f32)
-                })
-            })
-            .collect();
+        let profiles = sample_profiles(terrain, &frame, &distances_m, az_lo, az_step, n_profiles);
         let n_blocks = (n - 1).div_ceil(BLOCK);
         let block_max: Vec<f32> = profiles
             .chunks_exact(n)
@@ -158,6 +315,7 @@ impl<'a> TerrainView<'a> {
         }
         let mut view = Self {
             terrain,
+            traced: TracedGrid::new(&distances_m, 1),
             distances_m,
             profiles,
             block_max,
@@ -165,50 +323,78 @@ impl<'a> TerrainView<'a> {
             az_start_rad: az_lo,
             az_inv_step: 1.0 / az_step,
             n_profiles,
+            circles: (0..n_profiles)
+                .map(|p| terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step))
+                .collect(),
+            max_top_m,
             fan: None,
+            ray_grid_heights: Vec::new(),
             ray_block_min: Vec::new(),
+            ray_density: Vec::new(),
             may_hit_rad: frame.elevation_range_rad,
             frame,
         };
         if !exact {
-            view.build_fan(tracer, max_top_m);
+            view.build_fan(tracer, spacing);
         }
         Some(view)
     }
 
-    /// Trace the terrain fan, its per-block minima and the elevations that may meet the ground.
-    fn build_fan(&mut self, tracer: &dyn RayTracer, max_top_m: Vec<f64>) {
-        let f = &self.frame;
-        let spec = FanSpec {
-            camera_height_m: f.camera_height_m,
-            distances_m: self.distances_m.clone(),
-            max_top_m,
-            need_sky_direction: false,
-            sun_band_rad: None,
-            elevation_range_rad: f.elevation_range_rad,
-            pixel_rad: f.pixel_rad,
-            tolerance_px: f.tolerance_px,
-            max_depth: f.max_depth,
-        };
-        let fan = ElevationFan::build(tracer, &spec);
+    /// Trace the terrain fan at the largest stride whose interpolation passes (module docs),
+    /// then its per-block minima, path integrals and the elevations that may meet the ground.
+    fn build_fan(&mut self, tracer: &dyn RayTracer, spacing_m: f64) {
+        let stride = ((MAX_TRACED_STEP_M / spacing_m) as usize).max(1);
+        let mut traced = TracedGrid::new(&self.distances_m, stride);
+        let mut fan = ElevationFan::build(tracer, &self.fan_spec(&traced));
+        if stride > 1 && !self.interpolates(&traced, &fan) {
+            traced = TracedGrid::new(&self.distances_m, 1);
+            fan = ElevationFan::build(tracer, &self.fan_spec(&traced));
+        }
         let n = self.distances_m.len();
-        let last = self.distances_m[n - 1];
-        let alphas = fan.elevations_rad();
         let mut marked = (usize::MAX, 0usize);
+        let (first, last) = (self.distances_m[0], self.distances_m[n - 1]);
+        self.ray_grid_heights = (0..fan.len())
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let (heights, end) = (fan.ray_heights(i), fan.ray_end(i));
+                let traced = &traced;
+                (0..n).map(move |j| {
+                    traced
+                        .height(heights, end, j)
+                        .map_or(f32::NAN, |h| h as f32)
+                })
+            })
+            .collect();
         for i in 0..fan.len() {
-            let heights = fan.ray_heights(i);
+            let grid = &self.ray_grid_heights[i * n..(i + 1) * n];
+            let height = |j: usize| Some(f64::from(grid[j])).filter(|h| !h.is_nan());
+            let end = fan.ray_end(i);
             self.ray_block_min
-                .extend(block_minima(heights, self.n_blocks));
-            let low = heights
-                .iter()
-                .zip(&spec.max_top_m)
-                .any(|(h, top)| h.is_some_and(|h| h <= *top));
-            let lands_inside = matches!(fan.ray_end(i),
-                FanEnd::Ground { distance_m, .. } if distance_m >= spec.distances_m[0] && distance_m <= last);
+                .extend(block_minima(height, n, self.n_blocks));
+            let low = (0..n).any(|j| height(j).is_some_and(|h| h <= self.max_top_m[j]));
+            let lands_inside = matches!(end,
+                FanEnd::Ground { distance_m, .. } if distance_m >= first && distance_m <= last);
             if low || lands_inside {
                 marked = (marked.0.min(i), marked.1.max(i));
             }
         }
+        if let Some(scales) = self.frame.scale_heights_m {
+            let f = &self.frame;
+            self.ray_density = (0..fan.len())
+                .into_par_iter()
+                .flat_map_iter(|i| {
+                    let h = fan.ray_heights(i);
+                    cumulative_density(
+                        &traced.traced_m,
+                        h,
+                        f.camera_height_m,
+                        f.earth_radius_m,
+                        scales,
+                    )
+                })
+                .collect();
+        }
+        let alphas = fan.elevations_rad();
         self.may_hit_rad = if marked.0 == usize::MAX {
             (f64::INFINITY, f64::NEG_INFINITY)
         } else {
@@ -217,7 +403,56 @@ impl<'a> TerrainView<'a> {
                 alphas[(marked.1 + 1).min(alphas.len() - 1)],
             )
         };
+        self.traced = traced;
         self.fan = Some(fan);
+    }
+
+    /// The fan's spec for `traced`: heights matter below the highest ground between a traced
+    /// distance's neighbours (none before the land).
+    fn fan_spec(&self, traced: &TracedGrid) -> FanSpec {
+        let f = &self.frame;
+        let t = &traced.traced_m;
+        let max_top_m = (0..t.len())
+            .map(|c| {
+                let (a, b) = (t[c.saturating_sub(1)], t[(c + 1).min(t.len() - 1)]);
+                self.distances_m
+                    .iter()
+                    .zip(&self.max_top_m)
+                    .filter(|&(&d, _)| d >= a && d <= b)
+                    .map(|(_, &z)| z)
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .collect();
+        FanSpec {
+            camera_height_m: f.camera_height_m,
+            distances_m: t.clone(),
+            max_top_m,
+            need_sky_direction: false,
+            sun_band_rad: None,
+            elevation_range_rad: f.elevation_range_rad,
+            pixel_rad: f.pixel_rad,
+            tolerance_px: f.tolerance_px,
+            max_depth: f.max_depth,
+        }
+    }
+
+    /// Whether linear interpolation between `traced` distances is within the fan's tolerance
+    /// for every ray of `fan` where it comes below the highest ground: |Δ²h|/8 at three traced
+    /// land distances at most tolerance_px pixels at the nearest land.
+    fn interpolates(&self, traced: &TracedGrid, fan: &ElevationFan) -> bool {
+        let f = &self.frame;
+        let limit_m = f.tolerance_px * f.pixel_rad * self.distances_m[0];
+        let first_land = traced.map[0].0;
+        let tops = self.fan_spec(traced).max_top_m;
+        (0..fan.len()).all(|i| {
+            let h = &fan.ray_heights(i)[first_land..];
+            (1..h.len().saturating_sub(1)).all(|c| match (h[c - 1], h[c], h[c + 1]) {
+                (Some(a), Some(b), Some(d)) if a.min(b).min(d) <= tops[first_land + c] => {
+                    (a - 2.0 * b + d).abs() / 8.0 <= limit_m
+                }
+                _ => true,
+            })
+        })
     }
 
     /// Index of the profile nearest azimuth offset `offset_rad` (from the heading); `None`
@@ -239,32 +474,84 @@ impl<'a> TerrainView<'a> {
         let p = self.profile(offset_rad)?;
         let (i, t) = fan.interval_fraction(alpha);
         let j1 = (i + 1).min(fan.len() - 1);
-        let (ha, hb) = (fan.ray_heights(i), fan.ray_heights(j1));
-        let height = |j: usize| match (ha[j], hb[j]) {
-            (Some(x), Some(y)) => Some(x + (y - x) * t),
-            (x, y) => {
-                if t >= 0.5 {
-                    y
-                } else {
-                    x
-                }
-            }
+        let n = self.distances_m.len();
+        let (ha, hb) = (
+            &self.ray_grid_heights[i * n..(i + 1) * n],
+            &self.ray_grid_heights[j1 * n..(j1 + 1) * n],
+        );
+        let (ea, eb) = (fan.ray_end(i), fan.ray_end(j1));
+        let tf = t as f32;
+        let height = |j: usize| {
+            let (x, y) = (ha[j], hb[j]);
+            let h = if !(x.is_nan() || y.is_nan()) {
+                x + (y - x) * tf
+            } else if t >= 0.5 {
+                y
+            } else {
+                x
+            };
+            (!h.is_nan()).then_some(f64::from(h))
         };
         let nb = self.n_blocks;
         let (ma, mb) = (
             &self.ray_block_min[i * nb..(i + 1) * nb],
             &self.ray_block_min[j1 * nb..(j1 + 1) * nb],
         );
-        let end = if t >= 0.5 {
-            fan.ray_end(j1)
-        } else {
-            fan.ray_end(i)
-        };
-        self.march(p, height, |b| ma[b].min(mb[b]), end)
+        let end = if t >= 0.5 { eb } else { ea };
+        let mut hit = self.march(p, height, |b| ma[b].min(mb[b]), end)?;
+        if self.frame.scale_heights_m.is_some() {
+            let density = |k: usize| self.density_to(k, fan.ray_heights(k), hit);
+            hit.density_paths_m = match (density(i), density(j1)) {
+                (Some(x), Some(y)) => Some([0, 1].map(|c| x[c] + (y[c] - x[c]) * t)),
+                (x, y) => x.or(y),
+            };
+        }
+        Some(hit)
     }
 
-    /// As [`Self::hit`] for a ray traced on its own: `heights` at [`Self::distances_m`] and its
-    /// end.
+    /// Density-weighted lengths along fan ray `i` (its traced `heights`) to `hit`: its sum to
+    /// the traced distance before the hit, then linear to the next one, or (past its last
+    /// traced height) the piece from there to the hit point.
+    #[inline]
+    fn density_to(&self, i: usize, heights: &[Option<f64>], hit: TerrainHit) -> Option<[f64; 2]> {
+        let m = self.traced.traced_m.len();
+        let sums = &self.ray_density[i * m..(i + 1) * m];
+        let c = self.traced.interval(hit.distance_m);
+        self.interpolated_density(sums, heights, c, hit)
+    }
+
+    /// [`Self::density_to`] on the sums `sums` of one ray, the hit in traced interval `c`.
+    #[inline]
+    fn interpolated_density(
+        &self,
+        sums: &[[f32; 2]],
+        heights: &[Option<f64>],
+        c: usize,
+        hit: TerrainHit,
+    ) -> Option<[f64; 2]> {
+        let t = &self.traced.traced_m;
+        let s0 = sums[c].map(f64::from);
+        if s0[0].is_nan() {
+            return None;
+        }
+        if c + 1 < t.len() && !sums[c + 1][0].is_nan() {
+            let s1 = sums[c + 1].map(f64::from);
+            let w = ((hit.distance_m - t[c]) / (t[c + 1] - t[c])).clamp(0.0, 1.0);
+            return Some([0, 1].map(|k| s0[k] + (s1[k] - s0[k]) * w));
+        }
+        let scales = self.frame.scale_heights_m?;
+        let start = (t[c], heights[c]?);
+        let piece = piece_density(
+            start,
+            (hit.distance_m, hit.height_m),
+            self.frame.earth_radius_m,
+            scales,
+        );
+        Some([s0[0] + piece[0], s0[1] + piece[1]])
+    }
+
+    /// As [`Self::hit`] for a ray traced on its own: `heights` at [`Self::traced`]'s distances
+    /// (stride 1: every grid distance) and its end.
     pub(super) fn hit_traced(
         &self,
         offset_rad: f64,
@@ -272,12 +559,26 @@ impl<'a> TerrainView<'a> {
         end: FanEnd,
     ) -> Option<TerrainHit> {
         let p = self.profile(offset_rad)?;
-        self.march(
+        let tr = &self.traced;
+        let mut hit = self.march(
             p,
-            |j| heights.get(j).copied().flatten(),
+            |j| tr.height(heights, end, j),
             |_| f32::NEG_INFINITY,
             end,
-        )
+        )?;
+        if let Some(scales) = self.frame.scale_heights_m {
+            let f = &self.frame;
+            let sums = cumulative_density(
+                &tr.traced_m,
+                heights,
+                f.camera_height_m,
+                f.earth_radius_m,
+                scales,
+            );
+            let c = tr.interval(hit.distance_m);
+            hit.density_paths_m = self.interpolated_density(&sums, heights, c, hit);
+        }
+        Some(hit)
     }
 
     /// March profile `p` with a ray's heights `height(j)` (block minima `block_min(b)`, which
@@ -321,20 +622,19 @@ impl<'a> TerrainView<'a> {
     #[inline]
     fn crossing(&self, prev: Option<(f64, f64)>, j: usize, hj: f64, zj: f64) -> TerrainHit {
         let d = &self.distances_m;
-        match prev {
+        let (distance_m, height_m) = match prev {
             Some((hp, zp)) if zp.is_finite() => {
                 let (fp, fj) = (hp - zp, hj - zj);
                 let s = (fp / (fp - fj)).clamp(0.0, 1.0);
-                TerrainHit {
-                    distance_m: d[j - 1] + (d[j] - d[j - 1]) * s,
-                    height_m: zp + (zj - zp) * s,
-                }
+                (d[j - 1] + (d[j] - d[j - 1]) * s, zp + (zj - zp) * s)
             }
             // The ground starts at j (a coast) or nothing is known before it.
-            _ => TerrainHit {
-                distance_m: d[j],
-                height_m: zj,
-            },
+            _ => (d[j], zj),
+        };
+        TerrainHit {
+            distance_m,
+            height_m,
+            density_paths_m: None,
         }
     }
 
@@ -365,17 +665,17 @@ impl<'a> TerrainView<'a> {
             })
     }
 
-    /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`.
+    /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`
+    /// (on the great circle of its profile, where the hit was found).
     pub(super) fn colour(&self, hit: TerrainHit, offset_rad: f64) -> [f64; 3] {
         let t = self.terrain;
         let radius = self.frame.earth_radius_m;
-        let az = self.frame.heading_rad + offset_rad;
-        let (lat, lon) = t.destination_deg(az, hit.distance_m, radius);
-        let lon = t.wrap_lon(lon);
-        let (slope, normal) = t
-            .dem
-            .slope_at(lat, lon, radius)
-            .unwrap_or((0.0, [0.0, 0.0, 1.0]));
+        let (slope, normal) = self
+            .profile(offset_rad)
+            .and_then(|p| self.circles[p].grid_at(t, hit.distance_m, radius))
+            .map_or((0.0, [0.0, 0.0, 1.0]), |(r, c)| {
+                t.slope_at_grid(r, c, radius)
+            });
         // The normal is in the hit point's east/north/up; the light's direction is taken in the
         // same local frame (the model spans a few degrees at most).
         t.palette
@@ -384,31 +684,151 @@ impl<'a> TerrainView<'a> {
     }
 }
 
-/// Radiance of a sample along `dir` whose ray meets the ground at `hit`: the ground's colour
-/// (through the air between, with the sky's aerial perspective) behind the cards nearer than
-/// the hit; `heights` (at the card distances `card_distances_m`) are cleared beyond it.
-pub(super) fn shade_hit(
-    shader: &Shader<'_>,
-    view: &TerrainView<'_>,
-    dir: &ViewDirection,
-    heights: &mut [Option<f64>],
-    card_distances_m: &[f64],
-    hit: TerrainHit,
-) -> [f64; 3] {
-    let mut ground = view.colour(hit, dir.azimuth_offset_rad());
-    if let Some(aerial) = &shader.aerial {
-        let tau = aerial.extinction.chord_optical_depth(
-            aerial.earth_radius_m,
-            aerial.camera_height_m,
-            hit.height_m,
-            hit.distance_m,
-        );
-        ground = aerial.extinction.attenuate(ground, 1.0, tau);
+/// The profiles z(dⱼ) along `n_profiles` azimuths `az_step` apart from offset `az_lo` (in
+/// parallel, collected in order), `distances_m.len()` per azimuth; −∞ where there is no ground.
+fn sample_profiles(
+    terrain: &Terrain,
+    frame: &TerrainFrame,
+    distances_m: &[f64],
+    az_lo: f64,
+    az_step: f64,
+    n_profiles: usize,
+) -> Vec<f32> {
+    let radius = frame.earth_radius_m;
+    (0..n_profiles)
+        .into_par_iter()
+        .flat_map_iter(|p| {
+            let circle = terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step);
+            distances_m.iter().map(move |&d| {
+                circle
+                    .grid_at(terrain, d, radius)
+                    .and_then(|(r, c)| terrain.dem.height_at_grid(r, c))
+                    .filter(|&z| z > 0.0)
+                    .map_or(f32::NEG_INFINITY, |z| z as f32)
+            })
+        })
+        .collect()
+}
+
+impl TerrainView<'_> {
+    /// Whether a camera sample at apparent elevation `alpha` may meet the terrain (through
+    /// the fan; exact mode: always).
+    #[inline]
+    pub(super) fn may_hit(&self, alpha: f64) -> bool {
+        alpha >= self.may_hit_rad.0 && alpha <= self.may_hit_rad.1
     }
-    for (h, &d) in heights.iter_mut().zip(card_distances_m) {
-        if d >= hit.distance_m {
+}
+
+impl SceneObject for TerrainView<'_> {
+    fn fixed_distance_m(&self) -> Option<f64> {
+        None
+    }
+
+    /// The ground a camera ray meets (through the fan, or along its own traced ray); a ray the
+    /// sea reflects meets no terrain (the reflections show the cards and the sky).
+    #[inline]
+    fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
+        let hit = match ray.along {
+            RayAlong::Fan { alpha, .. } => {
+                if !self.may_hit(alpha) {
+                    return None;
+                }
+                self.hit(alpha, ray.azimuth_offset_rad())?
+            }
+            RayAlong::Traced {
+                terrain: Some((heights, end)),
+                ..
+            } => self.hit_traced(ray.azimuth_offset_rad(), heights, end)?,
+            RayAlong::Traced { terrain: None, .. } | RayAlong::Reflected { .. } => return None,
+        };
+        Some(Meet {
+            distance_m: hit.distance_m,
+            height_m: hit.height_m,
+            u: 0.0,
+            density_paths_m: hit.density_paths_m,
+        })
+    }
+
+    /// The ground's colour through the air between (with the sky's aerial perspective: along
+    /// the ray's path where the meet carries its path integrals, else the straight chord);
+    /// opaque.
+    fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
+        let hit = TerrainHit {
+            distance_m: meet.distance_m,
+            height_m: meet.height_m,
+            density_paths_m: meet.density_paths_m,
+        };
+        let mut ground = self.colour(hit, ray.azimuth_offset_rad());
+        if let Some(aerial) = &shader.aerial {
+            let tau = match hit.density_paths_m {
+                Some(d) => aerial.extinction.path_optical_depth(d),
+                None => aerial.extinction.chord_optical_depth(
+                    aerial.earth_radius_m,
+                    aerial.camera_height_m,
+                    hit.height_m,
+                    hit.distance_m,
+                ),
+            };
+            ground = aerial.extinction.attenuate(ground, 1.0, tau);
+        }
+        (ground, 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn traced_grid_maps_every_grid_distance_between_traced_ones() {
+        let grid: Vec<f64> = (0..23).map(|j| 5_000.0 + 100.0 * j as f64).collect();
+        let tg = TracedGrid::new(&grid, 4);
+        // Approach points ≤ 2 km apart before 5 km: 1.67 and 3.33 km.
+        assert_eq!(tg.traced_m.len(), 2 + 6 + 1);
+        assert!((tg.traced_m[0] - 5_000.0 / 3.0).abs() < 1e-9);
+        // A ray with heights h = d / 100 at the traced distances: linear everywhere.
+        let heights: Vec<Option<f64>> = tg.traced_m.iter().map(|d| Some(d / 100.0)).collect();
+        let end = FanEnd::Sky { elevation_rad: 0.0 };
+        for (j, d) in grid.iter().enumerate() {
+            let h = tg.height(&heights, end, j).unwrap();
+            assert!((h - d / 100.0).abs() < 1e-9, "{j}: {h}");
+        }
+        // Landing in the sea at 6.05 km after its last height at 5.8 km: down to 0 there.
+        let mut landed = heights.clone();
+        for h in landed.iter_mut().skip(5) {
             *h = None;
         }
+        let end = FanEnd::Ground {
+            distance_m: 6_050.0,
+            grazing_rad: 0.01,
+        };
+        let at = |j: usize| tg.height(&landed, end, j);
+        assert!((at(8).unwrap() - 58.0).abs() < 1e-9);
+        assert!((at(10).unwrap() - 58.0 * 50.0 / 250.0).abs() < 1e-9);
+        assert_eq!(at(11), None);
     }
-    shader.composite(dir, heights, ground)
+
+    #[test]
+    fn piece_density_is_the_integral_of_the_exponential_profile() {
+        // A level piece: length × e^(−h/H); a climbing one against a fine midpoint sum.
+        let r = 6.371e6;
+        let level = piece_density((0.0, 500.0), (1_000.0, 500.0), r, [8_000.0, 1_000.0]);
+        let stretch = 1.0 + 500.0 / r;
+        assert!((level[1] - 1_000.0 * stretch * (-0.5f64).exp()).abs() < 1e-9);
+        let got = piece_density((0.0, 0.0), (1_000.0, 300.0), r, [8_000.0, 1_000.0]);
+        let n = 100_000;
+        let length = (1_000.0 * (1.0 + 150.0 / r)).hypot(300.0);
+        for (k, scale) in [8_000.0, 1_000.0].into_iter().enumerate() {
+            let sum: f64 = (0..n)
+                .map(|i| (-(300.0 * (i as f64 + 0.5) / n as f64) / scale).exp())
+                .sum::<f64>()
+                * length
+                / n as f64;
+            assert!(
+                (got[k] - sum).abs() < 1e-6 * sum,
+                "{k}: {} vs {sum}",
+                got[k]
+            );
+        }
+    }
 }

@@ -362,6 +362,7 @@ struct RawTerrain {
     ice_rgb: Option<[f64; 3]>,
     light_azimuth_deg: Option<f64>,
     light_elevation_deg: Option<f64>,
+    fill_voids: Option<bool>,
 }
 
 /// The `[terrain]` section checked and its elevation model read, with the model file's sha256.
@@ -445,7 +446,11 @@ fn terrain_section(
         source: Box::new(source),
     })?;
     let digest: [u8; 32] = Sha256::digest(&bytes).into();
-    Ok((Terrain::new(dem_path, dem, (lat, lon), palette), digest))
+    let fill_voids = raw.fill_voids.unwrap_or(true);
+    Ok((
+        Terrain::new(dem_path, dem, (lat, lon), palette, fill_voids),
+        digest,
+    ))
 }
 
 /// The sea's rms facet slope (rad): `wave_slope_deg` if given, else Cox–Munk at

@@ -10,12 +10,14 @@
 //! * [`frames`] — time per frame of the render paths and image error against the tolerance;
 //! * [`frames_report`] — their tables and plot;
 //! * [`benchmarks`] — the whole `BENCHMARKS.md`;
+//! * [`effects`] — scenes with terrain, haze or the sun taken out, for the effects bench;
 //! * [`stats`] — median and 95th percentile.
 //! * [`stress_report`] — the stress suite's launch set, Bouguer drift bound, error against
 //!   tolerance: the `bench stress` study, `STRESS.md` and its plot.
 
 pub mod accuracy;
 pub mod benchmarks;
+pub mod effects;
 pub mod frames;
 pub mod frames_report;
 pub mod image_bounds;

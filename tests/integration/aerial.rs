@@ -205,13 +205,7 @@ fn haze_towards_a_card_follows_the_refracted_ray() {
     let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz_atm));
     let scales = [8_000.0, 1_000.0];
     let along = reference_density_paths(&index, 10.0, alpha, distance_m, 10.0, scales);
-    // Green (549 nm) coefficients of the documented model.
-    let r = 550.0f64 / 549.0;
-    let rayleigh = 0.0975 / 8_000.0;
-    let beta = [
-        rayleigh * r.powi(4),
-        (3.912 / visibility_m - rayleigh) * r.powf(1.3),
-    ];
+    let beta = green_extinction_per_m(visibility_m);
     let tau = beta[0] * along[0] + beta[1] * along[1];
     let relative = contrast / (-tau).exp() - 1.0;
     eprintln!(
@@ -231,8 +225,20 @@ fn haze_towards_a_card_follows_the_refracted_ray() {
     );
 }
 
+/// The documented model's extinction coefficients (1/m) at the surface in the green channel
+/// (549 nm) for `visibility_m` and the default sky (Rayleigh optical depth 0.0975 over 8 km):
+/// [Rayleigh, aerosol].
+pub(crate) fn green_extinction_per_m(visibility_m: f64) -> [f64; 2] {
+    let r = 550.0f64 / 549.0;
+    let rayleigh = 0.0975 / 8_000.0;
+    [
+        rayleigh * r.powi(4),
+        (3.912 / visibility_m - rayleigh) * r.powf(1.3),
+    ]
+}
+
 /// τ along the straight chord from the camera to the ray's point at `distance_m` (1 m pieces).
-fn film_chord_tau(
+pub(crate) fn film_chord_tau(
     scene: &Scene,
     alpha: f64,
     distance_m: f64,

@@ -31,4 +31,6 @@ mod spectral;
 mod stress;
 mod survey;
 mod terrain;
+mod terrain_exact;
+mod terrain_real;
 mod tracer;

@@ -11,6 +11,7 @@ use ghostship::render::{
 use ghostship::scene::{Scene, assets};
 
 use crate::support::data::data_dir;
+use crate::support::films::{at_edge, max_channel_difference};
 
 const R: f64 = 6_371_000.0;
 const ARCMIN: f64 = std::f64::consts::PI / (180.0 * 60.0);
@@ -321,31 +322,6 @@ fn boards_scene_with(extra: &str) -> (tempfile::TempDir, Scene) {
          {extra}"
     );
     scene_in_tempdir(&text)
-}
-
-/// The largest difference of the colour channels of `a` and `b`: absolute up to the white
-/// horizon sky (1), relative to the larger value above it — so the sun's disc, 1e2 to 1e5 times
-/// the sky, is held to the same share of its value as the sky.
-pub(crate) fn max_channel_difference(a: [f32; 4], b: [f32; 4]) -> f32 {
-    (0..3)
-        .map(|c| (a[c] - b[c]).abs() / a[c].abs().max(b[c].abs()).max(1.0))
-        .fold(0.0, f32::max)
-}
-
-/// Whether pixel (`x`, `y`) of `film` sits at an edge: one of its four neighbours differs from
-/// it by more than `threshold` in some channel ([`max_channel_difference`]).
-pub(crate) fn at_edge(film: &Film, x: u32, y: u32, threshold: f32) -> bool {
-    let p = film.pixel(x, y);
-    [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
-        .iter()
-        .any(|(dx, dy)| {
-            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-            nx >= 0
-                && ny >= 0
-                && (nx as u32) < film.width
-                && (ny as u32) < film.height
-                && max_channel_difference(p, film.pixel(nx as u32, ny as u32)) > threshold
-        })
 }
 
 #[test]

@@ -23,8 +23,8 @@ use ghostship::scene::card::srgb_to_linear;
 use ghostship::scene::{Scene, Texture, assets};
 use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 
-use crate::render::{at_edge, max_channel_difference};
 use crate::support::data::data_dir;
+use crate::support::films::differing_and_edge_pixels;
 use crate::support::reference::{
     BreakSource, atmosphere_index, bouguer_escape_elevation, reference_density_paths,
     reference_heights,
@@ -863,34 +863,6 @@ fn novaya_zemlya_sun_shows_as_stacked_strips_where_the_traced_map_puts_them() {
             .collect();
         assert!(gap.len() >= 3, "gap rows between {pair:?}: {gap:?}");
     }
-}
-
-/// Pixels of `a` and `b` that differ by more than `threshold` ([`max_channel_difference`]), and
-/// pixels of `b` on an edge (differing so from a vertical neighbour). Panics if a
-/// differing pixel is not next to an edge (any of its four neighbours differs from it) in `a` or
-/// in `b`: the fan moves edges, it never changes a pixel inside a uniform region.
-fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, usize) {
-    let differ = |p: [f32; 4], q: [f32; 4]| max_channel_difference(p, q) > threshold;
-    let mut diff = 0;
-    let mut edges = 0;
-    for y in 0..b.height {
-        for x in 0..b.width {
-            let p = b.pixel(x, y);
-            if differ(a.pixel(x, y), p) {
-                diff += 1;
-                assert!(
-                    at_edge(a, x, y, threshold) || at_edge(b, x, y, threshold),
-                    "pixel ({x}, {y}) differs away from any edge"
-                );
-            }
-            let up = y > 0 && differ(p, b.pixel(x, y - 1));
-            let down = y + 1 < b.height && differ(p, b.pixel(x, y + 1));
-            if up || down {
-                edges += 1;
-            }
-        }
-    }
-    (diff, edges)
 }
 
 fn fast_vs_exact(name: &str) {

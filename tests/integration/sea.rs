@@ -8,8 +8,8 @@
 use ghostship::render::{Film, RenderOptions, StraightRays, render_scene};
 use ghostship::scene::Scene;
 
-use crate::render::max_channel_difference;
 use crate::support::bisect;
+use crate::support::films::max_channel_difference;
 
 const R: f64 = 6_371_000.0;
 const CAMERA_M: f64 = 10.0;

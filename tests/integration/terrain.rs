@@ -9,12 +9,12 @@ use ghostship::scene::{Dem, Scene};
 
 use crate::support::dem::{Grid, hgt_bytes, write_geotiff};
 
-const R: f64 = 6_371_000.0;
+pub(crate) const R: f64 = 6_371_000.0;
 /// Metres per degree of latitude on the scene's sphere.
 const M_PER_DEG: f64 = R * std::f64::consts::PI / 180.0;
 const OBSERVER: (f64, f64) = (45.0, 10.0);
 
-fn quiet() -> RenderOptions {
+pub(crate) fn quiet() -> RenderOptions {
     RenderOptions {
         quiet: true,
         ..RenderOptions::default()
@@ -121,7 +121,7 @@ fn ridge_scene(dir: &Path, distance_m: f64, height_m: f64, camera: &str) -> Scen
 }
 
 /// [`ridge_scene`] with more scene text (cards) after the terrain section.
-fn ridge_scene_with(
+pub(crate) fn ridge_scene_with(
     dir: &Path,
     distance_m: f64,
     height_m: f64,
@@ -165,12 +165,12 @@ fn ridge_scene_with(
     Scene::from_file(&path).unwrap()
 }
 
-fn is_terrain(p: [f32; 4]) -> bool {
+pub(crate) fn is_terrain(p: [f32; 4]) -> bool {
     p[0] > 0.3 && p[1] < 0.1 && p[2] < 0.1
 }
 
 /// Rows of the centre column showing terrain.
-fn terrain_rows(film: &Film) -> Vec<u32> {
+pub(crate) fn terrain_rows(film: &Film) -> Vec<u32> {
     (0..film.height)
         .filter(|&y| is_terrain(film.pixel(film.width / 2, y)))
         .collect()
@@ -178,13 +178,13 @@ fn terrain_rows(film: &Film) -> Vec<u32> {
 
 /// Apparent elevation of the point at height `h` and ground distance `d` from a camera at `h0`,
 /// straight rays over a sphere of radius `r`: from (r+h)·cos(θ+α) = (r+h0)·cos α, θ = d/r.
-fn geometric_elevation(h0: f64, h: f64, d: f64, r: f64) -> f64 {
+pub(crate) fn geometric_elevation(h0: f64, h: f64, d: f64, r: f64) -> f64 {
     let theta = d / r;
     (((r + h) * theta.cos() - (r + h0)) / ((r + h) * theta.sin())).atan()
 }
 
 /// First film row (centre column, pitch `pitch`) whose centre lies at or below elevation `alpha`.
-fn first_row_below(scene: &Scene, alpha: f64) -> i64 {
+pub(crate) fn first_row_below(scene: &Scene, alpha: f64) -> i64 {
     let f = scene.camera.frame().focal_px;
     let boundary = 0.5 * scene.camera.height as f64 - f * (alpha - scene.camera.pitch_rad).tan();
     (boundary - 0.5).ceil() as i64

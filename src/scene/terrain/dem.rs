@@ -12,11 +12,19 @@
 //!   PixelIsArea (the default) puts the tie point on a pixel's corner, PixelIsPoint on its
 //!   centre. `GDAL_NODATA` (42113) and NaN samples are voids.
 //!
-//! Files are read through [`crate::input::read_limited`] ([`MAX_DEM_BYTES`]) and the grid is
-//! capped at [`MAX_DEM_SAMPLES`].
+//! Either may come as a zip archive of that one file (SRTM tiles are distributed as
+//! `N22W160.hgt.zip`; the member's name then places the tile) or gzip-compressed (`.hgt.gz`).
+//! Files are read through [`crate::input::read_limited`] ([`MAX_DEM_BYTES`], also the limit of
+//! what an archive may inflate to) and the grid is capped at [`MAX_DEM_SAMPLES`].
+//!
+//! **Voids** (SRTM's −32768, a GeoTIFF's `GDAL_NODATA` or NaN) stay voids in a [`Dem`];
+//! [`Dem::fill_voids`] replaces those it can reach by the harmonic interpolation of the
+//! heights around them (what a scene's terrain does unless `fill_voids = false`).
 
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
+
+use crate::input::Packing;
 
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
@@ -25,6 +33,10 @@ use tiff::tags::Tag;
 pub const MAX_DEM_BYTES: u64 = 512 * 1024 * 1024;
 /// Most samples in a grid (a 1″ SRTM tile has 13 M).
 pub const MAX_DEM_SAMPLES: usize = 64 * 1024 * 1024;
+/// [`Dem::fill_voids`] stops when no filled height changed by more than this in a sweep (m).
+pub const VOID_FILL_TOLERANCE_M: f64 = 1e-4;
+/// [`Dem::fill_voids`] stops after this many sweeps at the latest.
+pub const MAX_VOID_FILL_SWEEPS: usize = 20_000;
 
 /// An elevation model could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -38,8 +50,11 @@ pub enum DemError {
         #[source]
         source: std::io::Error,
     },
-    /// The file's extension is neither `.hgt` nor `.tif`/`.tiff`.
-    #[error("elevation model {path}: unknown format (expected a .hgt or .tif/.tiff file)")]
+    /// The file's extension is neither `.hgt` nor `.tif`/`.tiff` (nor a `.zip` or `.gz` of one).
+    #[error(
+        "elevation model {path}: unknown format (expected a .hgt or .tif/.tiff file, or a .zip \
+         or .gz of one)"
+    )]
     Format {
         /// The file.
         path: PathBuf,
@@ -123,19 +138,42 @@ impl Dem {
         Self::from_bytes(path, &bytes)
     }
 
-    /// Decode the bytes of a `.hgt` or GeoTIFF file; `path` gives the format (its extension),
-    /// the SRTM tile's position (its name) and the name in errors.
+    /// Decode the bytes of a `.hgt` or GeoTIFF file, or of a zip archive or gzip stream holding
+    /// one (SRTM tiles are distributed as `N22W160.hgt.zip`); `path` gives the format (its
+    /// extension; for an archive its member's, for gzip the name without `.gz`), the SRTM tile's
+    /// position (the name of the `.hgt` file itself) and the name in errors.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self, DemError> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("hgt") => read_hgt(path, bytes),
-            Some("tif" | "tiff") => read_geotiff(path, bytes),
-            _ => Err(DemError::Format {
-                path: path.to_path_buf(),
-            }),
+        let ext = extension(path);
+        if matches!(ext.as_deref(), Some("zip" | "gz")) {
+            let (inflated, packing) =
+                crate::input::unpack(bytes.to_vec(), MAX_DEM_BYTES).map_err(|source| {
+                    DemError::Read {
+                        path: path.to_path_buf(),
+                        source,
+                    }
+                })?;
+            let inner = match packing {
+                Packing::Zip { member } => PathBuf::from(member),
+                // A gzip stream is the file named without its `.gz`.
+                _ => PathBuf::from(path.file_stem().unwrap_or_default()),
+            };
+            return Self::decode(path, &inner, &inflated);
+        }
+        Self::decode(path, path, bytes)
+    }
+
+    /// Decode `bytes` by the extension and name of `inner` (the file itself, or an archive's
+    /// member); errors name `path`, and the member when it is not the file.
+    fn decode(path: &Path, inner: &Path, bytes: &[u8]) -> Result<Self, DemError> {
+        let named = if inner == path {
+            path.to_path_buf()
+        } else {
+            PathBuf::from(format!("{} (member {})", path.display(), inner.display()))
+        };
+        match extension(inner).as_deref() {
+            Some("hgt") => read_hgt(&named, hgt_corner(inner), bytes),
+            Some("tif" | "tiff") => read_geotiff(&named, bytes),
+            _ => Err(DemError::Format { path: named }),
         }
     }
 
@@ -163,7 +201,7 @@ impl Dem {
 
     /// Fractional (row, column) of a point, `None` outside the grid.
     #[inline]
-    fn grid_position(&self, lat_deg: f64, lon_deg: f64) -> Option<(f64, f64)> {
+    pub fn grid_position(&self, lat_deg: f64, lon_deg: f64) -> Option<(f64, f64)> {
         let r = (self.north_lat_deg - lat_deg) / self.lat_step_deg;
         let c = (lon_deg - self.west_lon_deg) / self.lon_step_deg;
         // Points on the edge stay on the grid despite rounding (a millionth of a step).
@@ -177,16 +215,76 @@ impl Dem {
     #[inline]
     pub fn height_at(&self, lat_deg: f64, lon_deg: f64) -> Option<f64> {
         let (r, c) = self.grid_position(lat_deg, lon_deg)?;
-        let (r0, c0) = (
-            (r as usize).min(self.rows - 2),
-            (c as usize).min(self.cols - 2),
-        );
-        let (tr, tc) = (r - r0 as f64, c - c0 as f64);
-        let at = |i: usize, j: usize| self.heights_m[i * self.cols + j] as f64;
-        let top = at(r0, c0) + (at(r0, c0 + 1) - at(r0, c0)) * tc;
-        let bottom = at(r0 + 1, c0) + (at(r0 + 1, c0 + 1) - at(r0 + 1, c0)) * tc;
-        let h = top + (bottom - top) * tr;
+        self.height_at_grid(r, c)
+    }
+
+    /// Bilinear height (m) at fractional row `r` and column `c` (on the grid, as
+    /// [`Self::grid_position`] gives them); `None` next to a void.
+    #[inline]
+    pub fn height_at_grid(&self, r: f64, c: f64) -> Option<f64> {
+        let h = bilinear(self.rows, self.cols, r, c, |i| f64::from(self.heights_m[i]));
         h.is_finite().then_some(h)
+    }
+
+    /// The height's rate of change per grid step southwards (along a column) and eastwards
+    /// (along a row) at every sample (m per step), by central differences (one-sided at the
+    /// edges and next to voids; NaN for a void or a sample with no known neighbour in a
+    /// direction). Row-major like the samples; what [`Self::gradient_at_grid`] interpolates.
+    pub fn gradients(&self) -> Vec<[f32; 2]> {
+        let (rows, cols) = (self.rows, self.cols);
+        let h = |r: usize, c: usize| self.heights_m[r * cols + c];
+        let diff = |before: Option<f32>, here: f32, after: Option<f32>| match (
+            before.filter(|v| !v.is_nan()),
+            after.filter(|v| !v.is_nan()),
+        ) {
+            (Some(b), Some(a)) => 0.5 * (a - b),
+            (Some(b), None) => here - b,
+            (None, Some(a)) => a - here,
+            (None, None) => f32::NAN,
+        };
+        (0..rows * cols)
+            .map(|i| {
+                let (r, c) = (i / cols, i % cols);
+                let here = h(r, c);
+                let south = diff(
+                    r.checked_sub(1).map(|r| h(r, c)),
+                    here,
+                    (r + 1 < rows).then(|| h(r + 1, c)),
+                );
+                let east = diff(
+                    c.checked_sub(1).map(|c| h(r, c)),
+                    here,
+                    (c + 1 < cols).then(|| h(r, c + 1)),
+                );
+                [south, east]
+            })
+            .collect()
+    }
+
+    /// Slope (rad from the horizontal) and upward unit normal (east, north, up) at fractional
+    /// row `r` and column `c`, from `gradients` ([`Self::gradients`]) interpolated bilinearly,
+    /// on a sphere of `radius_m`; `None` where a gradient is unknown.
+    pub fn gradient_at_grid(
+        &self,
+        gradients: &[[f32; 2]],
+        r: f64,
+        c: f64,
+        radius_m: f64,
+    ) -> Option<(f64, [f64; 3])> {
+        let south = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][0]));
+        let east = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][1]));
+        if !(south.is_finite() && east.is_finite()) {
+            return None;
+        }
+        let m_per_deg = radius_m * std::f64::consts::PI / 180.0;
+        let lat = self.north_lat_deg - r * self.lat_step_deg;
+        let gy = -south / (self.lat_step_deg * m_per_deg);
+        let gx = east / (self.lon_step_deg * m_per_deg * lat.to_radians().cos().max(1e-6));
+        let norm = (gx * gx + gy * gy + 1.0).sqrt();
+        Some((
+            (gx * gx + gy * gy).sqrt().atan(),
+            [-gx / norm, -gy / norm, 1.0 / norm],
+        ))
     }
 
     /// Slope (rad from the horizontal) and the upward unit normal (east, north, up) at a point,
@@ -210,6 +308,101 @@ impl Dem {
         ))
     }
 
+    /// Fill the voids that known samples surround or border with the harmonic interpolation of
+    /// those samples: each filled height is the mean of its four neighbours (those on the grid),
+    /// so a void inside a plane is filled with the plane, and no filled height lies outside the
+    /// range of the known heights around its void. Solved by successive over-relaxation from a
+    /// breadth-first first guess, to [`VOID_FILL_TOLERANCE_M`] (at most
+    /// [`MAX_VOID_FILL_SWEEPS`] sweeps, in a fixed order: the result does not depend on the
+    /// thread count). A void region touching no known sample stays void. Returns how many
+    /// samples were filled.
+    pub fn fill_voids(&mut self) -> usize {
+        let (first_guess, layers) = self.void_first_guess();
+        let filled: Vec<usize> = first_guess.iter().map(|&(i, _)| i).collect();
+        let mut z: Vec<f64> = self.heights_m.iter().map(|&h| f64::from(h)).collect();
+        for &(i, v) in &first_guess {
+            z[i] = v;
+        }
+        // Over-relaxation factor for a region `layers` samples deep (the optimum for a square
+        // of twice that side).
+        let extent = (2 * layers + 2) as f64;
+        let omega = 2.0 / (1.0 + (std::f64::consts::PI / extent).sin());
+        for _ in 0..MAX_VOID_FILL_SWEEPS {
+            let mut largest = 0.0f64;
+            for &i in &filled {
+                let mean = self.neighbour_mean(&z, i);
+                let change = omega * (mean - z[i]);
+                z[i] += change;
+                largest = largest.max(change.abs());
+            }
+            if largest < VOID_FILL_TOLERANCE_M {
+                break;
+            }
+        }
+        for &i in &filled {
+            self.heights_m[i] = z[i] as f32;
+        }
+        filled.len()
+    }
+
+    /// The mean of the on-grid four neighbours of sample `i` in `z`.
+    #[inline]
+    fn neighbour_mean(&self, z: &[f64], i: usize) -> f64 {
+        let (r, c) = (i / self.cols, i % self.cols);
+        let mut sum = 0.0;
+        let mut n = 0.0;
+        for (dr, dc) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+            if rr >= 0 && cc >= 0 && (rr as usize) < self.rows && (cc as usize) < self.cols {
+                sum += z[rr as usize * self.cols + cc as usize];
+                n += 1.0;
+            }
+        }
+        sum / n
+    }
+
+    /// Every void sample a known one can be reached from, with a first guess (the mean of its
+    /// neighbours reached in earlier layers of a breadth-first search from the known samples),
+    /// in the order reached; and the number of layers.
+    fn void_first_guess(&self) -> (Vec<(usize, f64)>, usize) {
+        let mut value: Vec<f64> = self.heights_m.iter().map(|&h| f64::from(h)).collect();
+        let mut reached: Vec<bool> = value.iter().map(|v| !v.is_nan()).collect();
+        let mut pending: Vec<usize> = (0..value.len()).filter(|&i| !reached[i]).collect();
+        let mut out = Vec::new();
+        let mut layers = 0;
+        loop {
+            let layer: Vec<(usize, f64)> = pending
+                .iter()
+                .filter_map(|&i| {
+                    let (r, c) = (i / self.cols, i % self.cols);
+                    let near = [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+                        .into_iter()
+                        .filter_map(|(dr, dc)| {
+                            let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                            let inside = rr >= 0
+                                && cc >= 0
+                                && (rr as usize) < self.rows
+                                && (cc as usize) < self.cols;
+                            let j = inside.then(|| rr as usize * self.cols + cc as usize)?;
+                            reached[j].then_some(value[j])
+                        });
+                    let (sum, count) = near.fold((0.0, 0.0), |(s, k), v| (s + v, k + 1.0));
+                    (count > 0.0).then(|| (i, sum / count))
+                })
+                .collect();
+            if layer.is_empty() {
+                return (out, layers);
+            }
+            layers += 1;
+            for &(i, v) in &layer {
+                reached[i] = true;
+                value[i] = v;
+            }
+            pending.retain(|&i| !reached[i]);
+            out.extend(layer);
+        }
+    }
+
     /// The finest grid spacing (m) on a sphere of `radius_m` (the east–west spacing shrinks with
     /// the cosine of the latitude; taken at the grid's most poleward row).
     pub fn spacing_m(&self, radius_m: f64) -> f64 {
@@ -219,6 +412,18 @@ impl Dem {
         (self.lat_step_deg * m_per_deg)
             .min(self.lon_step_deg * m_per_deg * polemost.to_radians().cos())
     }
+}
+
+/// Bilinear interpolation at fractional row `r`, column `c` (within the grid) of the values
+/// `at(index)` of a `rows` × `cols` row-major grid.
+#[inline]
+fn bilinear(rows: usize, cols: usize, r: f64, c: f64, at: impl Fn(usize) -> f64) -> f64 {
+    let (r0, c0) = ((r as usize).min(rows - 2), (c as usize).min(cols - 2));
+    let (tr, tc) = (r - r0 as f64, c - c0 as f64);
+    let i = r0 * cols + c0;
+    let top = at(i) + (at(i + 1) - at(i)) * tc;
+    let bottom = at(i + cols) + (at(i + cols + 1) - at(i + cols)) * tc;
+    top + (bottom - top) * tr
 }
 
 fn invalid(path: &Path, field: &'static str, message: String) -> DemError {
@@ -246,9 +451,16 @@ fn hgt_corner(path: &Path) -> Option<(f64, f64)> {
     ((-90.0..=89.0).contains(&lat) && (-180.0..=179.0).contains(&lon)).then_some((lat, lon))
 }
 
-/// Decode an SRTM `.hgt` tile named like `N78E015.hgt`.
-fn read_hgt(path: &Path, bytes: &[u8]) -> Result<Dem, DemError> {
-    let (lat, lon) = hgt_corner(path).ok_or_else(|| {
+/// The lower-case extension of `path`.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
+/// Decode an SRTM `.hgt` tile whose name (like `N78E015.hgt`) gave its south-west `corner`.
+fn read_hgt(path: &Path, corner: Option<(f64, f64)>, bytes: &[u8]) -> Result<Dem, DemError> {
+    let (lat, lon) = corner.ok_or_else(|| {
         invalid(
             path,
             "file name",
@@ -478,6 +690,47 @@ mod tests {
         assert_eq!(c("N78E15.hgt"), None);
         assert_eq!(c("X78E015.hgt"), None);
         assert_eq!(c("N95E015.hgt"), None);
+    }
+
+    #[test]
+    fn voids_inside_a_plane_are_filled_with_the_plane() {
+        // h = 3·row − 2·col + 100 on 40 × 50, a 12 × 9 void block and a lone void inside.
+        let plane = |r: usize, c: usize| 3.0 * r as f32 - 2.0 * c as f32 + 100.0;
+        let mut h: Vec<f32> = (0..2000).map(|k| plane(k / 50, k % 50)).collect();
+        let holes: Vec<usize> = (10..22)
+            .flat_map(|r| (20..29).map(move |c| r * 50 + c))
+            .chain([35 * 50 + 7])
+            .collect();
+        for &i in &holes {
+            h[i] = f32::NAN;
+        }
+        let mut dem = Dem::new(40, 50, (1.0, 0.0), (0.01, 0.01), h).unwrap();
+        assert_eq!(dem.fill_voids(), holes.len());
+        for &i in &holes {
+            let (r, c) = (i / 50, i % 50);
+            assert!((dem.sample(r, c) - plane(r, c)).abs() < 1e-2, "({r}, {c})");
+        }
+    }
+
+    #[test]
+    fn voids_at_an_edge_are_filled_within_their_surroundings_and_unreachable_ones_stay() {
+        // A void strip along the north edge of a bumpy grid: filled, between the lowest and
+        // highest known height. A grid of voids only: nothing to fill from.
+        let mut h: Vec<f32> = (0..400).map(|k| ((k * 37) % 23) as f32).collect();
+        for v in &mut h[..60] {
+            *v = f32::NAN;
+        }
+        let mut dem = Dem::new(20, 20, (1.0, 0.0), (0.01, 0.01), h).unwrap();
+        assert_eq!(dem.fill_voids(), 60);
+        for c in 0..20 {
+            for r in 0..3 {
+                let v = dem.sample(r, c);
+                assert!((0.0..=22.0).contains(&v), "({r}, {c}): {v}");
+            }
+        }
+        let mut empty = Dem::new(3, 3, (1.0, 0.0), (0.1, 0.1), vec![f32::NAN; 9]).unwrap();
+        assert_eq!(empty.fill_voids(), 0);
+        assert!(empty.sample(1, 1).is_nan());
     }
 
     #[test]

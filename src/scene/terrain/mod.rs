@@ -14,6 +14,7 @@
 //! ice_rgb = [0.50, 0.64, 0.75]
 //! light_azimuth_deg = 180.0    # where the light comes from (clockwise from north, default 180)
 //! light_elevation_deg = 30.0   # and how high (default 30)
+//! fill_voids = true            # fill the model's voids from the heights around them (default)
 //! ```
 //!
 //! The terrain's surface is the sea level of the sphere (`earth.radius_m`); heights at or below
@@ -103,6 +104,38 @@ pub fn light_direction(azimuth_rad: f64, elevation_rad: f64) -> [f64; 3] {
     [ce * sa, ce * ca, se]
 }
 
+/// A great circle through the observer: the point at angle δ along it is
+/// `start`·cos δ + `tangent`·sin δ (Earth-centred unit vectors).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GreatCircle {
+    /// The observer.
+    pub start: [f64; 3],
+    /// The unit tangent at the observer along the circle's azimuth.
+    pub tangent: [f64; 3],
+}
+
+impl GreatCircle {
+    /// Latitude and longitude (°) of the point at ground distance `distance_m` along the
+    /// circle, on a sphere of `radius_m`.
+    #[inline]
+    pub fn lat_lon_deg(&self, distance_m: f64, radius_m: f64) -> (f64, f64) {
+        let (s, c) = (distance_m / radius_m).sin_cos();
+        let p = [0, 1, 2].map(|k| self.start[k] * c + self.tangent[k] * s);
+        (
+            p[2].clamp(-1.0, 1.0).asin().to_degrees(),
+            p[1].atan2(p[0]).to_degrees(),
+        )
+    }
+
+    /// The model's fractional (row, column) of the point at `distance_m` along the circle
+    /// (`None` off the model), on a sphere of `radius_m`.
+    #[inline]
+    pub fn grid_at(&self, terrain: &Terrain, distance_m: f64, radius_m: f64) -> Option<(f64, f64)> {
+        let (lat, lon) = self.lat_lon_deg(distance_m, radius_m);
+        terrain.dem.grid_position(lat, terrain.wrap_lon(lon))
+    }
+}
+
 /// Terrain in a scene: an elevation model, the observer on it, and its palette.
 #[derive(Debug, Clone, Serialize)]
 pub struct Terrain {
@@ -115,21 +148,33 @@ pub struct Terrain {
     /// How hits are coloured.
     #[serde(flatten)]
     pub palette: Palette,
+    /// Whether the model's voids were filled (`fill_voids`, default true; see
+    /// [`Dem::fill_voids`]); unfilled voids are no ground.
+    pub fill_voids: bool,
+    /// How many void samples were filled.
+    #[serde(skip)]
+    pub voids_filled: usize,
     /// Highest terrain height in the model (m; 0 if it is all sea).
     pub max_height_m: f64,
     /// The decoded model.
     #[serde(skip)]
     pub dem: Arc<Dem>,
+    /// The model's height gradients per sample ([`Dem::gradients`]), for slopes and normals.
+    #[serde(skip)]
+    pub gradients: Arc<Vec<[f32; 2]>>,
 }
 
 impl Terrain {
-    /// Terrain from a decoded model (the file is named for errors and the scene's record).
+    /// Terrain from a decoded model (the file is named for errors and the scene's record), its
+    /// voids filled first if `fill_voids`.
     pub fn new(
         dem_path: PathBuf,
-        dem: Dem,
+        mut dem: Dem,
         (observer_lat_deg, observer_lon_deg): (f64, f64),
         palette: Palette,
+        fill_voids: bool,
     ) -> Self {
+        let voids_filled = if fill_voids { dem.fill_voids() } else { 0 };
         let mut max_height_m = 0.0f64;
         for r in 0..dem.rows {
             for c in 0..dem.cols {
@@ -139,13 +184,17 @@ impl Terrain {
                 }
             }
         }
+        let gradients = Arc::new(dem.gradients());
         Self {
             dem_path,
             observer_lat_deg,
             observer_lon_deg,
             palette,
+            fill_voids,
+            voids_filled,
             max_height_m,
             dem: Arc::new(dem),
+            gradients,
         }
     }
 
@@ -167,6 +216,23 @@ impl Terrain {
         (p2.to_degrees(), l2.to_degrees())
     }
 
+    /// The great circle leaving the observer along `azimuth_rad` (clockwise from north), for
+    /// many points along it ([`GreatCircle::grid_at`]): the same points as
+    /// [`Self::destination_deg`], with one sine and cosine per point instead of four.
+    pub fn great_circle(&self, azimuth_rad: f64) -> GreatCircle {
+        let (sp, cp) = self.observer_lat_deg.to_radians().sin_cos();
+        let (sl, cl) = self.observer_lon_deg.to_radians().sin_cos();
+        let (sa, ca) = azimuth_rad.sin_cos();
+        // Earth-centred unit vectors: the observer, and north and east there.
+        let up = [cp * cl, cp * sl, sp];
+        let north = [-sp * cl, -sp * sl, cp];
+        let east = [-sl, cl, 0.0];
+        GreatCircle {
+            start: up,
+            tangent: [0, 1, 2].map(|k| ca * north[k] + sa * east[k]),
+        }
+    }
+
     /// Ground distance (m) from the observer to a point, on a sphere of `radius_m` (haversine).
     pub fn distance_to_m(&self, lat_deg: f64, lon_deg: f64, radius_m: f64) -> f64 {
         let (p1, p2) = (self.observer_lat_deg.to_radians(), lat_deg.to_radians());
@@ -180,9 +246,31 @@ impl Terrain {
     /// sea (≤ 0 m), voids and points off the model.
     #[inline]
     pub fn height_along(&self, azimuth_rad: f64, distance_m: f64, radius_m: f64) -> Option<f64> {
+        let (r, c) = self.grid_along(azimuth_rad, distance_m, radius_m)?;
+        self.dem.height_at_grid(r, c).filter(|&h| h > 0.0)
+    }
+
+    /// The model's fractional (row, column) of the point at ground distance `distance_m` along
+    /// `azimuth_rad`; `None` off the model.
+    #[inline]
+    pub fn grid_along(
+        &self,
+        azimuth_rad: f64,
+        distance_m: f64,
+        radius_m: f64,
+    ) -> Option<(f64, f64)> {
         let (lat, lon) = self.destination_deg(azimuth_rad, distance_m, radius_m);
-        let lon = self.wrap_lon(lon);
-        self.dem.height_at(lat, lon).filter(|&h| h > 0.0)
+        self.dem.grid_position(lat, self.wrap_lon(lon))
+    }
+
+    /// Slope (rad) and upward unit normal (east, north, up) of the ground at the model's
+    /// fractional row `r` and column `c`, on a sphere of `radius_m`: the gradients
+    /// ([`Dem::gradients`]) interpolated bilinearly; flat where unknown.
+    #[inline]
+    pub fn slope_at_grid(&self, r: f64, c: f64, radius_m: f64) -> (f64, [f64; 3]) {
+        self.dem
+            .gradient_at_grid(&self.gradients, r, c, radius_m)
+            .unwrap_or((0.0, [0.0, 0.0, 1.0]))
     }
 
     /// `lon_deg` shifted by whole turns to the model's longitudes when that puts it on the model.
@@ -230,5 +318,35 @@ impl Terrain {
         let m_per_deg = radius_m * std::f64::consts::PI / 180.0;
         let pad = 1.5 * stride as f64 * m_per_deg * dem.lat_step_deg.max(dem.lon_step_deg);
         Some(((lo - pad).max(0.0), hi + pad))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn great_circle_points_are_the_destinations() {
+        let dem = Dem::new(2, 2, (80.0, 10.0), (1.0, 1.0), vec![0.0; 4]).unwrap();
+        let t = Terrain::new(
+            PathBuf::from("x.tif"),
+            dem,
+            (78.3, 15.2),
+            Palette::default_palette(),
+            false,
+        );
+        let r = 6.371e6;
+        for az in [0.0f64, 0.7, 2.0, 3.1, -1.2] {
+            let gc = t.great_circle(az);
+            for d in [0.0, 1_000.0, 45_000.0, 700_000.0] {
+                let (a, b) = gc.lat_lon_deg(d, r);
+                let (c, e) = t.destination_deg(az, d, r);
+                let dl = (b - e + 540.0).rem_euclid(360.0) - 180.0;
+                assert!(
+                    (a - c).abs() < 1e-9 && dl.abs() < 1e-9,
+                    "{az} {d}: {a},{b} vs {c},{e}"
+                );
+            }
+        }
     }
 }

@@ -2,6 +2,7 @@
 //!
 //! * [`cli`] — running the `ghostship` binary and checking its exit status.
 //! * [`dem`] — synthetic elevation models (GeoTIFF, SRTM .hgt) written from their samples.
+//! * [`films`] — comparing renders: channel differences, edges, differing pixels.
 //! * [`data`] — paths of the repository's test inputs (shipped soundings, fixtures, scenes).
 //! * [`reference`] — an independent ray tracer (not the code under test) for accuracy checks.
 //! * [`fans`] — fitted stress soundings, fold slopes and reference heights with error estimates
@@ -12,6 +13,7 @@ pub mod cli;
 pub mod data;
 pub mod dem;
 pub mod fans;
+pub mod films;
 pub mod reference;
 
 /// Bisects [lo, hi] `iterations` times for the boundary of a predicate that is false at `lo`
