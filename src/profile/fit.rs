@@ -415,8 +415,8 @@ impl Profile {
         };
         // Lazy: a scene traced to a 40 km top reads little of the column up to 86 km.
         // 10 m nodes through the blend's first 3 km (its bump decays over τₛ ≥ a few hundred
-        // metres), 100 m above, the US 1976 layer bases as nodes: within 1e-10 of a fine
-        // integration in ln P (hydrostatic.rs tests).
+        // metres), 100 m above, the US 1976 layer bases as nodes: n and dn/dh within 1e-14 of
+        // a fine integration's (hydrostatic.rs tests).
         let kinks: Vec<f64> = super::us1976::layer_bases_geometric_m().collect();
         let grid = grid_with_nodes(&[(top_m + 3000.0, 10.0), (f64::INFINITY, 100.0)], &kinks);
         let table = HydrostaticTable::lazy(
@@ -524,8 +524,9 @@ const DENSE_LEVELS: usize = 10;
 
 /// Integration step limit (m) for the hydrostatic knots. Each integration runs from one level
 /// to the next, where T_v is smooth (the fit's kinks are at the levels), so RK4 at 25 m is
-/// within 1e-11 of the exact ln P even through a strong inversion (1e-9 hPa at the surface,
-/// far below the 0.1 hPa a sounding reports; test `hydrostatic_knots_need_no_finer_steps`).
+/// within 1e-11 of the exact ln P per gap even through a strong inversion (about 1e-8 hPa per
+/// gap at the surface, far below the 0.1 hPa a sounding reports; test
+/// `hydrostatic_knots_need_no_finer_steps`).
 pub(crate) const HYDROSTATIC_STEP_M: f64 = 25.0;
 
 /// ln P at every level, and whether it carries a measured pressure.

@@ -150,9 +150,8 @@ impl MonotoneCubic {
 /// bucket lookup and a binary search over the few knots inside one bucket. The answer is exactly
 /// `partition_point`'s (a bucket whose edges rounding put on the wrong side of `h` falls back to
 /// the full search). Written by hand: the refractive table's build and the tracer's closed-form
-/// climb evaluate the fitted curves hundreds of thousands of times per sounding, in ascending runs
-/// of heights, and a 150-level binary search per evaluation was the largest single cost of a
-/// survey.
+/// climb evaluate the fitted curves very often per sounding, and a binary search over every
+/// level per evaluation showed in the survey's profiles.
 #[derive(Debug, Clone)]
 pub(crate) struct KnotIndex {
     knots_m: Vec<f64>,

@@ -446,8 +446,11 @@ impl StratifiedIndex for RefractiveAtmosphere {
 
     /// The table's node spacing, breaks added, where scans read the table
     /// ([`TableSpec::scans_read_table`]): a lookup at a node returns the exact value stored
-    /// there, and between nodes the table is a smooth quintic up to the next break. Otherwise
-    /// [`ScanGrid::DEFAULT`].
+    /// there, and between nodes the table is one quintic (a cell, or a piece of a cut cell), so
+    /// the cells are polynomial ([`ScanGrid::polynomial_cells`]; a cell that evaluates the
+    /// exact formula is smooth between the breaks, which are nodes, and its seven samples are
+    /// those of a function far closer to its degree-6 interpolant than the envelope's slack).
+    /// Otherwise [`ScanGrid::DEFAULT`].
     fn scan_grid(&self) -> ScanGrid {
         if self.spec.scans_read_table {
             ScanGrid {
@@ -455,6 +458,7 @@ impl StratifiedIndex for RefractiveAtmosphere {
                 fine_top_m: self.spec.fine_top_agl_m,
                 coarse_step_m: self.spec.coarse_step_m,
                 with_breaks: true,
+                polynomial_cells: true,
             }
         } else {
             ScanGrid::DEFAULT

@@ -50,9 +50,11 @@ pub struct GridError {
     pub max_abs_dn: f64,
     /// Largest |Δ(dn/dh)| (m⁻¹) the table returns at the check points.
     pub max_abs_ddndh_per_m: f64,
-    /// Largest |Δn| of the plain Hermite interpolant before the exact fallback was applied.
+    /// Largest |Δn| of the quintic interpolant (a cut cell: its two pieces) before the exact
+    /// fallback was applied.
     pub raw_max_abs_dn: f64,
-    /// Largest |Δ(dn/dh)| (m⁻¹) of the plain Hermite interpolant before the fallback.
+    /// Largest |Δ(dn/dh)| (m⁻¹) of the quintic interpolant (a cut cell: its pieces) before the
+    /// fallback.
     pub raw_max_abs_ddndh_per_m: f64,
 }
 

@@ -342,7 +342,7 @@ pub fn summary_text(report: &LayersReport) -> String {
     let _ = writeln!(
         o,
         "Index table: max |Δn| {:.1e}, max |Δdn/dh| {:.1e} /m, {} of {} cells exact, {} cut at a \
-         level",
+         break (a level, layer edge or layer base)",
         t.max_abs_dn(),
         t.max_abs_ddndh_per_m(),
         t.exact_cells(),

@@ -8,10 +8,15 @@
 //! In: a [`StratifiedIndex`] and the Earth radius. Out: a [`BouguerEnvelope`] — g on the
 //! index's [`ScanGrid`](super::ScanGrid) (by default 0.25 m to 4 km above the surface, 5 m
 //! above; a sounding surveyed through its table: the table's nodes and every break) with running
-//! minima from the ground up and from the top down, and a bound on how far g can dip between two nodes — and [`Fate`] queries.
+//! minima from the ground up and from the top down, and a lower bound of g between nodes — and
+//! [`Fate`] queries. The bound between nodes: on a fine grid, how far g can dip below its node
+//! values given the end slopes (which assumes g′ nearly linear across a cell); where the grid's
+//! cells are polynomial (a table read at its own nodes, 100 m apart for a survey, where g′ can
+//! change sign twice inside a cell whose ends both climb), the hull of g's Bernstein
+//! coefficients on each cell, and on the part of the ray's own cell beyond it.
 //! A fate is only claimed when the grid proves it: "turns" needs a node with g < c; "does not
-//! turn" needs every node above (or below) to clear c by more than the dip bound. Otherwise the
-//! answer is [`Fate::Undecided`] and the caller keeps integrating.
+//! turn" needs g above (or below) the ray to clear c by the bound. Otherwise the answer is
+//! [`Fate::Undecided`] and the caller keeps integrating.
 //!
 //! [`FateWatch`] applies the fates along a ray, as a [`RayHook`]: the one rule by which every
 //! caller (the trace report, the renderer) ends rays early. Past its last target a ray that
@@ -54,6 +59,59 @@ pub struct BouguerEnvelope {
     dip_below: Vec<f64>,
     /// The largest dip of g between two nodes at or above i (m).
     dip_above: Vec<f64>,
+    /// Where the scan's cells are polynomial ([`ScanGrid::polynomial_cells`](super::ScanGrid)):
+    /// each cell's hull, which replaces the dip bounds.
+    hulls: Option<CellHulls>,
+}
+
+/// The Bernstein coefficients of g over each cell of a polynomial scan (m): g lies within
+/// their hull, so on any part of a cell it is at least the smallest coefficient of that part
+/// (de Casteljau), and on whole cells at least their smallest coefficient.
+#[derive(Debug, Clone)]
+struct CellHulls {
+    coefficients: Vec<[f64; CELL_DEGREE + 1]>,
+    /// min of the coefficients of cells i.. .
+    lowest_from: Vec<f64>,
+    /// min of the coefficients of cells 0..=i.
+    lowest_to: Vec<f64>,
+}
+
+impl CellHulls {
+    /// A lower bound of g over cell `i` from fraction `t` up (`upward`) or down to it.
+    fn part(&self, i: usize, t: f64, upward: bool) -> f64 {
+        let [left, right] = split(&self.coefficients[i], t.clamp(0.0, 1.0));
+        let part = if upward { right } else { left };
+        part.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
+    /// A lower bound of g above (`upward`) or below height fraction `t` of cell `i`.
+    fn beyond(&self, i: usize, t: f64, upward: bool) -> f64 {
+        let rest = if upward {
+            self.lowest_from.get(i + 1).copied()
+        } else {
+            i.checked_sub(1).map(|j| self.lowest_to[j])
+        };
+        let bound = self.part(i, t, upward).min(rest.unwrap_or(f64::INFINITY));
+        // The samples' rounding (g ≈ 6.4e6 m).
+        bound - HULL_MARGIN * bound.abs()
+    }
+}
+
+/// Relative margin on a hull bound for the rounding of the samples it was computed from.
+const HULL_MARGIN: f64 = 1e-12;
+
+/// The Bernstein coefficients of the two halves of `b` cut at `t` (de Casteljau).
+fn split(b: &[f64; CELL_DEGREE + 1], t: f64) -> [[f64; CELL_DEGREE + 1]; 2] {
+    let mut level = *b;
+    let (mut left, mut right) = ([0.0; CELL_DEGREE + 1], [0.0; CELL_DEGREE + 1]);
+    for r in 0..=CELL_DEGREE {
+        left[r] = level[0];
+        right[CELL_DEGREE - r] = level[CELL_DEGREE - r];
+        for i in 0..CELL_DEGREE - r {
+            level[i] = (1.0 - t) * level[i] + t * level[i + 1];
+        }
+    }
+    [left, right]
 }
 
 impl BouguerEnvelope {
@@ -69,24 +127,19 @@ impl BouguerEnvelope {
                 (n * r, n + r * dn)
             })
             .unzip();
-        // How far g can fall between nodes a and b below the lower node value: where the slope
-        // keeps its sign (monotone cell), by the curvature, Δ·|g'(b) − g'(a)|/8; where it changes
-        // sign (a minimum inside), by Δ·(|g'(a)| + |g'(b)|)/2. Non-finite slopes: unbounded.
         let dips: Vec<f64> = (0..heights_m.len())
             .map(|i| {
                 if i + 1 >= heights_m.len() {
                     return 0.0;
                 }
-                let d = heights_m[i + 1] - heights_m[i];
-                let (a, b) = (slope[i], slope[i + 1]);
-                let dip = if (a > 0.0) == (b > 0.0) {
-                    d * (b - a).abs() / 8.0
-                } else {
-                    d * (a.abs() + b.abs()) / 2.0
-                };
+                let dip = slope_dip(heights_m[i + 1] - heights_m[i], slope[i], slope[i + 1]);
                 if dip.is_finite() { dip } else { f64::INFINITY }
             })
             .collect();
+        let hulls = index
+            .scan_grid()
+            .polynomial_cells
+            .then(|| CellHulls::new(index, earth_radius_m, &heights_m, &g));
         let nan_safe = |v: f64| if v.is_nan() { f64::NEG_INFINITY } else { v };
         let scan = |values: &[f64], forward: bool, op: fn(f64, f64) -> f64| {
             let mut out = vec![0.0; values.len()];
@@ -109,6 +162,7 @@ impl BouguerEnvelope {
             dip_below: scan(&dips, true, f64::max),
             dip_above: scan(&dips, false, f64::max),
             heights_m,
+            hulls,
         }
     }
 
@@ -126,19 +180,29 @@ impl BouguerEnvelope {
             (false, true) => Some(false),
             _ => None,
         };
+        let (clear_above, clear_below) = match &self.hulls {
+            Some(hulls) if below + 1 < self.heights_m.len() => {
+                let (lo, hi) = (self.heights_m[below], self.heights_m[below + 1]);
+                let t = (height_m - lo) / (hi - lo);
+                (
+                    hulls.beyond(below, t, true) > invariant_m + slack,
+                    hulls.beyond(below, t, false) > invariant_m + slack,
+                )
+            }
+            _ => (
+                self.min_above
+                    .get(above)
+                    .is_some_and(|&m| m > invariant_m + slack + self.dip_above[below]),
+                self.min_below[below]
+                    > invariant_m + slack + self.dip_below[below.min(self.dip_below.len() - 1)],
+            ),
+        };
         let turns_above = if above >= self.heights_m.len() {
             Some(false)
         } else {
-            side(
-                self.min_above[above] < invariant_m - slack,
-                self.min_above[above] > invariant_m + slack + self.dip_above[below],
-            )
+            side(self.min_above[above] < invariant_m - slack, clear_above)
         };
-        let turns_below = side(
-            self.min_below[below] < invariant_m - slack,
-            self.min_below[below]
-                > invariant_m + slack + self.dip_below[below.min(self.dip_below.len() - 1)],
-        );
+        let turns_below = side(self.min_below[below] < invariant_m - slack, clear_below);
         match (climbing, turns_above, turns_below) {
             (true, Some(false), _) => Fate::Escapes,
             (false, _, Some(false)) => Fate::MeetsGround,
@@ -146,6 +210,117 @@ impl BouguerEnvelope {
             (true, Some(true), Some(false)) => Fate::MeetsGround,
             (false, Some(false), Some(true)) => Fate::Escapes,
             _ => Fate::Undecided,
+        }
+    }
+}
+
+/// How far g can fall below the lower of its node values inside a cell of width `width_m`
+/// with end slopes `a` and `b`, from the slopes alone: where the slope keeps its sign (monotone
+/// cell), by the curvature, Δ·|g'(b) − g'(a)|/8 (exact if g' is linear across the cell); where
+/// it changes sign (a minimum inside), by Δ·(|g'(a)| + |g'(b)|)/2.
+fn slope_dip(width_m: f64, a: f64, b: f64) -> f64 {
+    if (a > 0.0) == (b > 0.0) {
+        width_m * (b - a).abs() / 8.0
+    } else {
+        width_m * (a.abs() + b.abs()) / 2.0
+    }
+}
+
+/// Degree of g = n·r over a cell where n is a quintic in h.
+const CELL_DEGREE: usize = 6;
+
+/// The inverse of the collocation matrix of the degree-6 Bernstein basis at t = j/6: it turns
+/// seven equispaced samples of a polynomial of degree ≤ 6 on [0, 1] into its Bernstein
+/// coefficients.
+fn bernstein_from_samples() -> &'static [[f64; CELL_DEGREE + 1]; CELL_DEGREE + 1] {
+    static INVERSE: std::sync::OnceLock<[[f64; CELL_DEGREE + 1]; CELL_DEGREE + 1]> =
+        std::sync::OnceLock::new();
+    INVERSE.get_or_init(|| {
+        const K: usize = CELL_DEGREE + 1;
+        let binomial =
+            |n: usize, k: usize| (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64);
+        // [M | I] → [I | M⁻¹] by Gauss–Jordan with partial pivoting (M is well conditioned).
+        let mut m = [[0.0; 2 * K]; K];
+        for (j, row) in m.iter_mut().enumerate() {
+            let t = j as f64 / CELL_DEGREE as f64;
+            let n = CELL_DEGREE;
+            for (i, v) in row[..K].iter_mut().enumerate() {
+                *v = binomial(n, i) * t.powi(i as i32) * (1.0 - t).powi((n - i) as i32);
+            }
+            row[K + j] = 1.0;
+        }
+        for col in 0..K {
+            let pivot = (col..K)
+                .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
+                .unwrap_or(col);
+            m.swap(col, pivot);
+            let p = m[col][col];
+            for v in m[col].iter_mut() {
+                *v /= p;
+            }
+            for r in 0..K {
+                if r != col {
+                    let f = m[r][col];
+                    let pivot_row = m[col];
+                    for (v, pv) in m[r].iter_mut().zip(pivot_row) {
+                        *v -= f * pv;
+                    }
+                }
+            }
+        }
+        std::array::from_fn(|r| std::array::from_fn(|c| m[r][K + c]))
+    })
+}
+
+impl CellHulls {
+    /// Each cell's Bernstein coefficients from seven equispaced samples of g (the nodes' `g`
+    /// and five scans inside), in parallel (collected in order).
+    fn new<S: StratifiedIndex + ?Sized>(
+        index: &S,
+        earth_radius_m: f64,
+        heights_m: &[f64],
+        g: &[f64],
+    ) -> Self {
+        let g_at = |h: f64| index.scan_index_and_derivative(h).0 * (earth_radius_m + h);
+        let inverse = bernstein_from_samples();
+        let coefficients: Vec<[f64; CELL_DEGREE + 1]> = (0..heights_m.len().saturating_sub(1))
+            .into_par_iter()
+            .map(|i| {
+                let (lo, hi) = (heights_m[i], heights_m[i + 1]);
+                let samples: [f64; CELL_DEGREE + 1] = std::array::from_fn(|j| match j {
+                    0 => g[i],
+                    CELL_DEGREE => g[i + 1],
+                    _ => g_at(lo + (hi - lo) * j as f64 / CELL_DEGREE as f64),
+                });
+                // Relative to the first sample, so that the sums carry the cell's variation
+                // rather than 6.4e6 m; a non-finite sample makes the cell's bound −∞.
+                std::array::from_fn(|k| {
+                    let v = g[i]
+                        + inverse[k]
+                            .iter()
+                            .zip(&samples)
+                            .map(|(w, s)| w * (s - g[i]))
+                            .sum::<f64>();
+                    if v.is_nan() { f64::NEG_INFINITY } else { v }
+                })
+            })
+            .collect();
+        let lowest: Vec<f64> = coefficients
+            .iter()
+            .map(|c| c.iter().copied().fold(f64::INFINITY, f64::min))
+            .collect();
+        let mut lowest_from = lowest.clone();
+        for i in (0..lowest_from.len().saturating_sub(1)).rev() {
+            lowest_from[i] = lowest_from[i].min(lowest_from[i + 1]);
+        }
+        let mut lowest_to = lowest;
+        for i in 1..lowest_to.len() {
+            lowest_to[i] = lowest_to[i].min(lowest_to[i - 1]);
+        }
+        CellHulls {
+            coefficients,
+            lowest_from,
+            lowest_to,
         }
     }
 }
@@ -296,6 +471,7 @@ impl<H: RayHook + ?Sized> RayHook for Watched<'_, '_, H> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tracer::ScanGrid;
 
     /// n = 1 + a − b·h below `duct_top_m` (a trapping gradient), normal above.
     struct Duct {
@@ -434,6 +610,102 @@ mod tests {
             rec.end.height_m > 1500.0 && rec.end.height_m < 2000.0,
             "{rec:?}"
         );
+    }
+
+    /// g′ ≈ 1 + R·dn/dh = 1.2 everywhere but inside 1000–1100 m, where a cubic n makes
+    /// g′ = 1.2 − 6s(1 − s) (s the fraction of the cell): positive at both ends, −0.3 in the
+    /// middle, so g rises 14.5 m, falls back to 5.5 m above its value at 1000 m, then rises to
+    /// 20 m at 1100 m. Scanned on 100 m cells; `polynomial` says whether the cells are declared
+    /// polynomial (they are: n is linear or cubic on each).
+    struct BumpCell {
+        polynomial: bool,
+    }
+    const BUMP_R: f64 = 6_371_000.0;
+    impl StratifiedIndex for BumpCell {
+        fn index_and_derivative(&self, h: f64) -> (f64, f64) {
+            let (n0, k) = (1.0 + 3e-4, 1.0 / BUMP_R);
+            if h < 1000.0 {
+                (n0 + 0.2 * k * h, 0.2 * k)
+            } else if h < 1100.0 {
+                let s = (h - 1000.0) / 100.0;
+                let n =
+                    n0 + k * (200.0 + 0.2 * (h - 1000.0) - 100.0 * (3.0 * s * s - 2.0 * s * s * s));
+                (n, k * (0.2 - 6.0 * s * (1.0 - s)))
+            } else {
+                (
+                    n0 + k * (200.0 + 20.0 - 100.0 + 0.2 * (h - 1100.0)),
+                    0.2 * k,
+                )
+            }
+        }
+        fn scan_grid(&self) -> ScanGrid {
+            ScanGrid {
+                fine_step_m: 100.0,
+                fine_top_m: 0.0,
+                coarse_step_m: 100.0,
+                with_breaks: false,
+                polynomial_cells: self.polynomial,
+            }
+        }
+    }
+
+    #[test]
+    fn a_dip_inside_a_coarse_cell_whose_ends_climb_is_not_cleared() {
+        let g = |h: f64| BumpCell { polynomial: true }.index_and_derivative(h).0 * (BUMP_R + h);
+        let (g0, g_ray) = (g(1000.0), g(1030.0));
+        // The dip's bottom, 5.5 m above g0, and g at the ray's height, 14 m above.
+        let lowest = (0..=500)
+            .map(|i| g(1050.0 + 0.1 * f64::from(i)))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            lowest > g0 + 5.0 && lowest < g0 + 6.0 && g_ray > g0 + 14.0,
+            "{} {}",
+            lowest - g0,
+            g_ray - g0
+        );
+        // A climbing ray at 1030 m whose invariant lies between the dip and its own g: it turns
+        // at the dip and cannot escape.
+        let c = g0 + 10.0;
+        let slopes = BouguerEnvelope::new(&BumpCell { polynomial: false }, BUMP_R, 40_000.0);
+        let hulls = BouguerEnvelope::new(&BumpCell { polynomial: true }, BUMP_R, 40_000.0);
+        // End slopes alone see a cell whose ends both climb at 1.2: no dip, so "escapes".
+        assert_eq!(slopes.fate(1030.0, true, c), Fate::Escapes);
+        assert_ne!(hulls.fate(1030.0, true, c), Fate::Escapes);
+        // Still decided where it is clear: far below the dip, or above the cell.
+        assert_eq!(hulls.fate(1030.0, true, g0 - 50.0), Fate::Escapes);
+        assert_eq!(hulls.fate(1150.0, true, g(1150.0) - 1.0), Fate::Escapes);
+        // Descending from 1090 m with c above the dip: it turns there, so it does not reach the
+        // ground without turning, as the hull knows.
+        assert_ne!(hulls.fate(1090.0, false, g0 + 5.9), Fate::MeetsGround);
+    }
+
+    #[test]
+    fn bernstein_split_halves_reproduce_the_polynomial() {
+        // Coefficients of an arbitrary sextic; its value at t from the left half at 1 and the
+        // right half at 0 (both its value at t).
+        let b = [3.0, -1.0, 4.0, 1.5, -5.0, 9.0, 2.0];
+        let eval = |c: &[f64; 7], t: f64| {
+            (0..7).fold(0.0, |acc, i| {
+                let binom = [1.0, 6.0, 15.0, 20.0, 15.0, 6.0, 1.0][i];
+                acc + c[i] * binom * t.powi(i as i32) * (1.0 - t).powi(6 - i as i32)
+            })
+        };
+        let [left, right] = split(&b, 0.3);
+        assert!(
+            (left[6] - eval(&b, 0.3)).abs() < 1e-12 && (right[0] - eval(&b, 0.3)).abs() < 1e-12
+        );
+        // The left half at u is the whole at 0.3·u; the right half at u the whole at 0.3 + 0.7·u.
+        for u in [0.1, 0.5, 0.9] {
+            assert!((eval(&left, u) - eval(&b, 0.3 * u)).abs() < 1e-12);
+            assert!((eval(&right, u) - eval(&b, 0.3 + 0.7 * u)).abs() < 1e-12);
+        }
+        // Seven samples of a sextic give its coefficients back.
+        let inverse = bernstein_from_samples();
+        let samples: [f64; 7] = std::array::from_fn(|j| eval(&b, j as f64 / 6.0));
+        for (k, row) in inverse.iter().enumerate() {
+            let c: f64 = row.iter().zip(&samples).map(|(w, s)| w * s).sum();
+            assert!((c - b[k]).abs() < 1e-11, "{k}: {c} vs {}", b[k]);
+        }
     }
 
     /// A trapping layer between 1000 and 1200 m over normal air.

@@ -74,7 +74,7 @@ pub trait StratifiedIndex: Send + Sync {
     }
     /// The node layout of a whole-column scan (Bouguer's envelope): where a lookup table
     /// stands behind [`scan_index_and_derivative`](Self::scan_index_and_derivative), its own
-    /// node spacing, since a scan between its nodes learns nothing the nodes do not hold.
+    /// node spacing, each cell then one polynomial (see [`ScanGrid::polynomial_cells`]).
     /// Default: [`ScanGrid::DEFAULT`].
     fn scan_grid(&self) -> ScanGrid {
         ScanGrid::DEFAULT
@@ -115,7 +115,9 @@ impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
 
 /// Node spacing of a whole-column scan ([`StratifiedIndex::scan_grid`]): `fine_step_m` up to
 /// `fine_top_m` above the surface, `coarse_step_m` above, and — where `with_breaks` — every
-/// break of the field a node too, so that no cell straddles a jump of dn/dh.
+/// break of the field a node too, so that no cell straddles a jump of dn/dh. Where
+/// `polynomial_cells`, the scanned n(h) is one polynomial of degree ≤ 5 between neighbouring
+/// nodes (a quintic table read at its own nodes and breaks).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScanGrid {
     /// Node spacing near the ground (m).
@@ -127,6 +129,11 @@ pub struct ScanGrid {
     /// Whether the field's breaks ([`StratifiedIndex::breaks_m`] and
     /// [`StratifiedIndex::minor_breaks`]) are nodes too.
     pub with_breaks: bool,
+    /// Whether n(h) is a polynomial of degree ≤ 5 between neighbouring nodes: Bouguer's
+    /// envelope then bounds how far g = n·r dips inside each cell by the Bernstein coefficients
+    /// of g (degree ≤ 6, from seven samples), which holds whatever the cell's shape; otherwise
+    /// by the end slopes alone, which assumes g' nearly linear across a cell (fine cells).
+    pub polynomial_cells: bool,
 }
 
 impl ScanGrid {
@@ -137,6 +144,7 @@ impl ScanGrid {
         fine_top_m: 4_000.0,
         coarse_step_m: 5.0,
         with_breaks: false,
+        polynomial_cells: false,
     };
 }
 

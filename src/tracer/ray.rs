@@ -919,10 +919,6 @@ enum Polish {
 }
 
 impl Aim {
-    /// After the aimed step ended at `height_m` with local elevation `elevation_rad`: landed, a
-    /// corrected step (Newton on the step length) if it missed by more than
-    /// [`LANDING_TOLERANCE_M`] and the correction is well conditioned, else landed if within
-    /// [`LANDING_SLACK_M`] and missed if not.
     /// Whether a step aimed here ended on the far side of the point it aims at, half way to
     /// the break or beyond.
     fn overshot(&self, height_m: f64) -> bool {
@@ -933,6 +929,10 @@ impl Aim {
         }
     }
 
+    /// After the aimed step ended at `height_m` with local elevation `elevation_rad`: landed, a
+    /// corrected step (Newton on the step length) if it missed by more than
+    /// [`LANDING_TOLERANCE_M`] and the correction is well conditioned, else landed if within
+    /// [`LANDING_SLACK_M`] and missed if not.
     fn polish(self, height_m: f64, elevation_rad: f64) -> Polish {
         let aim_m = if self.exit.up {
             self.exit.height_m - SHORT_OF_BREAK_M

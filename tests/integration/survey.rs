@@ -898,3 +898,60 @@ fn a_joined_survey_is_in_the_manifest_and_never_stale() {
     crate::support::cli::pipeline_ok(&split_pipeline_keeping_record(dir.path(), 1), &whole, &[]);
     crate::support::cli::assert_same_tree(&out.join("arctic"), &whole.join("arctic"));
 }
+
+/// The survey's n(h) table (`survey_table()`: 5 m cells to 1 km, 100 m above, cells holding a
+/// level cut there) against the exact formula at 4 000 random heights from the surface to the
+/// 40 km top, on every shipped real sounding fitted as the survey fits it: within
+/// `SURVEY_TABLE_DNDH_PER_M` in n and in dn/dh, the bound README and the docs state.
+#[test]
+fn the_survey_table_holds_its_bound_against_the_exact_formula() {
+    use std::sync::Arc;
+
+    use ghostship::profile::Profile;
+    use ghostship::refractivity::RefractiveAtmosphere;
+    use ghostship::sounding::{ReadOptions, read_sounding};
+    use ghostship::survey::{SURVEY_TABLE_DNDH_PER_M, survey_table};
+
+    let options = SurveyOptions::default();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(crate::support::data::soundings_dir())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 14);
+    // SplitMix64: deterministic heights, so a failure reproduces.
+    let mut state = 0x5EED_u64;
+    let mut next = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (z ^ (z >> 31)) as f64 / u64::MAX as f64
+    };
+    for path in &files {
+        let s = read_sounding(path, &ReadOptions::default()).unwrap();
+        let profile = Profile::from_sounding(&s, &options.atmosphere.fit_options()).unwrap();
+        let atm = RefractiveAtmosphere::with_spec(Arc::new(profile), 550.0, survey_table())
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let (mut worst_n, mut worst_d) = (0.0f64, 0.0f64);
+        for _ in 0..4_000 {
+            // Half the heights in the lowest kilometre (5 m cells), half above.
+            let u = next();
+            let h = if u < 0.5 {
+                2e3 * u
+            } else {
+                1e3 + 78e3 * (u - 0.5)
+            };
+            let (table, exact) = (atm.table_refractivity(h), atm.exact_refractivity(h));
+            worst_n = worst_n.max((table.0 - exact.0).abs());
+            worst_d = worst_d.max((table.1 - exact.1).abs());
+        }
+        assert!(
+            worst_n <= SURVEY_TABLE_DNDH_PER_M && worst_d <= SURVEY_TABLE_DNDH_PER_M,
+            "{}: |Δn| {worst_n:.2e}, |Δdn/dh| {worst_d:.2e} /m",
+            path.display()
+        );
+    }
+}
