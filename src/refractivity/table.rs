@@ -548,6 +548,41 @@ mod tests {
         assert_eq!(at_node.error(&f).cut_cells, 0);
     }
 
+    /// Cuts at the edges of the layout: in a chunk's last cell, in the grid's last cell, and a
+    /// declared break above the grid that changes nothing.
+    #[test]
+    fn breaks_cut_cells_at_chunk_and_grid_ends() {
+        // dn/dh jumps at 63.4 (cell 63, the first chunk's last) and at 99.6 (cell 99, the
+        // grid's last); a cubic between.
+        let f = |h: f64| -> NodeResult<()> {
+            let kink = |x: f64, k: f64| if x >= 0.0 { (k * x, k) } else { (0.0, 0.0) };
+            let (a, da) = kink(h - 63.4, -3e-8);
+            let (b, db) = kink(h - 99.6, 5e-8);
+            let x = h / 100.0;
+            Ok((
+                1e-4 - 2e-8 * h + 1e-9 * x * x * x + a + b,
+                -2e-8 + 3e-11 * x * x + da + db,
+            ))
+        };
+        let grid =
+            HermiteGrid::new(0.0, 1.0, 100, 1e-15, 1e-15).with_breaks(vec![63.4, 99.6, 150.0]);
+        for h in [
+            63.0, 63.399_999, 63.4, 63.400_001, 63.999, 64.0, 99.1, 99.6, 99.9, 100.0,
+        ] {
+            let Lookup::Value(v, d) = grid.lookup(h, &f) else {
+                panic!("{h} is not interpolated")
+            };
+            let (ve, de) = f(h).unwrap();
+            assert!(
+                (v - ve).abs() < 1e-15 && (d - de).abs() < 1e-15,
+                "{h}: {v} {ve} {d} {de}"
+            );
+        }
+        let err = grid.error(&f);
+        assert_eq!((err.exact_cells, err.cut_cells), (0, 2), "{err:?}");
+        assert_eq!(grid.lookup(100.5, &f), Lookup::Outside);
+    }
+
     /// A chunk where the exact formula fails evaluates exactly (and reports NaN-free maxima).
     #[test]
     fn a_failing_chunk_falls_back_to_exact() {
