@@ -1,10 +1,11 @@
 //! Terrain: the elevation-model readers against files written from known samples, and rendered
 //! ridges of known geometry against line–sphere geometry (straight rays and the
-//! constant-curvature model's effective radius R/(1−k)), the hidden base included.
+//! constant-curvature model's effective radius R/(1−k)), the hidden base included; on a calm
+//! sea a ridge's mirror image ends where the sphere's reflection geometry puts it.
 
 use std::path::Path;
 
-use ghostship::render::{ConstantCurvatureRays, Film, RenderOptions, render_scene};
+use ghostship::render::{ConstantCurvatureRays, Film, RenderOptions, StraightRays, render_scene};
 use ghostship::scene::{Dem, Scene};
 
 use crate::support::dem::{Grid, hgt_bytes, write_geotiff};
@@ -283,4 +284,59 @@ fn cards_and_terrain_compose_in_depth_order() {
             );
         }
     }
+}
+
+#[test]
+fn a_calm_sea_mirrors_a_ridge_where_the_sphere_geometry_puts_it() {
+    // A red ridge 15 m high at 10 km seen from 10 m over a mirror sea, straight rays: the
+    // lowest red row is the mirror image of the ridge's near top edge, which the law of
+    // reflection on the sphere puts at about −(10 + 15)/10 000 rad (the sphere's curvature
+    // lowers it by some 10 %; the waterline is near −10/10 000).
+    let (d, h, h0) = (10_000.0, 15.0, 10.0);
+    let sea = |extra: &str| {
+        format!("[atmosphere]\nstraight = true\n[sea]\nwave_slope_deg = 0.0\n{extra}\n")
+    };
+    let camera = format!("height_m = {h0}\npitch_deg = -0.06");
+    let expected = crate::support::mirror_elevation_rad(h0, h, d, R);
+    // Sanity of the reference.
+    assert!((expected * d / -(h0 + h) - 1.0).abs() < 0.15, "{expected}");
+    let dir = tempfile::tempdir().unwrap();
+    let scene = ridge_scene_with(dir.path(), d, h, &camera, &sea(""));
+    let frame = scene.camera.frame();
+    let pixel_rad = 1.0 / frame.focal_px;
+    let x = scene.camera.width / 2;
+    let elevation = |row: f64| frame.view_direction(x as f64 + 0.5, row).elevation_rad;
+    for exact in [false, true] {
+        let options = RenderOptions { exact, ..quiet() };
+        let film = render_scene(&scene, &StraightRays::new(R).unwrap(), &options).unwrap();
+        let rows = terrain_rows(&film);
+        // The ridge and its image touch at the waterline: one run of rows.
+        assert!(rows.windows(2).all(|w| w[1] == w[0] + 1), "{rows:?}");
+        let top = *rows.first().expect("ridge not visible") as i64;
+        let predicted = first_row_below(&scene, geometric_elevation(h0, h, d, R));
+        assert!(
+            (top - predicted).abs() <= 1,
+            "exact={exact}: {top} vs {predicted}"
+        );
+        let y = *rows.last().unwrap() as f64;
+        let (e_sea, e_red) = (elevation(y + 1.5), elevation(y + 0.5));
+        assert!(
+            e_sea - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
+            "exact={exact}: image edge between {e_sea} and {e_red}, expected {expected}"
+        );
+        assert!(e_red < -1.5 * h0 / d, "exact={exact}: {e_red}");
+    }
+    // Without reflections the sea below the waterline shows no ridge.
+    let dir = tempfile::tempdir().unwrap();
+    let off = ridge_scene_with(dir.path(), d, h, &camera, &sea("reflections = false"));
+    let film = render_scene(&off, &StraightRays::new(R).unwrap(), &quiet()).unwrap();
+    let waterline = first_row_below(&off, geometric_elevation(h0, 0.0, d, R)) as u32;
+    let below: Vec<u32> = terrain_rows(&film)
+        .into_iter()
+        .filter(|&y| y > waterline + 2)
+        .collect();
+    assert!(
+        below.is_empty(),
+        "ridge rows below the waterline: {below:?}"
+    );
 }
