@@ -733,20 +733,31 @@ impl<'a> TerrainView<'a> {
 
     /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`
     /// (on the great circle of its profile, where the hit was found).
+    /// The palette's lit colour, under the orthophoto's where one covers the point (the
+    /// photograph's own colours, not relit: it carries the light it was taken in).
     pub(super) fn colour(&self, hit: TerrainHit, offset_rad: f64) -> [f64; 3] {
         let t = self.terrain;
         let radius = self.frame.earth_radius_m;
-        let (slope, normal) = self
+        let lat_lon = self
             .profile(offset_rad)
-            .and_then(|p| self.circles[p].grid_at(t, hit.distance_m, radius))
+            .map(|p| self.circles[p].lat_lon_deg(hit.distance_m, radius));
+        let (slope, normal) = lat_lon
+            .and_then(|(lat, lon)| t.dem.grid_position(lat, t.wrap_lon(lon)))
             .map_or((0.0, [0.0, 0.0, 1.0]), |(r, c)| {
                 t.slope_at_grid(r, c, radius)
             });
         // The normal is in the hit point's east/north/up; the light's direction is taken in the
         // same local frame (the model spans a few degrees at most).
-        t.palette
-            .colour(hit.height_m, slope, normal)
-            .map(|c| c * self.frame.brightness)
+        let lit = t.palette.colour(hit.height_m, slope, normal);
+        let ground = match (&t.orthophoto, lat_lon) {
+            (Some(photo), Some((lat, lon))) => {
+                let [r, g, b, a] = photo.rgba_at(lat, lon).map(f64::from);
+                let under = 1.0 - a;
+                [r + under * lit[0], g + under * lit[1], b + under * lit[2]]
+            }
+            _ => lit,
+        };
+        ground.map(|c| c * self.frame.brightness)
     }
 }
 

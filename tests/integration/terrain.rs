@@ -340,3 +340,115 @@ fn a_calm_sea_mirrors_a_ridge_where_the_sphere_geometry_puts_it() {
         "ridge rows below the waterline: {below:?}"
     );
 }
+
+#[test]
+fn an_orthophoto_colours_the_ground_it_covers_and_the_palette_the_rest() {
+    // Over the red ridge at 15 km, an orthophoto 4 pixels wide (yellow, yellow, blue, blue) across
+    // 0.0012° of longitude centred north of the observer (47 m each side at 15 km, 3.1 mrad of
+    // the frame's ±4.4 mrad): between the centres of its two yellow pixels the ground is the
+    // photograph's yellow exactly (not relit), between the blue ones blue; beyond its edges the
+    // palette's lit red.
+    let (d, h, h0) = (15_000.0, 60.0, 10.0);
+    let dir = tempfile::tempdir().unwrap();
+    let (yellow, blue) = ([255u8, 200, 0], [0u8, 64, 255]);
+    let photo =
+        image::RgbImage::from_fn(4, 1, |c, _| image::Rgb(if c < 2 { yellow } else { blue }));
+    photo.save(dir.path().join("photo.png")).unwrap();
+    let (south, north) = (
+        OBSERVER.0 + (d - 300.0) / M_PER_DEG,
+        OBSERVER.0 + (d + 1_300.0) / M_PER_DEG,
+    );
+    let (west, east) = (OBSERVER.1 - 0.0006, OBSERVER.1 + 0.0006);
+    let extra = format!(
+        "orthophoto = \"photo.png\"\northophoto_bounds_deg = [{south}, {west}, {north}, {east}]\n"
+    );
+    let camera = format!("height_m = {h0}\npitch_deg = 0.1");
+    let scene = ridge_scene_with(dir.path(), d, h, &camera, &extra);
+    let film = render_scene(&scene, &StraightRays::new(R).unwrap(), &quiet()).unwrap();
+    let linear = |c: [u8; 3]| c.map(|v| ghostship::scene::card::srgb_to_linear(v as f64 / 255.0));
+    // The ridge's rows in column x (anything that is not sky: the sky is brighter in blue).
+    let ridge_rows = |x: u32| -> Vec<u32> {
+        (0..film.height)
+            .filter(|&y| {
+                let p = film.pixel(x, y);
+                p[2] < 0.5 * p[0].max(p[1]) || p[0] < 0.05
+            })
+            .collect()
+    };
+    let frame = scene.camera.frame();
+    // Columns whose azimuth offset puts them `east_m` east of north at the ridge.
+    let column = |east_m: f64| {
+        let az = east_m / d;
+        (0..film.width)
+            .min_by(|&a, &b| {
+                let da = (frame
+                    .view_direction(a as f64 + 0.5, 100.0)
+                    .azimuth_offset_rad()
+                    - az)
+                    .abs();
+                let db = (frame
+                    .view_direction(b as f64 + 0.5, 100.0)
+                    .azimuth_offset_rad()
+                    - az)
+                    .abs();
+                da.total_cmp(&db)
+            })
+            .unwrap()
+    };
+    let m_per_deg_lon = M_PER_DEG * OBSERVER.0.to_radians().cos();
+    for (east_deg, expected) in [(-0.0003, linear(yellow)), (0.0003, linear(blue))] {
+        let x = column(east_deg * m_per_deg_lon);
+        let rows = ridge_rows(x);
+        assert!(rows.len() > 10, "x = {x}: ridge rows {rows:?}");
+        let p = film.pixel(x, rows[rows.len() / 2]);
+        for c in 0..3 {
+            assert!(
+                (p[c] as f64 - expected[c]).abs() < 1e-5,
+                "x = {x}: {p:?}, the photograph's {expected:?}"
+            );
+        }
+    }
+    // Beyond the photograph: the palette's red, lit.
+    for x in [
+        column(-0.0009 * m_per_deg_lon),
+        column(0.0009 * m_per_deg_lon),
+    ] {
+        let rows = ridge_rows(x);
+        let p = film.pixel(x, rows[rows.len() / 2]);
+        assert!(is_terrain(p), "x = {x}: {p:?}");
+    }
+}
+
+#[test]
+fn orthophoto_settings_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = ridge_scene_with(dir.path(), 15_000.0, 60.0, "height_m = 10", "");
+    assert!(ok.terrain.unwrap().orthophoto.is_none());
+    let path = dir.path().join("scene.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let cases = [
+        (
+            "orthophoto_bounds_deg = [45.0, 9.0, 46.0, 11.0]\n",
+            "terrain.orthophoto_bounds_deg",
+        ),
+        ("orthophoto = \"missing.png\"\n", "missing.png"),
+    ];
+    image::RgbImage::new(2, 2)
+        .save(dir.path().join("p.png"))
+        .unwrap();
+    let inverted = "orthophoto = \"p.png\"\northophoto_bounds_deg = [46.0, 9.0, 45.0, 11.0]\n";
+    for (extra, named) in cases.into_iter().chain([(inverted, "south < north")]) {
+        std::fs::write(&path, format!("{text}{extra}")).unwrap();
+        let err = Scene::from_file(&path).unwrap_err().to_string();
+        assert!(
+            err.contains(named) && err.contains("scene.toml"),
+            "{extra}: {err}"
+        );
+    }
+    // Bounds default to the model's cells.
+    std::fs::write(&path, format!("{text}orthophoto = \"p.png\"\n")).unwrap();
+    let scene = Scene::from_file(&path).unwrap();
+    let terrain = scene.terrain.unwrap();
+    let photo = terrain.orthophoto.as_ref().unwrap();
+    assert_eq!(photo.bounds_deg, terrain.model_area_deg());
+}
