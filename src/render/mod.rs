@@ -416,7 +416,10 @@ fn shade_flat_row(
             continue;
         }
         let fan_end = ctx.fan.interpolate(alpha, heights);
-        if ctx.shader.may_meet_sun(fan_end) || ctx.shader.may_meet_glint(fan_end) {
+        if ctx.shader.may_meet_sun(fan_end)
+            || ctx.shader.may_meet_glint(fan_end)
+            || ctx.shader.may_reflect_terrain(fan_end)
+        {
             return false;
         }
         let mut reflects = false;
@@ -674,9 +677,11 @@ struct SeaReflectionInputs<'a> {
     distances_m: &'a [f64],
     /// The farthest card in view (m), if any.
     farthest_card_m: Option<f64>,
+    /// The farthest ground distance of the terrain in view (m), if any.
+    farthest_terrain_m: Option<f64>,
 }
 
-/// The sea's reflections for a frame: a sea fan when a card is in view (over the reflected
+/// The sea's reflections for a frame: a sea fan when a card or terrain is in view (over the reflected
 /// elevations the frame's grazing angles and the wave facets reach), the sun's glitter or mirror
 /// image. `None` when the scene turns reflections off or the frame shows no sea.
 /// `reflected_sky`: the sky by elevation over [0, π/2].
@@ -719,11 +724,18 @@ fn sea_reflection(
     let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
     // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
     let need_sky = mirror && scene.sun.is_some();
-    let max_range_m = inp
-        .farthest_card_m
-        .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
+    let max_range_m = match (inp.farthest_card_m, inp.farthest_terrain_m) {
+        (Some(a), Some(b)) => Some(a.max(b)),
+        (a, b) => a.or(b),
+    }
+    .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
+    // The air along reflected rays to the terrain is summed in the fan (cards take the chord).
+    let density = inp
+        .farthest_terrain_m
+        .and(scene.sky.extinction())
+        .map(|e| (e.scale_heights_m(), scene.earth_radius_m));
     let fan = max_range_m
-        .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky));
+        .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density));
     let sky = scene.sky;
     let glint = scene.sun.filter(|_| !mirror).map(|sun| {
         // The sun's light at the sea comes along its own curved ray from the sea surface (a
@@ -939,6 +951,7 @@ pub fn render_scene(
             camera_height_m: cam.height_m,
             distances_m: &distances_m,
             farthest_card_m: distances_m.last().copied(),
+            farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
         },
     );
     stats.sea_fan_rays = reflection

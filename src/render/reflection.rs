@@ -1,14 +1,15 @@
 //! Render — the sea's reflections. In: a ray that met the sea (grazing angle g, ground distance
 //! d from the camera, azimuth), the cards, the sky and the sun. Out: the radiance the sea sends
-//! back along it beyond the sky reflection already tabulated by grazing angle: the cards' mirror
-//! images and the sun's glitter (calm: its mirror image).
+//! back along it beyond the sky reflection already tabulated by grazing angle: the mirror images
+//! of the cards and the terrain, and the sun's glitter (calm: its mirror image).
 //!
 //! In a spherically stratified atmosphere a reflected ray is a ray launched from the sea surface
 //! (height 0) at elevation e = the reflected angle, in the same vertical plane, so one **sea
 //! fan** ([`SeaFan`]) traced from height 0 once per frame serves every sample: it records each
 //! ray's height on a uniform grid of ranges (from the reflection point) and is interpolated
 //! bilinearly. A reflected ray from a hit at distance d meets a card at distance D > d at range
-//! D − d. The wave facets ([`Sea::facet_nodes`]) spread the reflected rays over a few elevations;
+//! D − d; the terrain's profile along the sample's azimuth is marched from d on
+//! (`super::terrain`). The wave facets ([`Sea::facet_nodes`]) spread the reflected rays over a few elevations;
 //! their card images are Fresnel-weighted, and seen through the air from the card to the sea
 //! (the chord) when the sky has aerial perspective (the renderer then attenuates the whole sea
 //! radiance from the sea to the camera). Exact mode uses the same sea fan.
@@ -18,6 +19,7 @@ use rayon::prelude::*;
 use super::objects::{RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
+use super::terrain::piece_density;
 use crate::scene::camera::ViewDirection;
 use crate::scene::sea::FacetNode;
 use crate::scene::sky::SunDisc;
@@ -48,6 +50,12 @@ pub(super) struct SeaFan {
     n_r: usize,
     /// Row-major by elevation: height (m) at each range, NaN where the ray had ended.
     heights: Vec<f32>,
+    /// Row-major like `heights`: the lowest height of the ray at this range and beyond (+∞
+    /// where it had ended: it meets nothing there).
+    min_beyond: Vec<f32>,
+    /// Row-major like `heights`, when asked for: the density-weighted path lengths [D_R, D_A]
+    /// (m) from the sea to each range along the ray's own heights (NaN past its end).
+    density: Vec<[f32; 2]>,
     /// Final elevation (rad, relative to the reflection point's horizontal), NaN unless the ray
     /// left into the sky.
     sky_elevation: Vec<f64>,
@@ -56,13 +64,15 @@ pub(super) struct SeaFan {
 impl SeaFan {
     /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
     /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is nothing to
-    /// cover.
+    /// cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
+    /// density-weighted path lengths with ([`Self::density_paths_m`]).
     pub(super) fn build(
         tracer: &dyn RayTracer,
         e_hi: f64,
         step_rad: f64,
         max_range_m: f64,
         need_sky_direction: bool,
+        density: Option<([f64; 2], f64)>,
     ) -> Option<Self> {
         if !(e_hi > 0.0 && e_hi.is_finite() && max_range_m > 0.0 && max_range_m.is_finite()) {
             return None;
@@ -97,12 +107,47 @@ impl SeaFan {
             heights.extend(h);
             sky_elevation.push(s);
         }
+        let density = match density {
+            Some((scales_m, radius_m)) => heights
+                .par_chunks_exact(n_r)
+                .with_min_len(8)
+                .flat_map_iter(|row| {
+                    let ranges = &ranges;
+                    let mut sum = [0.0f64; 2];
+                    let mut prev = (0.0, 0.0);
+                    row.iter().enumerate().map(move |(m, &h)| {
+                        if h.is_nan() || sum[0].is_nan() {
+                            sum = [f64::NAN; 2];
+                        } else {
+                            let at = (ranges[m], f64::from(h));
+                            let piece = piece_density(prev, at, radius_m, scales_m);
+                            sum = [sum[0] + piece[0], sum[1] + piece[1]];
+                            prev = at;
+                        }
+                        sum.map(|v| v as f32)
+                    })
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut min_beyond = heights.clone();
+        for row in min_beyond.chunks_exact_mut(n_r) {
+            let mut low = f32::INFINITY;
+            for h in row.iter_mut().rev() {
+                if !h.is_nan() {
+                    low = low.min(*h);
+                }
+                *h = low;
+            }
+        }
         Some(Self {
             inv_step_e: 1.0 / step_e,
             n_e,
             inv_step_r: 1.0 / step_r,
             n_r,
             heights,
+            min_beyond,
+            density,
             sky_elevation,
         })
     }
@@ -123,6 +168,19 @@ impl SeaFan {
         Some((i, x - i as f64))
     }
 
+    /// The ray launched from the sea at `elevation_rad`, for its heights at many ranges
+    /// ([`SeaRay::height`], the same values as [`Self::height`]); `None` outside the fan.
+    #[inline]
+    pub(super) fn ray(&self, elevation_rad: f64) -> Option<SeaRay<'_>> {
+        let (i, t) = Self::cell(elevation_rad * self.inv_step_e, self.n_e)?;
+        Some(SeaRay {
+            low: &self.heights[i * self.n_r..(i + 1) * self.n_r],
+            high: &self.heights[(i + 1) * self.n_r..(i + 2) * self.n_r],
+            t,
+            inv_step_r: self.inv_step_r,
+        })
+    }
+
     /// Height (m) at range `range_m` of the ray launched from the sea at `elevation_rad`:
     /// bilinear in the fan, `None` outside it or where a neighbour had ended.
     #[inline]
@@ -138,6 +196,47 @@ impl SeaFan {
         h.is_finite().then_some(h)
     }
 
+    /// The density-weighted path lengths [D_R, D_A] (m) from the sea along the ray launched at
+    /// `elevation_rad` to range `range_m` (bilinear, as [`Self::height`]); `None` where they
+    /// were not summed or a neighbour had ended.
+    #[inline]
+    pub(super) fn density_paths_m(&self, elevation_rad: f64, range_m: f64) -> Option<[f64; 2]> {
+        if self.density.is_empty() {
+            return None;
+        }
+        let (i, t) = Self::cell(elevation_rad * self.inv_step_e, self.n_e)?;
+        let (m, u) = Self::cell(range_m * self.inv_step_r, self.n_r)?;
+        let at = |i: usize, m: usize| self.density[i * self.n_r + m];
+        let (a, b) = (at(i, m), at(i, m + 1));
+        let (c, d) = (at(i + 1, m), at(i + 1, m + 1));
+        let out = [0, 1].map(|k| {
+            let low = f64::from(a[k]) + f64::from(b[k] - a[k]) * u;
+            let high = f64::from(c[k]) + f64::from(d[k] - c[k]) * u;
+            low + (high - low) * t
+        });
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    /// A lower bound (m) on the height, at every range from `range_m` on, of the ray launched
+    /// from the sea at `elevation_rad` as [`Self::height`] interpolates it (+∞ outside the fan:
+    /// it has no height there).
+    #[inline]
+    pub(super) fn min_height_beyond(&self, elevation_rad: f64, range_m: f64) -> f64 {
+        let Some((i, _)) = Self::cell(elevation_rad * self.inv_step_e, self.n_e) else {
+            return f64::INFINITY;
+        };
+        // (`max` maps a NaN range to 0: every height of the ray bounds it.)
+        let x = (range_m * self.inv_step_r).max(0.0);
+        if x > (self.n_r - 1) as f64 {
+            return f64::INFINITY;
+        }
+        // The interpolated height in cell m is a weighted mean of the nodes m, m + 1 of rows
+        // i, i + 1, so the nodes' minimum from m on bounds it there and beyond.
+        let m = x as usize;
+        let at = |i: usize| self.min_beyond[i * self.n_r + m];
+        f64::from(at(i).min(at(i + 1)))
+    }
+
     /// Final elevation (rad, relative to the reflection point's horizontal) of the ray launched
     /// from the sea at `elevation_rad`, where it and its neighbour left into the sky.
     #[inline]
@@ -146,6 +245,28 @@ impl SeaFan {
         let (a, b) = (self.sky_elevation[i], self.sky_elevation[i + 1]);
         let e = a + (b - a) * t;
         e.is_finite().then_some(e)
+    }
+}
+
+/// One ray of a [`SeaFan`]: its two neighbouring fan rays and the fraction between them.
+pub(super) struct SeaRay<'f> {
+    low: &'f [f32],
+    high: &'f [f32],
+    t: f64,
+    inv_step_r: f64,
+}
+
+impl SeaRay<'_> {
+    /// Height (m) at range `range_m`, as [`SeaFan::height`] gives it.
+    #[inline]
+    pub(super) fn height(&self, range_m: f64) -> Option<f64> {
+        let (m, u) = SeaFan::cell(range_m * self.inv_step_r, self.low.len())?;
+        let (a, b) = (self.low[m] as f64, self.low[m + 1] as f64);
+        let (c, d) = (self.high[m] as f64, self.high[m + 1] as f64);
+        let low = a + (b - a) * u;
+        let high = c + (d - c) * u;
+        let h = low + (high - low) * self.t;
+        h.is_finite().then_some(h)
     }
 }
 
@@ -320,9 +441,9 @@ impl Reflection {
 
 impl Shader<'_> {
     /// What the sea adds along `dir` to its tabulated sky reflection, for a ray that met it at
-    /// `grazing_rad` and `distance_m`: the sun's glitter (when `with_sun`) and the cards'
-    /// mirror images (Fresnel-weighted, over the facet classes, each in front of the sky it
-    /// hides, which is taken out again).
+    /// `grazing_rad` and `distance_m`: the sun's glitter (when `with_sun`) and the mirror images
+    /// of the cards and the terrain (composed in depth order, Fresnel-weighted, over the facet
+    /// classes, each in front of the sky it hides, which is taken out again).
     pub(super) fn sea_reflections(
         &self,
         dir: &ViewDirection,
@@ -351,15 +472,23 @@ impl Shader<'_> {
             offset.abs() <= card.half_width_rad
         };
         let beyond = |card: &super::shade::ViewCard<'_>| card.distance_m > distance_m;
-        if !self.cards.iter().any(beyond) {
+        let terrain = self.terrain.as_ref();
+        let may_show_terrain =
+            |e: f64| terrain.is_some_and(|t| t.may_be_reflected(fan, e, distance_m));
+        let nodes = refl.facets.at(grazing_rad);
+        let counts = |node: &FacetNode| node.weight * node.reflectance >= MIN_NODE_SHARE;
+        let terrain_nodes = nodes
+            .iter()
+            .any(|n| counts(n) && may_show_terrain(n.reflected_elevation_rad));
+        if !terrain_nodes && !self.cards.iter().any(beyond) {
             return out;
         }
         let az = azimuth();
-        if !self.cards.iter().any(|c| beyond(c) && in_range(c, az)) {
+        if !terrain_nodes && !self.cards.iter().any(|c| beyond(c) && in_range(c, az)) {
             return out;
         }
-        for node in refl.facets.at(grazing_rad) {
-            if node.weight * node.reflectance < MIN_NODE_SHARE {
+        for node in nodes {
+            if !counts(&node) {
                 continue;
             }
             let e = node.reflected_elevation_rad;

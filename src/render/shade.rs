@@ -297,6 +297,31 @@ impl<'a> Shader<'a> {
         }
     }
 
+    /// Whether the sea a ray that ended with `end` may mirror the terrain (some facet class
+    /// that counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray below the
+    /// highest ground beyond the first land): then its colour depends on the azimuth.
+    #[inline]
+    pub(super) fn may_reflect_terrain(&self, end: FanEnd) -> bool {
+        let (
+            FanEnd::Ground {
+                grazing_rad,
+                distance_m,
+            },
+            Some(r),
+            Some(terrain),
+        ) = (end, &self.reflection, &self.terrain)
+        else {
+            return false;
+        };
+        let Some(fan) = &r.fan else {
+            return false;
+        };
+        r.facets.at(grazing_rad).iter().any(|node| {
+            node.weight * node.reflectance >= super::reflection::MIN_NODE_SHARE
+                && terrain.may_be_reflected(fan, node.reflected_elevation_rad, distance_m)
+        })
+    }
+
     /// Whether the sea a ray that ended with `end` mirrors `card` (some facet class that
     /// counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray within the card's
     /// height range at its range): then the colour depends on the azimuth in its columns.

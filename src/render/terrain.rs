@@ -29,6 +29,12 @@
 //! skipped whole. A ray that reaches the sea first (its heights end) meets no terrain beyond.
 //! The ground distance of the hit orders terrain against cards and the sea.
 //!
+//! **In the sea.** A ray the sea reflects at ground distance d₀ is a ray launched from the sea
+//! surface (`super::reflection::SeaFan`) in the same vertical plane, so it marches the same
+//! profile from d₀ on, its height at dⱼ the sea fan's at range dⱼ − d₀. The sea fan's per-ray
+//! minima beyond each range reject the rays that stay above the profile's highest ground, and
+//! the blocks they stay above, without a look at their points.
+//!
 //! **The air to the hit.** With the sky's aerial perspective, the density-weighted path
 //! lengths D_k = ∫ e^(−h/H_k) ds (H = 8 km and the aerosol scale height) from the camera to
 //! every traced distance are summed once per fan ray along its own traced heights (each piece's
@@ -46,6 +52,7 @@ use rayon::prelude::*;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::objects::{Meet, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, RayTracer};
+use super::reflection::SeaFan;
 use super::shade::Shader;
 use crate::scene::Terrain;
 use crate::scene::terrain::GreatCircle;
@@ -175,7 +182,7 @@ impl TracedGrid {
 /// `h1`) (ground distance, height) over a sphere of `radius_m`, its height linear along it:
 /// L·e^(−h₀/H)·(1 − e^(−Δh/H))/(Δh/H) for each scale height H.
 #[inline]
-fn piece_density(
+pub(super) fn piece_density(
     (d0, h0): (f64, f64),
     (d1, h1): (f64, f64),
     radius_m: f64,
@@ -229,6 +236,8 @@ pub(super) struct TerrainView<'a> {
     profiles: Vec<f32>,
     /// Highest profile point of each block [bB, (b+1)B] (overlapping by one point).
     block_max: Vec<f32>,
+    /// Highest point of each profile (−∞: no ground on it).
+    profile_max: Vec<f32>,
     n_blocks: usize,
     az_start_rad: f64,
     az_inv_step: f64,
@@ -237,6 +246,8 @@ pub(super) struct TerrainView<'a> {
     circles: Vec<GreatCircle>,
     /// The highest ground at each grid distance over all profiles (−∞: none).
     max_top_m: Vec<f64>,
+    /// The highest ground in the frame (m).
+    max_height_m: f64,
     /// Where the rays are traced: the fan's (or in exact mode every sample's).
     pub(super) traced: TracedGrid,
     /// The terrain fan (None in exact mode: rays are traced per sample).
@@ -302,6 +313,10 @@ impl<'a> TerrainView<'a> {
                 })
             })
             .collect();
+        let profile_max: Vec<f32> = block_max
+            .chunks_exact(n_blocks)
+            .map(|b| b.iter().copied().fold(f32::NEG_INFINITY, f32::max))
+            .collect();
         // Highest ground at each distance over all profiles: the fan refines below it.
         let max_top_m: Vec<f64> = (0..n)
             .map(|j| {
@@ -319,6 +334,7 @@ impl<'a> TerrainView<'a> {
             distances_m,
             profiles,
             block_max,
+            profile_max,
             n_blocks,
             az_start_rad: az_lo,
             az_inv_step: 1.0 / az_step,
@@ -326,6 +342,7 @@ impl<'a> TerrainView<'a> {
             circles: (0..n_profiles)
                 .map(|p| terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step))
                 .collect(),
+            max_height_m: max_top_m.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             max_top_m,
             fan: None,
             ray_grid_heights: Vec::new(),
@@ -498,7 +515,7 @@ impl<'a> TerrainView<'a> {
             &self.ray_block_min[j1 * nb..(j1 + 1) * nb],
         );
         let end = if t >= 0.5 { eb } else { ea };
-        let mut hit = self.march(p, height, |b| ma[b].min(mb[b]), end)?;
+        let mut hit = self.march(p, 0, height, |b| ma[b].min(mb[b]), end)?;
         if self.frame.scale_heights_m.is_some() {
             let density = |k: usize| self.density_to(k, fan.ray_heights(k), hit);
             hit.density_paths_m = match (density(i), density(j1)) {
@@ -562,6 +579,7 @@ impl<'a> TerrainView<'a> {
         let tr = &self.traced;
         let mut hit = self.march(
             p,
+            0,
             |j| tr.height(heights, end, j),
             |_| f32::NEG_INFINITY,
             end,
@@ -581,12 +599,56 @@ impl<'a> TerrainView<'a> {
         Some(hit)
     }
 
+    /// Where a ray the sea reflects at ground distance `from_m` (leaving it at `elevation_rad`,
+    /// its heights from the sea fan `fan`) meets the ground along the profile at azimuth offset
+    /// `offset_rad`. A ray that stays above the profile's highest point beyond the first land
+    /// is rejected at once; blocks are skipped where the ray stays above their highest point.
+    #[inline]
+    pub(super) fn hit_reflected(
+        &self,
+        offset_rad: f64,
+        fan: &SeaFan,
+        elevation_rad: f64,
+        from_m: f64,
+    ) -> Option<TerrainHit> {
+        let d = &self.distances_m;
+        if from_m.is_nan() || from_m >= d[d.len() - 1] {
+            return None;
+        }
+        let p = self.profile(offset_rad)?;
+        let top = f64::from(self.profile_max[p]);
+        if fan.min_height_beyond(elevation_rad, d[0] - from_m) > top {
+            return None;
+        }
+        let from = d.partition_point(|&x| x <= from_m);
+        let sea_ray = fan.ray(elevation_rad)?;
+        self.march(
+            p,
+            from,
+            |j| sea_ray.height(d[j] - from_m),
+            |b| fan.min_height_beyond(elevation_rad, d[b * BLOCK] - from_m) as f32,
+            FanEnd::Lost,
+        )
+    }
+
+    /// Whether a ray the sea reflects at ground distance `from_m`, leaving it at
+    /// `elevation_rad`, may meet the ground anywhere in the frame (it comes below the highest
+    /// ground beyond the first land).
+    #[inline]
+    pub(super) fn may_be_reflected(&self, fan: &SeaFan, elevation_rad: f64, from_m: f64) -> bool {
+        let d = &self.distances_m;
+        from_m < d[d.len() - 1]
+            && fan.min_height_beyond(elevation_rad, d[0] - from_m) <= self.max_height_m
+    }
+
     /// March profile `p` with a ray's heights `height(j)` (block minima `block_min(b)`, which
-    /// may be −∞ to force a look) to the first grid interval where the ray meets the ground.
+    /// may be −∞ to force a look) from grid point `from` to the first grid interval where the
+    /// ray meets the ground.
     #[inline]
     fn march(
         &self,
         p: usize,
+        from: usize,
         height: impl Fn(usize) -> Option<f64>,
         block_min: impl Fn(usize) -> f32,
         end: FanEnd,
@@ -595,14 +657,18 @@ impl<'a> TerrainView<'a> {
         let z = &self.profiles[p * n..(p + 1) * n];
         let zmax = &self.block_max[p * self.n_blocks..(p + 1) * self.n_blocks];
         let mut prev: Option<(f64, f64)> = None; // (h, z) at the previous grid point
-        for (b, &block_top) in zmax.iter().enumerate() {
+        for (b, &block_top) in zmax.iter().enumerate().skip(from / BLOCK) {
             if block_min(b) > block_top {
                 prev = None; // the block's last point is above ground: restart there
                 continue;
             }
             let start = b * BLOCK;
             let stop = ((b + 1) * BLOCK).min(n - 1);
-            let first = if prev.is_some() { start + 1 } else { start };
+            let first = if prev.is_some() {
+                start + 1
+            } else {
+                start.max(from)
+            };
             for (j, &zj) in z.iter().enumerate().take(stop + 1).skip(first) {
                 let zj = zj as f64;
                 let Some(hj) = height(j) else {
@@ -667,20 +733,31 @@ impl<'a> TerrainView<'a> {
 
     /// Colour (linear RGB) of the ground hit at `hit` by a sample at azimuth offset `offset_rad`
     /// (on the great circle of its profile, where the hit was found).
+    /// The palette's lit colour, under the orthophoto's where one covers the point (the
+    /// photograph's own colours, not relit: it carries the light it was taken in).
     pub(super) fn colour(&self, hit: TerrainHit, offset_rad: f64) -> [f64; 3] {
         let t = self.terrain;
         let radius = self.frame.earth_radius_m;
-        let (slope, normal) = self
+        let lat_lon = self
             .profile(offset_rad)
-            .and_then(|p| self.circles[p].grid_at(t, hit.distance_m, radius))
+            .map(|p| self.circles[p].lat_lon_deg(hit.distance_m, radius));
+        let (slope, normal) = lat_lon
+            .and_then(|(lat, lon)| t.dem.grid_position(lat, t.wrap_lon(lon)))
             .map_or((0.0, [0.0, 0.0, 1.0]), |(r, c)| {
                 t.slope_at_grid(r, c, radius)
             });
         // The normal is in the hit point's east/north/up; the light's direction is taken in the
         // same local frame (the model spans a few degrees at most).
-        t.palette
-            .colour(hit.height_m, slope, normal)
-            .map(|c| c * self.frame.brightness)
+        let lit = t.palette.colour(hit.height_m, slope, normal);
+        let ground = match (&t.orthophoto, lat_lon) {
+            (Some(photo), Some((lat, lon))) => {
+                let [r, g, b, a] = photo.rgba_at(lat, lon).map(f64::from);
+                let under = 1.0 - a;
+                [r + under * lit[0], g + under * lit[1], b + under * lit[2]]
+            }
+            _ => lit,
+        };
+        ground.map(|c| c * self.frame.brightness)
     }
 }
 
@@ -724,8 +801,8 @@ impl SceneObject for TerrainView<'_> {
         None
     }
 
-    /// The ground a camera ray meets (through the fan, or along its own traced ray); a ray the
-    /// sea reflects meets no terrain (the reflections show the cards and the sky).
+    /// The ground a camera ray meets (through the fan, or along its own traced ray), or a ray
+    /// the sea reflects (through the sea fan).
     #[inline]
     fn meet(&self, ray: &SampleRay<'_>) -> Option<Meet> {
         let hit = match ray.along {
@@ -739,7 +816,12 @@ impl SceneObject for TerrainView<'_> {
                 terrain: Some((heights, end)),
                 ..
             } => self.hit_traced(ray.azimuth_offset_rad(), heights, end)?,
-            RayAlong::Traced { terrain: None, .. } | RayAlong::Reflected { .. } => return None,
+            RayAlong::Reflected {
+                fan,
+                elevation_rad,
+                from_m,
+            } => self.hit_reflected(ray.azimuth_offset_rad(), fan, elevation_rad, from_m)?,
+            RayAlong::Traced { terrain: None, .. } => return None,
         };
         Some(Meet {
             distance_m: hit.distance_m,
@@ -750,8 +832,9 @@ impl SceneObject for TerrainView<'_> {
     }
 
     /// The ground's colour through the air between (with the sky's aerial perspective: along
-    /// the ray's path where the meet carries its path integrals, else the straight chord);
-    /// opaque.
+    /// the ray's path where the meet carries its path integrals, else the straight chord; for a
+    /// ray the sea reflects, along its path from the sea to the ground, summed in the sea fan:
+    /// the sea's own haze is added after); opaque.
     fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
         let hit = TerrainHit {
             distance_m: meet.distance_m,
@@ -759,7 +842,26 @@ impl SceneObject for TerrainView<'_> {
             density_paths_m: meet.density_paths_m,
         };
         let mut ground = self.colour(hit, ray.azimuth_offset_rad());
-        if let Some(aerial) = &shader.aerial {
+        if let RayAlong::Reflected {
+            fan,
+            elevation_rad,
+            from_m,
+        } = ray.along
+        {
+            if let Some(aerial) = &shader.aerial {
+                let range_m = hit.distance_m - from_m;
+                let tau = match fan.density_paths_m(elevation_rad, range_m) {
+                    Some(d) => aerial.extinction.path_optical_depth(d),
+                    None => aerial.extinction.chord_optical_depth(
+                        aerial.earth_radius_m,
+                        0.0,
+                        hit.height_m,
+                        range_m,
+                    ),
+                };
+                ground = aerial.extinction.attenuate(ground, 1.0, tau);
+            }
+        } else if let Some(aerial) = &shader.aerial {
             let tau = match hit.density_paths_m {
                 Some(d) => aerial.extinction.path_optical_depth(d),
                 None => aerial.extinction.chord_optical_depth(

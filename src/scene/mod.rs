@@ -143,6 +143,17 @@ pub enum SceneError {
         #[source]
         source: card::TextureError,
     },
+    /// The terrain's orthophoto could not be read.
+    #[error("invalid scene {path}: terrain.orthophoto: cannot read image {image}: {source}")]
+    Orthophoto {
+        /// The scene file.
+        path: PathBuf,
+        /// The image file.
+        image: PathBuf,
+        /// The image error.
+        #[source]
+        source: image::ImageError,
+    },
     /// The terrain's elevation model could not be read.
     #[error("invalid scene {path}: terrain.dem: {source}")]
     Terrain {
@@ -363,14 +374,21 @@ struct RawTerrain {
     light_azimuth_deg: Option<f64>,
     light_elevation_deg: Option<f64>,
     fill_voids: Option<bool>,
+    orthophoto: Option<PathBuf>,
+    orthophoto_bounds_deg: Option<[f64; 4]>,
 }
 
-/// The `[terrain]` section checked and its elevation model read, with the model file's sha256.
+/// The sha256 of a terrain's elevation model file and of its orthophoto's, if any.
+type TerrainDigests = ([u8; 32], Option<[u8; 32]>);
+
+/// The `[terrain]` section checked and its elevation model (and orthophoto, at `photo_path`)
+/// read, with the sha256 of the model file and of the orthophoto's.
 fn terrain_section(
     c: &Checker<'_>,
     raw: &RawTerrain,
     dem_path: PathBuf,
-) -> Result<(Terrain, [u8; 32]), SceneError> {
+    photo_path: Option<PathBuf>,
+) -> Result<(Terrain, TerrainDigests), SceneError> {
     let lat = c.range(
         "terrain.observer_lat_deg",
         raw.observer_lat_deg,
@@ -447,10 +465,86 @@ fn terrain_section(
     })?;
     let digest: [u8; 32] = Sha256::digest(&bytes).into();
     let fill_voids = raw.fill_voids.unwrap_or(true);
-    Ok((
-        Terrain::new(dem_path, dem, (lat, lon), palette, fill_voids),
-        digest,
-    ))
+    let terrain = Terrain::new(dem_path, dem, (lat, lon), palette, fill_voids);
+    if raw.orthophoto.is_none() && raw.orthophoto_bounds_deg.is_some() {
+        return Err(c.invalid(
+            "terrain.orthophoto_bounds_deg",
+            "bounds without terrain.orthophoto: give the image too".to_string(),
+        ));
+    }
+    match photo_path {
+        Some(image) => {
+            let bounds = raw
+                .orthophoto_bounds_deg
+                .unwrap_or_else(|| terrain.model_area_deg());
+            let (photo, photo_digest) = orthophoto(c, image, bounds)?;
+            Ok((terrain.with_orthophoto(photo), (digest, Some(photo_digest))))
+        }
+        None => Ok((terrain, (digest, None))),
+    }
+}
+
+/// The orthophoto at `image_path` over `bounds_deg` (south, west, north, east; checked), with
+/// the image file's sha256.
+fn orthophoto(
+    c: &Checker<'_>,
+    image_path: PathBuf,
+    bounds_deg: [f64; 4],
+) -> Result<(terrain::Orthophoto, [u8; 32]), SceneError> {
+    let key = "terrain.orthophoto_bounds_deg";
+    let [south, west, north, east] = bounds_deg;
+    c.range(
+        key,
+        south,
+        -90.0,
+        90.0,
+        "south, west, north, east: latitudes −90…90°",
+    )?;
+    c.range(
+        key,
+        north,
+        -90.0,
+        90.0,
+        "south, west, north, east: latitudes −90…90°",
+    )?;
+    c.range(
+        key,
+        west,
+        -360.0,
+        360.0,
+        "south, west, north, east: longitudes −360…360°",
+    )?;
+    c.range(
+        key,
+        east,
+        -360.0,
+        360.0,
+        "south, west, north, east: longitudes −360…360°",
+    )?;
+    if !(south < north && west < east && east - west <= 360.0) {
+        return Err(c.invalid(
+            key,
+            format!(
+                "[{south}, {west}, {north}, {east}]: give south < north and west < east, at \
+                 most 360° apart"
+            ),
+        ));
+    }
+    let (texture, digest) =
+        card::Texture::from_file_with_digest(&image_path).map_err(|e| SceneError::Orthophoto {
+            path: c.path.to_path_buf(),
+            image: e.path,
+            source: e.source,
+        })?;
+    if texture.width == 0 || texture.height == 0 {
+        return Err(c.invalid("terrain.orthophoto", "the image has no pixels".to_string()));
+    }
+    let photo = terrain::Orthophoto {
+        image_path,
+        bounds_deg,
+        texture: Arc::new(texture),
+    };
+    Ok((photo, digest))
 }
 
 /// The sea's rms facet slope (rad): `wave_slope_deg` if given, else Cox–Munk at
@@ -854,10 +948,11 @@ impl Scene {
             }),
         };
 
-        let (terrain, terrain_digest) = match &raw.terrain {
+        let (terrain, terrain_digests) = match &raw.terrain {
             Some(rt) => {
-                let (t, d) = terrain_section(&c, rt, resolve(&rt.dem))?;
-                (Some(t), Some(d))
+                let photo = rt.orthophoto.as_deref().map(resolve);
+                let (t, digests) = terrain_section(&c, rt, resolve(&rt.dem), photo)?;
+                (Some(t), Some(digests))
             }
             None => (None, None),
         };
@@ -887,17 +982,17 @@ impl Scene {
             spectral_bands,
             hash_hex: String::new(),
         };
-        scene.hash_hex = scene.compute_hash(text, &card_digests, terrain_digest);
+        scene.hash_hex = scene.compute_hash(text, &card_digests, terrain_digests);
         Ok(scene)
     }
 
-    /// `card_digests`: the sha256 of each card's image file, in card order; `terrain_digest`:
-    /// that of the elevation model file, when there is terrain.
+    /// `card_digests`: the sha256 of each card's image file, in card order; `terrain_digests`:
+    /// those of the elevation model file and of the orthophoto (if any), when there is terrain.
     fn compute_hash(
         &self,
         text: &str,
         card_digests: &[[u8; 32]],
-        terrain_digest: Option<[u8; 32]>,
+        terrain_digests: Option<TerrainDigests>,
     ) -> String {
         let mut h = Sha256::new();
         h.update(b"ghostship-scene-v1\0");
@@ -919,6 +1014,9 @@ impl Scene {
         view.source_path = None;
         if let Some(t) = &mut view.terrain {
             t.dem_path = file_name(&t.dem_path);
+            if let Some(photo) = &mut t.orthophoto {
+                photo.image_path = file_name(&photo.image_path);
+            }
         }
         h.update(serde_json::to_vec(&view).unwrap_or_default());
         // The atmosphere file enters by content too: editing a layer changes the image, so it
@@ -939,9 +1037,13 @@ impl Scene {
             h.update(b"\0card\0");
             h.update(digest);
         }
-        if let Some(digest) = terrain_digest {
+        if let Some((digest, photo)) = terrain_digests {
             h.update(b"\0terrain\0");
             h.update(digest);
+            if let Some(photo) = photo {
+                h.update(b"\0orthophoto\0");
+                h.update(photo);
+            }
         }
         h.finalize().iter().map(|b| format!("{b:02x}")).collect()
     }

@@ -183,6 +183,7 @@ fn base_scene(with_sounding: bool) -> toml::Table {
         "{CAMERA}[atmosphere]\n[earth]\n[sky]\n[sea]\n[[cards]]\nimage = \"../cards/ship.png\"\n\
          distance_m = 10000.0\nwidth_m = 50.0\nheight_m = 20.0\n[sun]\nelevation_deg = 1.0\n\
          [terrain]\ndem = \"terrain/island.tif\"\nobserver_lat_deg = 78.0\nobserver_lon_deg = 15.0\n\
+         orthophoto = \"terrain/island_photo.png\"\n\
          [render]\n"
     );
     if with_sounding {

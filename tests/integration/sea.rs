@@ -1,6 +1,7 @@
 //! The sea's reflections: on a mirror sea (calm) the mirror image of a card under straight rays
-//! ends where the sphere's reflection geometry puts it (computed here by bisection on the law of
-//! reflection, independently of the renderer's sea fan), in the fan and the exact render alike,
+//! ends where the sphere's reflection geometry puts it (`support::mirror_elevation_rad`:
+//! bisection on the law of reflection, independently of the renderer's sea fan), in the fan and
+//! the exact render alike,
 //! and through the Novaya Zemlya inversion where the independent reference tracer's rays put it;
 //! the sun's Cox–Munk glitter on a wind-roughened sea is centred under the sun and below the
 //! horizon; and frames with reflections do not depend on the thread count.
@@ -44,28 +45,9 @@ fn render(scene: &Scene, exact: bool) -> Film {
     film
 }
 
-/// Apparent elevation (rad) at the camera of the mirror image of a point at height `top_m`
-/// and ground distance `distance_m`, on a sphere of radius R with straight rays: the sea point
-/// at angle θ where the camera and the point make equal angles with the surface normal
-/// (bisection on θ), seen from the camera.
+/// [`support::mirror_elevation_rad`] from this file's camera on its sphere.
 fn mirror_elevation_rad(top_m: f64, distance_m: f64) -> f64 {
-    let camera = [0.0, R + CAMERA_M];
-    let phi = distance_m / R;
-    let target = [(R + top_m) * phi.sin(), (R + top_m) * phi.cos()];
-    let angle_to_normal = |theta: f64, q: [f64; 2]| {
-        let p = [R * theta.sin(), R * theta.cos()];
-        let (vx, vy) = (q[0] - p[0], q[1] - p[1]);
-        let n = [theta.sin(), theta.cos()];
-        ((vx * n[0] + vy * n[1]) / vx.hypot(vy)).acos()
-    };
-    // The camera's angle to the normal grows with θ, the target's shrinks: one crossing.
-    let (lo, hi) = bisect(0.0, phi, 200, |theta| {
-        angle_to_normal(theta, camera) > angle_to_normal(theta, target)
-    });
-    let theta = 0.5 * (lo + hi);
-    let p = [R * theta.sin(), R * theta.cos()];
-    // Camera horizontal is +x, vertical +y.
-    (p[1] - camera[1]).atan2(p[0] - camera[0])
+    crate::support::mirror_elevation_rad(CAMERA_M, top_m, distance_m, R)
 }
 
 /// The lowest row of column `x` whose pixel is the red card (green < half the reflected sky's

@@ -1,10 +1,11 @@
 //! Terrain: the elevation-model readers against files written from known samples, and rendered
 //! ridges of known geometry against line–sphere geometry (straight rays and the
-//! constant-curvature model's effective radius R/(1−k)), the hidden base included.
+//! constant-curvature model's effective radius R/(1−k)), the hidden base included; on a calm
+//! sea a ridge's mirror image ends where the sphere's reflection geometry puts it.
 
 use std::path::Path;
 
-use ghostship::render::{ConstantCurvatureRays, Film, RenderOptions, render_scene};
+use ghostship::render::{ConstantCurvatureRays, Film, RenderOptions, StraightRays, render_scene};
 use ghostship::scene::{Dem, Scene};
 
 use crate::support::dem::{Grid, hgt_bytes, write_geotiff};
@@ -283,4 +284,171 @@ fn cards_and_terrain_compose_in_depth_order() {
             );
         }
     }
+}
+
+#[test]
+fn a_calm_sea_mirrors_a_ridge_where_the_sphere_geometry_puts_it() {
+    // A red ridge 15 m high at 10 km seen from 10 m over a mirror sea, straight rays: the
+    // lowest red row is the mirror image of the ridge's near top edge, which the law of
+    // reflection on the sphere puts at about −(10 + 15)/10 000 rad (the sphere's curvature
+    // lowers it by some 10 %; the waterline is near −10/10 000).
+    let (d, h, h0) = (10_000.0, 15.0, 10.0);
+    let sea = |extra: &str| {
+        format!("[atmosphere]\nstraight = true\n[sea]\nwave_slope_deg = 0.0\n{extra}\n")
+    };
+    let camera = format!("height_m = {h0}\npitch_deg = -0.06");
+    let expected = crate::support::mirror_elevation_rad(h0, h, d, R);
+    // Sanity of the reference.
+    assert!((expected * d / -(h0 + h) - 1.0).abs() < 0.15, "{expected}");
+    let dir = tempfile::tempdir().unwrap();
+    let scene = ridge_scene_with(dir.path(), d, h, &camera, &sea(""));
+    let frame = scene.camera.frame();
+    let pixel_rad = 1.0 / frame.focal_px;
+    let x = scene.camera.width / 2;
+    let elevation = |row: f64| frame.view_direction(x as f64 + 0.5, row).elevation_rad;
+    for exact in [false, true] {
+        let options = RenderOptions { exact, ..quiet() };
+        let film = render_scene(&scene, &StraightRays::new(R).unwrap(), &options).unwrap();
+        let rows = terrain_rows(&film);
+        // The ridge and its image touch at the waterline: one run of rows.
+        assert!(rows.windows(2).all(|w| w[1] == w[0] + 1), "{rows:?}");
+        let top = *rows.first().expect("ridge not visible") as i64;
+        let predicted = first_row_below(&scene, geometric_elevation(h0, h, d, R));
+        assert!(
+            (top - predicted).abs() <= 1,
+            "exact={exact}: {top} vs {predicted}"
+        );
+        let y = *rows.last().unwrap() as f64;
+        let (e_sea, e_red) = (elevation(y + 1.5), elevation(y + 0.5));
+        assert!(
+            e_sea - 0.5 * pixel_rad <= expected && expected <= e_red + 0.5 * pixel_rad,
+            "exact={exact}: image edge between {e_sea} and {e_red}, expected {expected}"
+        );
+        assert!(e_red < -1.5 * h0 / d, "exact={exact}: {e_red}");
+    }
+    // Without reflections the sea below the waterline shows no ridge.
+    let dir = tempfile::tempdir().unwrap();
+    let off = ridge_scene_with(dir.path(), d, h, &camera, &sea("reflections = false"));
+    let film = render_scene(&off, &StraightRays::new(R).unwrap(), &quiet()).unwrap();
+    let waterline = first_row_below(&off, geometric_elevation(h0, 0.0, d, R)) as u32;
+    let below: Vec<u32> = terrain_rows(&film)
+        .into_iter()
+        .filter(|&y| y > waterline + 2)
+        .collect();
+    assert!(
+        below.is_empty(),
+        "ridge rows below the waterline: {below:?}"
+    );
+}
+
+#[test]
+fn an_orthophoto_colours_the_ground_it_covers_and_the_palette_the_rest() {
+    // Over the red ridge at 15 km, an orthophoto 4 pixels wide (yellow, yellow, blue, blue) across
+    // 0.0012° of longitude centred north of the observer (47 m each side at 15 km, 3.1 mrad of
+    // the frame's ±4.4 mrad): between the centres of its two yellow pixels the ground is the
+    // photograph's yellow exactly (not relit), between the blue ones blue; beyond its edges the
+    // palette's lit red.
+    let (d, h, h0) = (15_000.0, 60.0, 10.0);
+    let dir = tempfile::tempdir().unwrap();
+    let (yellow, blue) = ([255u8, 200, 0], [0u8, 64, 255]);
+    let photo =
+        image::RgbImage::from_fn(4, 1, |c, _| image::Rgb(if c < 2 { yellow } else { blue }));
+    photo.save(dir.path().join("photo.png")).unwrap();
+    let (south, north) = (
+        OBSERVER.0 + (d - 300.0) / M_PER_DEG,
+        OBSERVER.0 + (d + 1_300.0) / M_PER_DEG,
+    );
+    let (west, east) = (OBSERVER.1 - 0.0006, OBSERVER.1 + 0.0006);
+    let extra = format!(
+        "orthophoto = \"photo.png\"\northophoto_bounds_deg = [{south}, {west}, {north}, {east}]\n"
+    );
+    let camera = format!("height_m = {h0}\npitch_deg = 0.1");
+    let scene = ridge_scene_with(dir.path(), d, h, &camera, &extra);
+    let film = render_scene(&scene, &StraightRays::new(R).unwrap(), &quiet()).unwrap();
+    let linear = |c: [u8; 3]| c.map(|v| ghostship::scene::card::srgb_to_linear(v as f64 / 255.0));
+    // The ridge's rows in column x (anything that is not sky: the sky is brighter in blue).
+    let ridge_rows = |x: u32| -> Vec<u32> {
+        (0..film.height)
+            .filter(|&y| {
+                let p = film.pixel(x, y);
+                p[2] < 0.5 * p[0].max(p[1]) || p[0] < 0.05
+            })
+            .collect()
+    };
+    let frame = scene.camera.frame();
+    // Columns whose azimuth offset puts them `east_m` east of north at the ridge.
+    let column = |east_m: f64| {
+        let az = east_m / d;
+        (0..film.width)
+            .min_by(|&a, &b| {
+                let da = (frame
+                    .view_direction(a as f64 + 0.5, 100.0)
+                    .azimuth_offset_rad()
+                    - az)
+                    .abs();
+                let db = (frame
+                    .view_direction(b as f64 + 0.5, 100.0)
+                    .azimuth_offset_rad()
+                    - az)
+                    .abs();
+                da.total_cmp(&db)
+            })
+            .unwrap()
+    };
+    let m_per_deg_lon = M_PER_DEG * OBSERVER.0.to_radians().cos();
+    for (east_deg, expected) in [(-0.0003, linear(yellow)), (0.0003, linear(blue))] {
+        let x = column(east_deg * m_per_deg_lon);
+        let rows = ridge_rows(x);
+        assert!(rows.len() > 10, "x = {x}: ridge rows {rows:?}");
+        let p = film.pixel(x, rows[rows.len() / 2]);
+        for c in 0..3 {
+            assert!(
+                (p[c] as f64 - expected[c]).abs() < 1e-5,
+                "x = {x}: {p:?}, the photograph's {expected:?}"
+            );
+        }
+    }
+    // Beyond the photograph: the palette's red, lit.
+    for x in [
+        column(-0.0009 * m_per_deg_lon),
+        column(0.0009 * m_per_deg_lon),
+    ] {
+        let rows = ridge_rows(x);
+        let p = film.pixel(x, rows[rows.len() / 2]);
+        assert!(is_terrain(p), "x = {x}: {p:?}");
+    }
+}
+
+#[test]
+fn orthophoto_settings_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = ridge_scene_with(dir.path(), 15_000.0, 60.0, "height_m = 10", "");
+    assert!(ok.terrain.unwrap().orthophoto.is_none());
+    let path = dir.path().join("scene.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let cases = [
+        (
+            "orthophoto_bounds_deg = [45.0, 9.0, 46.0, 11.0]\n",
+            "terrain.orthophoto_bounds_deg",
+        ),
+        ("orthophoto = \"missing.png\"\n", "missing.png"),
+    ];
+    image::RgbImage::new(2, 2)
+        .save(dir.path().join("p.png"))
+        .unwrap();
+    let inverted = "orthophoto = \"p.png\"\northophoto_bounds_deg = [46.0, 9.0, 45.0, 11.0]\n";
+    for (extra, named) in cases.into_iter().chain([(inverted, "south < north")]) {
+        std::fs::write(&path, format!("{text}{extra}")).unwrap();
+        let err = Scene::from_file(&path).unwrap_err().to_string();
+        assert!(
+            err.contains(named) && err.contains("scene.toml"),
+            "{extra}: {err}"
+        );
+    }
+    // Bounds default to the model's cells.
+    std::fs::write(&path, format!("{text}orthophoto = \"p.png\"\n")).unwrap();
+    let scene = Scene::from_file(&path).unwrap();
+    let terrain = scene.terrain.unwrap();
+    let photo = terrain.orthophoto.as_ref().unwrap();
+    assert_eq!(photo.bounds_deg, terrain.model_area_deg());
 }

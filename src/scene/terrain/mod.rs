@@ -1,6 +1,6 @@
 //! Scene — terrain. In: the scene's `[terrain]` section (an elevation model file, where the
-//! observer stands on it, a palette). Out: a [`Terrain`]: the decoded [`Dem`], the observer's
-//! position and the colour rules the renderer shades terrain hits with.
+//! observer stands on it, a palette, optionally an orthophoto). Out: a [`Terrain`]: the decoded
+//! [`Dem`], the observer's position and the colour rules the renderer shades terrain hits with.
 //!
 //! ```toml
 //! [terrain]
@@ -15,12 +15,15 @@
 //! light_azimuth_deg = 180.0    # where the light comes from (clockwise from north, default 180)
 //! light_elevation_deg = 30.0   # and how high (default 30)
 //! fill_voids = true            # fill the model's voids from the heights around them (default)
+//! orthophoto = "island.png"    # optional: ground colours from a georeferenced image
+//! orthophoto_bounds_deg = [78.2, 14.5, 78.6, 15.5]  # its S, W, N, E edges (default: the model's)
 //! ```
 //!
 //! The terrain's surface is the sea level of the sphere (`earth.radius_m`); heights at or below
 //! 0 m and voids are sea. The camera's `height_m` stays its height above the sea.
 
 pub mod dem;
+pub mod ortho;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -28,6 +31,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 pub use dem::{Dem, DemError};
+pub use ortho::Orthophoto;
 
 /// How terrain is coloured: by height and slope, then lit by one directional light.
 ///
@@ -154,6 +158,10 @@ pub struct Terrain {
     /// How many void samples were filled.
     #[serde(skip)]
     pub voids_filled: usize,
+    /// Ground colours from a georeferenced image, where it covers the ground (else the
+    /// palette's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orthophoto: Option<Orthophoto>,
     /// Highest terrain height in the model (m; 0 if it is all sea).
     pub max_height_m: f64,
     /// The decoded model.
@@ -192,10 +200,25 @@ impl Terrain {
             palette,
             fill_voids,
             voids_filled,
+            orthophoto: None,
             max_height_m,
             dem: Arc::new(dem),
             gradients,
         }
+    }
+
+    /// The same terrain coloured by `orthophoto` where it covers the ground.
+    pub fn with_orthophoto(mut self, orthophoto: Orthophoto) -> Self {
+        self.orthophoto = Some(orthophoto);
+        self
+    }
+
+    /// The cells around the model's samples: its sample centres widened by half a step on each
+    /// side, as south, west, north and east edges (°) — an orthophoto's default bounds.
+    pub fn model_area_deg(&self) -> [f64; 4] {
+        let (south, north, west, east) = self.dem.bounds_deg();
+        let (dlat, dlon) = (0.5 * self.dem.lat_step_deg, 0.5 * self.dem.lon_step_deg);
+        [south - dlat, west - dlon, north + dlat, east + dlon]
     }
 
     /// Latitude and longitude (°) of the point at ground distance `distance_m` along

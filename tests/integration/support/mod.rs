@@ -31,3 +31,28 @@ pub fn bisect(lo: f64, hi: f64, iterations: u32, is_high: impl Fn(f64) -> bool) 
     }
     (lo, hi)
 }
+
+/// Apparent elevation (rad) from a camera at `camera_m` of the mirror image, on a calm sea, of
+/// a point at height `top_m` and ground distance `distance_m`, on a sphere of radius `radius_m`
+/// with straight rays: the sea point at angle θ where the camera and the point make equal
+/// angles with the surface normal (bisection on θ), seen from the camera.
+pub fn mirror_elevation_rad(camera_m: f64, top_m: f64, distance_m: f64, radius_m: f64) -> f64 {
+    let r = radius_m;
+    let camera = [0.0, r + camera_m];
+    let phi = distance_m / r;
+    let target = [(r + top_m) * phi.sin(), (r + top_m) * phi.cos()];
+    let angle_to_normal = |theta: f64, q: [f64; 2]| {
+        let p = [r * theta.sin(), r * theta.cos()];
+        let (vx, vy) = (q[0] - p[0], q[1] - p[1]);
+        let n = [theta.sin(), theta.cos()];
+        ((vx * n[0] + vy * n[1]) / vx.hypot(vy)).acos()
+    };
+    // The camera's angle to the normal grows with θ, the target's shrinks: one crossing.
+    let (lo, hi) = bisect(0.0, phi, 200, |theta| {
+        angle_to_normal(theta, camera) > angle_to_normal(theta, target)
+    });
+    let theta = 0.5 * (lo + hi);
+    let p = [r * theta.sin(), r * theta.cos()];
+    // Camera horizontal is +x, vertical +y.
+    (p[1] - camera[1]).atan2(p[0] - camera[0])
+}
