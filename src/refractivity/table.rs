@@ -461,6 +461,26 @@ fn evaluate(coefficients: &[f64; 6], t: f64, inv_step: f64) -> (f64, f64) {
 mod tests {
     use super::*;
 
+    /// Every height of `heights` is interpolated (not exact) and within `bound` of `f` in n and
+    /// dn/dh.
+    fn assert_interpolates_within(
+        grid: &HermiteGrid,
+        f: &dyn Fn(f64) -> NodeResult<()>,
+        heights: &[f64],
+        bound: f64,
+    ) {
+        for &h in heights {
+            let Lookup::Value(v, d) = grid.lookup(h, f) else {
+                panic!("{h} is not interpolated")
+            };
+            let (ve, de) = f(h).unwrap();
+            assert!(
+                (v - ve).abs() < bound && (d - de).abs() < bound,
+                "{h}: {v} {ve} {d} {de}"
+            );
+        }
+    }
+
     /// A cubic is reproduced exactly (to rounding) by the quintic Hermite.
     #[test]
     fn reproduces_a_cubic_exactly() {
@@ -527,16 +547,8 @@ mod tests {
             }
         };
         let grid = HermiteGrid::new(0.0, 1.0, 20, 1e-15, 1e-15).with_breaks(vec![10.3]);
-        for h in [10.0, 10.1, 10.299_999, 10.3, 10.300_001, 10.7, 10.999] {
-            let Lookup::Value(v, d) = grid.lookup(h, &f) else {
-                panic!("{h} is not interpolated")
-            };
-            let (ve, de) = f(h).unwrap();
-            assert!(
-                (v - ve).abs() < 1e-15 && (d - de).abs() < 1e-15,
-                "{h}: {v} {ve} {d} {de}"
-            );
-        }
+        let heights = [10.0, 10.1, 10.299_999, 10.3, 10.300_001, 10.7, 10.999];
+        assert_interpolates_within(&grid, &f, &heights, 1e-15);
         let err = grid.error(&f);
         assert_eq!((err.exact_cells, err.cut_cells), (0, 1), "{err:?}");
         assert!(err.max_abs_ddndh_per_m < 1e-15, "{err:?}");
@@ -566,18 +578,10 @@ mod tests {
         };
         let grid =
             HermiteGrid::new(0.0, 1.0, 100, 1e-15, 1e-15).with_breaks(vec![63.4, 99.6, 150.0]);
-        for h in [
+        let heights = [
             63.0, 63.399_999, 63.4, 63.400_001, 63.999, 64.0, 99.1, 99.6, 99.9, 100.0,
-        ] {
-            let Lookup::Value(v, d) = grid.lookup(h, &f) else {
-                panic!("{h} is not interpolated")
-            };
-            let (ve, de) = f(h).unwrap();
-            assert!(
-                (v - ve).abs() < 1e-15 && (d - de).abs() < 1e-15,
-                "{h}: {v} {ve} {d} {de}"
-            );
-        }
+        ];
+        assert_interpolates_within(&grid, &f, &heights, 1e-15);
         let err = grid.error(&f);
         assert_eq!((err.exact_cells, err.cut_cells), (0, 2), "{err:?}");
         assert_eq!(grid.lookup(100.5, &f), Lookup::Outside);

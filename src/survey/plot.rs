@@ -205,12 +205,11 @@ pub fn ducts_png(rows: &[SurveyRow]) -> Result<Vec<u8>, String> {
             .configure_mesh()
             .x_desc("year")
             .y_desc("duct strength ΔM (M-units)")
-            .x_label_formatter(&|v| {
-                if t1 - t0 > 3.0 {
-                    format!("{v:.0}")
-                } else {
-                    format!("{v:.2}")
-                }
+            // Decimals by span, so that ticks a fraction of a year apart read apart.
+            .x_label_formatter(&|v| match t1 - t0 {
+                s if s > 20.0 => format!("{v:.0}"),
+                s if s > 2.0 => format!("{v:.1}"),
+                _ => format!("{v:.2}"),
             })
             .label_style((PLOT_FONT, 14))
             .light_line_style(RGBColor(235, 235, 235))
