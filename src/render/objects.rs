@@ -328,9 +328,9 @@ mod tests {
         (acc, t)
     }
 
-    #[test]
-    fn meets_are_composed_nearest_first_and_stably() {
-        let dir = crate::scene::camera::Camera {
+    /// The view through the centre of a small level frame.
+    fn centre_view() -> ViewDirection {
+        crate::scene::camera::Camera {
             height_m: 10.0,
             heading_rad: 0.0,
             pitch_rad: 0.0,
@@ -340,7 +340,12 @@ mod tests {
             samples_per_pixel: 1,
         }
         .frame()
-        .view_direction(2.0, 1.0);
+        .view_direction(2.0, 1.0)
+    }
+
+    #[test]
+    fn meets_are_composed_nearest_first_and_stably() {
+        let dir = centre_view();
         let ray = SampleRay::new(
             &dir,
             RayAlong::Fan {
@@ -394,17 +399,7 @@ mod tests {
 
     #[test]
     fn placed_meets_merge_into_fixed_ones_before_those_equally_far() {
-        let dir = crate::scene::camera::Camera {
-            height_m: 10.0,
-            heading_rad: 0.0,
-            pitch_rad: 0.0,
-            hfov_rad: 0.1,
-            width: 4,
-            height: 2,
-            samples_per_pixel: 1,
-        }
-        .frame()
-        .view_direction(2.0, 1.0);
+        let dir = centre_view();
         let ray = SampleRay::new(
             &dir,
             RayAlong::Fan {
