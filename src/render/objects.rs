@@ -343,16 +343,21 @@ mod tests {
         .view_direction(2.0, 1.0)
     }
 
-    #[test]
-    fn meets_are_composed_nearest_first_and_stably() {
-        let dir = centre_view();
-        let ray = SampleRay::new(
-            &dir,
+    /// A level sample ray from the fan along `dir`, no card heights.
+    fn level_fan_ray(dir: &ViewDirection) -> SampleRay<'_> {
+        SampleRay::new(
+            dir,
             RayAlong::Fan {
                 alpha: 0.0,
                 card_heights: None,
             },
-        );
+        )
+    }
+
+    #[test]
+    fn meets_are_composed_nearest_first_and_stably() {
+        let dir = centre_view();
+        let ray = level_fan_ray(&dir);
         let shader = shader();
         for count in [1usize, 2, 3, 9, 20] {
             // Distances out of order, with ties (k % 5), translucent.
@@ -400,13 +405,7 @@ mod tests {
     #[test]
     fn placed_meets_merge_into_fixed_ones_before_those_equally_far() {
         let dir = centre_view();
-        let ray = SampleRay::new(
-            &dir,
-            RayAlong::Fan {
-                alpha: 0.0,
-                card_heights: None,
-            },
-        );
+        let ray = level_fan_ray(&dir);
         let shader = shader();
         // Fixed slabs in ascending order (ties included), placed ones out of order, some at
         // the fixed ones' distances; all translucent with distinct colours.

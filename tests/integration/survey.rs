@@ -32,6 +32,17 @@ fn num(row: &BTreeMap<String, String>, key: &str) -> Option<f64> {
     (!text.is_empty()).then(|| text.parse().unwrap())
 }
 
+/// `survey-merge PART1 PART2 --out OUT`, which must fail.
+fn merge_fails(part1: &Path, part2: &Path, out: &Path) -> crate::support::cli::Run {
+    fails(&[
+        "survey-merge",
+        part1.to_str().unwrap(),
+        part2.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 fn survey(sources: &[&Path], out: &Path, extra: &[&str]) -> Vec<BTreeMap<String, String>> {
     let mut args = vec!["survey", "--quiet", "--out", out.to_str().unwrap()];
     args.extend(sources.iter().map(|p| p.to_str().unwrap()));
@@ -756,13 +767,7 @@ fn survey_merge_refuses_a_stale_part_of_other_inputs() {
     ]);
     assert!(r.stderr.contains("is not YYYY-MM-DD"), "{}", r.stderr);
     let joined = dir.path().join("joined");
-    let r = fails(&[
-        "survey-merge",
-        p1.to_str().unwrap(),
-        p2.to_str().unwrap(),
-        "--out",
-        joined.to_str().unwrap(),
-    ]);
+    let r = merge_fails(&p1, &p2, &joined);
     for needle in [
         p1.to_str().unwrap(),
         p2.to_str().unwrap(),
@@ -784,13 +789,7 @@ fn survey_merge_refuses_a_stale_part_of_other_inputs() {
     let mut part = json_file(&p2.join("part.json"));
     part["program"] = "ghostship 0.0.0".into();
     std::fs::write(p2.join("part.json"), serde_json::to_vec(&part).unwrap()).unwrap();
-    let r = fails(&[
-        "survey-merge",
-        p1.to_str().unwrap(),
-        p2.to_str().unwrap(),
-        "--out",
-        joined.to_str().unwrap(),
-    ]);
+    let r = merge_fails(&p1, &p2, &joined);
     assert!(r.stderr.contains("ghostship 0.0.0"), "{}", r.stderr);
 }
 
@@ -804,24 +803,12 @@ fn a_folder_holds_the_files_of_one_survey_run() {
     // An unsplit survey into a part's folder leaves no part.json of the earlier run behind.
     survey(&[&record], &p2, &[]);
     assert!(!p2.join("part.json").exists(), "stale part.json kept");
-    let r = fails(&[
-        "survey-merge",
-        p1.to_str().unwrap(),
-        p2.to_str().unwrap(),
-        "--out",
-        dir.path().join("j").to_str().unwrap(),
-    ]);
+    let r = merge_fails(&p1, &p2, &dir.path().join("j"));
     assert!(r.stderr.contains("part.json"), "{}", r.stderr);
     // The joined survey never goes into a part's folder (it would mix with that part).
     survey_part(&[&record], "2/2", &p2);
     let before = crate::support::cli::output_tree(&p1);
-    let r = fails(&[
-        "survey-merge",
-        p1.to_str().unwrap(),
-        p2.to_str().unwrap(),
-        "--out",
-        p1.to_str().unwrap(),
-    ]);
+    let r = merge_fails(&p1, &p2, &p1);
     assert!(r.stderr.contains("is one of the parts"), "{}", r.stderr);
     assert!(
         crate::support::cli::output_tree(&p1) == before,
