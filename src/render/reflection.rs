@@ -14,6 +14,8 @@
 //! (the chord) when the sky has aerial perspective (the renderer then attenuates the whole sea
 //! radiance from the sea to the camera). Exact mode uses the same sea fan.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::objects::{RayAlong, SampleRay};
@@ -333,11 +335,11 @@ pub(super) struct Reflection {
     pub(super) sky: Sky,
     pub(super) earth_radius_m: f64,
     /// Rays from the sea surface (absent without cards beyond the nearest sea).
-    pub(super) fan: Option<SeaFan>,
+    pub(super) fan: Option<Arc<SeaFan>>,
     /// Sky radiance by the reflected rays' elevation.
-    pub(super) sky_table: AngleTable,
+    pub(super) sky_table: Arc<AngleTable>,
     /// The facet classes by grazing angle.
-    pub(super) facets: FacetTable,
+    pub(super) facets: Arc<FacetTable>,
     /// Rough-sea sun glitter (a sun and σ > 0).
     pub(super) glint: Option<Glint>,
     /// The sun, for its mirror image on a mirror sea (σ = 0), and its disc prepared once.
@@ -407,6 +409,29 @@ impl Reflection {
             }),
             _ => false,
         }
+    }
+
+    /// Whether some ray meeting the sea at a grazing angle in `grazing_rad` (lo, hi) and a
+    /// ground distance in `distance_m` (lo, hi) may show the sun: when this is false,
+    /// [`Self::may_show_sun`] is false for every such ray. A mirror sea's sun image is not
+    /// bounded here: any ray that meets such a sea may show it.
+    pub(super) fn may_show_sun_range(
+        &self,
+        grazing_rad: (f64, f64),
+        distance_m: (f64, f64),
+    ) -> bool {
+        if let Some(g) = &self.glint {
+            // The farthest hit tilts the sun most (padded for the rounding of interpolated
+            // distances); a NaN distance bounds nothing.
+            let far = distance_m.0.abs().max(distance_m.1.abs());
+            let tilt = far / self.earth_radius_m * (1.0 + 1e-9) + 1e-12;
+            if !tilt.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
+                return true;
+            }
+            let e = g.sun.elevation_rad + g.refraction_rad;
+            return self.sea.may_glint_range(grazing_rad, (e - tilt, e + tilt));
+        }
+        self.mirror_sun.is_some() && self.fan.is_some()
     }
 
     /// The sun's glitter (rough sea) or mirror image (mirror sea) along a ray meeting the sea at

@@ -5,6 +5,8 @@
 //! the sky's aerial perspective ([`crate::scene::sky::Extinction`]) a card or the sea is seen
 //! through the optical depth of the chord from the camera to the point the ray meets it.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::air_paths::{AirPaths, Meets};
@@ -24,7 +26,7 @@ pub(super) struct AerialShading {
     /// The card distances (m), indexed like a ray's heights.
     pub(super) distances_m: Vec<f64>,
     /// The rays' own paths to the cards and the sea, where the tracer can integrate them.
-    pub(super) paths: Option<AirPaths>,
+    pub(super) paths: Option<Arc<AirPaths>>,
 }
 
 impl AerialShading {
@@ -246,11 +248,11 @@ impl AngleTable {
 /// Everything shading needs, resolved once per frame.
 pub(super) struct Shader<'a> {
     pub(super) cards: Vec<ViewCard<'a>>,
-    pub(super) sky_table: AngleTable,
-    pub(super) sea_table: AngleTable,
+    pub(super) sky_table: Arc<AngleTable>,
+    pub(super) sea_table: Arc<AngleTable>,
     pub(super) sun: Option<SunDisc>,
     /// The sky's transmittance towards the sun by apparent elevation (with a sun only).
-    pub(super) sun_transmittance: Option<AngleTable>,
+    pub(super) sun_transmittance: Option<Arc<AngleTable>>,
     /// The transmittance towards the sun along each ray's own path, where the tracer could
     /// integrate it (preferred over `sun_transmittance`, the air-mass fallback).
     pub(super) sun_path: Option<SunTransmittance>,
@@ -264,7 +266,7 @@ pub(super) struct Shader<'a> {
     /// The sea's reflections of the cards and the sun (`None`: the sky reflection alone).
     pub(super) reflection: Option<super::reflection::Reflection>,
     /// The terrain in view, if any.
-    pub(super) terrain: Option<TerrainView<'a>>,
+    pub(super) terrain: Option<Arc<TerrainView<'a>>>,
 }
 
 #[inline]
@@ -377,7 +379,7 @@ impl<'a> Shader<'a> {
     pub(super) fn compose(&self, ray: &SampleRay<'_>) -> Composed {
         compose(
             ray,
-            self.terrain.iter().map(Object::Terrain),
+            self.terrain.iter().map(|t| Object::Terrain(t)),
             self.cards.iter().map(Object::Card),
             self,
         )

@@ -248,6 +248,21 @@ impl Sea {
         };
         (0.5 * gap).tan().powi(2) / sigma2 < 40.0
     }
+
+    /// Whether [`Self::may_glint`] may hold for some grazing angle in `grazing_rad` (lo, hi)
+    /// with a sun range inside `sun_elevation_rad`: when this is false, it is false for every
+    /// such pair (the gap between the ranges is at most the gap between any two of their
+    /// points, and the test only loosens as the gap narrows).
+    pub fn may_glint_range(&self, grazing_rad: (f64, f64), sun_elevation_rad: (f64, f64)) -> bool {
+        let sigma2 = self.wave_slope_rad.tan().powi(2);
+        if !(sigma2 > 0.0 && grazing_rad.1 > 0.0 && sun_elevation_rad.1 > 0.0) {
+            return false;
+        }
+        let gap = (grazing_rad.0 - sun_elevation_rad.1)
+            .max(sun_elevation_rad.0 - grazing_rad.1)
+            .max(0.0);
+        (0.5 * gap).tan().powi(2) / sigma2 < 40.0
+    }
 }
 
 #[cfg(test)]

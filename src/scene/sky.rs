@@ -350,6 +350,15 @@ impl SunDisc {
         (elevation_rad - self.elevation_rad).abs() <= self.radius_rad
     }
 
+    /// Whether some elevation in [`lo_rad`, `hi_rad`] may be within the disc's band: when this
+    /// is false, [`Self::may_meet`] is false for every elevation of the range (the band is
+    /// widened by far more than any rounding). NaN bounds are ignored (a NaN elevation never
+    /// meets the disc).
+    pub fn may_meet_range(&self, lo_rad: f64, hi_rad: f64) -> bool {
+        let pad = self.radius_rad + 1e-12;
+        hi_rad >= self.elevation_rad - pad && lo_rad <= self.elevation_rad + pad
+    }
+
     /// [`Sun::disc`]: the haversine of the angular distance from the centre against that of the
     /// edge, so a direction outside costs no arcsine.
     #[inline]
