@@ -14,14 +14,20 @@
 //! less than [`FLAT_ROW_FRACTION`] × the fan tolerance (the elevation changes by ≈ α·u²/2 across
 //! a row: one band for every row of a narrow mirage frame at 400×200, one to a few at
 //! 1920×1080). Each band is shaded at the elevation of its first column: one fan lookup, one sea
-//! or sky colour, and per pixel only the card tests in card columns. Rows whose ray may meet
-//! the sun, or that would need more than a few bands, are shaded pixel by pixel (the disc
-//! depends on each pixel's own elevation and azimuth).
+//! or sky colour, and per pixel only the card tests in card columns. Rows that would need more
+//! than a few bands are shaded pixel by pixel. A band whose ray may show the sun — its disc, or
+//! its glitter or mirror image on the sea, which depend on each pixel's azimuth — adds the sun's
+//! part column by column, exact at node columns and interpolated between them within a
+//! documented tolerance (`band_sun`).
 //!
 //! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
 //! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
-//! band whose sea mirrors a card shades that card's columns pixel by pixel, and rows whose sea
-//! may show the sun's glitter are shaded pixel by pixel like rows that meet the sun.
+//! band whose sea mirrors a card shades that card's columns pixel by pixel (with the sun's part,
+//! exact, when the band may show it).
+//!
+//! **Frame plans** (`plan`): everything a frame's rows are shaded from (fan, tables, shader) is
+//! built first, then each row is shaded on its own; a sun sweep (`sweep`) shades only the rows
+//! that its sun can change and copies the others from its first frame.
 //!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
@@ -31,6 +37,7 @@
 //! own). With one sample per pixel the pixel centre is used.
 
 mod air_paths;
+mod band_sun;
 pub mod curved;
 pub mod elevation_fan;
 mod memo;
@@ -51,6 +58,7 @@ use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
 use crate::scene::{Scene, Sun};
+use band_sun::{BandColumns, BandSun};
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use memo::MemoRays;
@@ -259,6 +267,8 @@ struct RowScratch {
     band_columns: Vec<(usize, (usize, usize))>,
     /// Interpolated heights at the card distances of each flat band, band after band.
     band_heights: Vec<Option<f64>>,
+    /// What the sun adds in each column of a flat row whose band may show it.
+    sun_added: Vec<[f64; 3]>,
 }
 
 impl RowScratch {
@@ -269,6 +279,7 @@ impl RowScratch {
             card_columns: Vec::new(),
             band_columns: Vec::new(),
             band_heights: Vec::new(),
+            sun_added: Vec::new(),
         }
     }
 
@@ -301,7 +312,8 @@ impl RowScratch {
 /// half-width in radians): across a 1° mirage frame at α = 0.3° that is 0.005 px at 400 px wide
 /// (every row of the paper frames at 400×200 is one band) but 0.02 px at 1920 (rows of a 1080p
 /// frame take one to a few bands). A band shares one ray — one fan lookup, the sea or sky colour once —
-/// and only columns that can meet a card (or rows that meet the sun) are shaded pixel by pixel.
+/// and only columns that can meet a card (or, for the sun's part, that may show the sun) are
+/// shaded pixel by pixel.
 /// Features are then misplaced by at most (1 + this) × the fan tolerance.
 pub const FLAT_ROW_FRACTION: f64 = 0.1;
 
@@ -332,6 +344,8 @@ struct FlatBand {
     /// Whether the sea it meets may mirror a card (its card columns then shade the sea's
     /// reflections pixel by pixel).
     reflects: bool,
+    /// Whether it may show the sun (its columns then add the sun's part, `band_sun`).
+    sun: bool,
 }
 
 /// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
@@ -374,8 +388,9 @@ pub fn flat_bands(
     Some(bands)
 }
 
-/// Shade row `y` (1 sample per pixel) band by band ([`flat_bands`]: each band at one elevation),
-/// if it can be cut into few enough bands and no band meets the sun; returns whether it did.
+/// Shade row `y` (1 sample per pixel) band by band ([`flat_bands`]: each band at one elevation,
+/// with the sun's part per column where a band may show it), if it can be cut into few enough
+/// bands and no band's sea may mirror the terrain; returns whether it did.
 fn shade_flat_row(
     ctx: &FlatRow<'_>,
     row: &mut [[f32; 4]],
@@ -391,6 +406,7 @@ fn shade_flat_row(
     let RowScratch {
         band_heights,
         band_columns: columns,
+        sun_added,
         ..
     } = scratch;
     band_heights.clear();
@@ -409,15 +425,30 @@ fn shade_flat_row(
                 clear_sky: true,
                 fan_end: FanEnd::Lost,
                 reflects: false,
+                sun: false,
             });
             continue;
         }
         let fan_end = ctx.fan.interpolate(alpha, heights);
-        if ctx.shader.may_meet_sun(fan_end)
-            || ctx.shader.may_meet_glint(fan_end)
-            || ctx.shader.may_reflect_terrain(fan_end)
-        {
+        if ctx.shader.may_reflect_terrain(fan_end) {
             return false;
+        }
+        let dir = ctx
+            .frame
+            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
+        let background = ctx.shader.background_with(&dir, fan_end, false);
+        let sun = BandSun::of(ctx.shader, alpha, fan_end);
+        if let Some(sun) = sun {
+            sun_added.resize(width as usize, [0.0; 3]);
+            let run = BandColumns {
+                shader: ctx.shader,
+                frame: ctx.frame,
+                film_y,
+                alpha,
+                sun,
+                background,
+            };
+            run.fill_band((start, end), width as usize, sun_added);
         }
         let mut reflects = false;
         for card in &ctx.shader.cards {
@@ -431,20 +462,27 @@ fn shade_flat_row(
                 columns.push((k, range.unwrap_or((0, width as usize))));
             }
         }
-        let dir = ctx
-            .frame
-            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
         bands.push(FlatBand {
             start,
             end,
             alpha,
-            background: ctx.shader.background_with(&dir, fan_end, false),
+            background,
             clear_sky: false,
             fan_end,
             reflects,
+            sun: sun.is_some(),
         });
     }
-    shade_bands(ctx, row, &bands, band_heights, columns, non_finite);
+    let sun_added = &sun_added[..];
+    shade_bands(
+        ctx,
+        row,
+        &bands,
+        band_heights,
+        columns,
+        sun_added,
+        non_finite,
+    );
     true
 }
 
@@ -456,6 +494,7 @@ fn shade_bands(
     bands: &[FlatBand],
     band_heights: &[Option<f64>],
     columns: &[(usize, (usize, usize))],
+    sun_added: &[[f64; 3]],
     non_finite: &AtomicU64,
 ) {
     let width = row.len();
@@ -498,12 +537,15 @@ fn shade_bands(
                 .frame
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
             let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
-            let background = if band.reflects {
+            let background = if band.reflects || band.sun {
                 ctx.shader.background(&dir, band.fan_end)
             } else {
                 band.background
             };
             pixel(finite(ctx.shader.composite(&dir, heights, background)))
+        } else if band.sun {
+            let (c, add) = (band.background, sun_added[x]);
+            pixel(finite([c[0] + add[0], c[1] + add[1], c[2] + add[2]]))
         } else {
             if !band.background.iter().all(|v| v.is_finite()) {
                 non_finite.fetch_add(1, Ordering::Relaxed);

@@ -354,12 +354,125 @@ fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> 
     })
 }
 
-/// Whether two optional shared values are the same (both absent, or one allocation).
-fn same_arc<T>(a: &Option<Arc<T>>, b: &Option<Arc<T>>) -> bool {
-    match (a, b) {
-        (None, None) => true,
-        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-        _ => false,
+/// What a plan is built from: the scene, its tracer and options, and the frame's geometry.
+struct PlanInputs<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    options: RenderOptions,
+    elevations: (f64, f64),
+    pixel_rad: f64,
+}
+
+impl<'a> PlanInputs<'a> {
+    /// The spec of the frame's elevation fan, for the cards in `view`.
+    fn fan_spec(&self, view: &ViewCards<'_>) -> FanSpec {
+        let cam = &self.scene.camera;
+        FanSpec {
+            camera_height_m: cam.height_m,
+            distances_m: view.distances_m.clone(),
+            max_top_m: view.max_top_m.clone(),
+            need_sky_direction: self.scene.sun.is_some(),
+            sun_band_rad: self.scene.sun.map(|s| sun_band_rad(&s, self.pixel_rad)),
+            elevation_range_rad: self.elevations,
+            // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
+            // sub-pixel bound holds everywhere, not only at the centre.
+            pixel_rad: cam.min_pixel_angle_rad(),
+            tolerance_px: self.options.tolerance_px,
+            max_depth: self.options.max_refine_depth,
+        }
+    }
+
+    /// The fan (none in exact mode) and the sky table: the base's table, or built while the
+    /// fan is traced (it needs no fan).
+    fn fan_and_sky(
+        &self,
+        spec: &FanSpec,
+        base: Option<&FramePlan<'a>>,
+    ) -> (Option<ElevationFan>, Arc<AngleTable>) {
+        let build_fan = || (!self.options.exact).then(|| ElevationFan::build(self.tracer, spec));
+        match base {
+            Some(b) => (build_fan(), Arc::clone(&b.shader.sky_table)),
+            None => {
+                let (sky, (lo, hi)) = (self.scene.sky, self.elevations);
+                // The optical depths once per frame, not once per table entry (same values).
+                let depths = sky.optical_depths();
+                rayon::join(build_fan, || {
+                    Arc::new(AngleTable::new(lo, hi, |e| {
+                        sky.radiance_with_depths(e, depths)
+                    }))
+                })
+            }
+        }
+    }
+
+    /// The sea's tables for `inp`: the base's when its fan's steepest grazing angle is this
+    /// fan's, else built (and then the tables are not the base's: the second value).
+    fn sea_tables(
+        &self,
+        inp: &SeaReflectionInputs<'_>,
+        base: Option<&FramePlan<'a>>,
+    ) -> (SeaTables, bool) {
+        let key = inp
+            .fan
+            .and_then(ElevationFan::max_grazing_rad)
+            .map(f64::to_bits);
+        if let Some(b) = base.filter(|b| b.sea.key == key) {
+            return (b.sea.clone(), true);
+        }
+        let reflected_sky = match base {
+            Some(b) => Arc::clone(&b.sea.reflected_sky),
+            None => {
+                let sky = self.scene.sky;
+                let depths = sky.optical_depths();
+                Arc::new(AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
+                    sky.radiance_with_depths(e, depths)
+                }))
+            }
+        };
+        (SeaTables::build(inp, reflected_sky), base.is_none())
+    }
+
+    /// The aerial perspective, its rays' paths integrated at `alphas` (the fan's elevations)
+    /// or taken from the base when its fan has the same elevations; with whether the paths
+    /// are present exactly when the base's are.
+    fn aerial(
+        &self,
+        view: &ViewCards<'_>,
+        alphas: &[f64],
+        base: Option<&FramePlan<'a>>,
+    ) -> (Option<AerialShading>, bool) {
+        let Some(extinction) = self.scene.sky.extinction() else {
+            return (None, true);
+        };
+        let base_paths = base.map(|b| b.shader.aerial.as_ref().and_then(|a| a.paths.clone()));
+        let same_rays = base.and_then(|b| b.fan.as_ref()).is_some_and(|f| {
+            let bits = |a: &f64| a.to_bits();
+            f.elevations_rad()
+                .iter()
+                .map(bits)
+                .eq(alphas.iter().map(bits))
+        });
+        let cam = &self.scene.camera;
+        let paths = match base_paths.clone() {
+            Some(paths) if same_rays => paths,
+            _ => AirPaths::build(
+                self.tracer,
+                cam.height_m,
+                &view.distances_m,
+                extinction.scale_heights_m(),
+                alphas,
+            )
+            .map(Arc::new),
+        };
+        let shares = base_paths.is_none_or(|b| b.is_some() == paths.is_some());
+        let aerial = AerialShading {
+            extinction,
+            camera_height_m: cam.height_m,
+            earth_radius_m: self.scene.earth_radius_m,
+            distances_m: view.distances_m.clone(),
+            paths,
+        };
+        (Some(aerial), shares)
     }
 }
 
@@ -381,160 +494,70 @@ impl<'a> FramePlan<'a> {
         let (width, height) = (cam.width, cam.height);
         let span = azimuth_span(&frame, width, height, cam.heading_rad);
         let view = ViewCards::new(scene, span, pixel_rad);
-        let elevations = elevation_range(&frame, width, height, pixel_rad);
+        let inputs = PlanInputs {
+            scene,
+            tracer,
+            options: options.clone(),
+            elevations: elevation_range(&frame, width, height, pixel_rad),
+            pixel_rad,
+        };
         let terrain = match base {
             Some(b) => b.shader.terrain.clone(),
-            None => terrain_view(scene, tracer, options, span, elevations),
+            None => terrain_view(scene, tracer, options, span, inputs.elevations),
         };
-        let sky = scene.sky;
-        // The optical depths once per frame, not once per table entry (same values).
-        let depths = sky.optical_depths();
-        let need_sky_direction = scene.sun.is_some();
-        let spec = FanSpec {
-            camera_height_m: cam.height_m,
-            distances_m: view.distances_m.clone(),
-            max_top_m: view.max_top_m.clone(),
-            need_sky_direction,
-            sun_band_rad: scene.sun.map(|s| sun_band_rad(&s, pixel_rad)),
-            elevation_range_rad: elevations,
-            // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
-            // sub-pixel bound holds everywhere, not only at the centre.
-            pixel_rad: cam.min_pixel_angle_rad(),
-            tolerance_px: options.tolerance_px,
-            max_depth: options.max_refine_depth,
-        };
-        let build_fan = || (!options.exact).then(|| ElevationFan::build(tracer, &spec));
-        // The sky table needs no fan: build both at once.
-        let (fan, sky_table) = match base {
-            Some(b) => (build_fan(), Arc::clone(&b.shader.sky_table)),
-            None => rayon::join(build_fan, || {
-                Arc::new(AngleTable::new(elevations.0, elevations.1, |e| {
-                    sky.radiance_with_depths(e, depths)
-                }))
-            }),
-        };
+        let (fan, sky_table) = inputs.fan_and_sky(&inputs.fan_spec(&view), base);
         let clear_sky_from = fan.as_ref().map_or(f64::INFINITY, |f| {
             clear_sky_from(scene, f, &view.max_top_m, terrain.as_deref())
         });
-        let mut shares_base =
-            base.is_none_or(|b| b.clear_sky_from.to_bits() == clear_sky_from.to_bits());
-        let mut stats = RenderStats {
-            cards_in_view: view.cards.len(),
-            fan_rays: fan.as_ref().map_or(0, ElevationFan::len),
-            fan_depth: fan.as_ref().map_or(0, |f| f.max_depth_reached),
-            ..RenderStats::default()
-        };
         let sea_inputs = SeaReflectionInputs {
             scene,
             tracer,
             fan: fan.as_ref(),
-            elevations,
+            elevations: inputs.elevations,
             pixel_rad,
             camera_height_m: cam.height_m,
             distances_m: &view.distances_m,
             farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
         };
-        let sea = match base {
-            Some(b)
-                if b.sea.key
-                    == fan
-                        .as_ref()
-                        .and_then(|f| f.max_grazing_rad())
-                        .map(f64::to_bits) =>
-            {
-                b.sea.clone()
-            }
-            _ => {
-                shares_base &= base.is_none();
-                let reflected_sky = match base {
-                    Some(b) => Arc::clone(&b.sea.reflected_sky),
-                    None => Arc::new(AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
-                        sky.radiance_with_depths(e, depths)
-                    })),
-                };
-                SeaTables::build(&sea_inputs, reflected_sky)
-            }
-        };
-        let reflection = sea_reflection(scene, tracer, &sea);
-        stats.sea_fan_rays = reflection
-            .as_ref()
-            .and_then(|r| r.fan.as_ref())
-            .map_or(0, |f| f.len());
+        let (sea, same_sea) = inputs.sea_tables(&sea_inputs, base);
         // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact
         // mode.
         let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
         let traced = match &fan {
             Some(fan) if needs_paths => fan.rays_and_ends(),
-            None if needs_paths => traced_grid(tracer, cam.height_m, elevations, pixel_rad),
+            None if needs_paths => traced_grid(tracer, cam.height_m, inputs.elevations, pixel_rad),
             _ => Vec::new(),
         };
-        let sun_path = scene.sun.and_then(|sun| {
-            let band = sun_band_rad(&sun, pixel_rad);
-            SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
+        let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
+        let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
+        let shares_base = base.is_none_or(|b| {
+            b.clear_sky_from.to_bits() == clear_sky_from.to_bits() && same_sea && same_aerial
         });
-        stats.sun_rays = sun_path.as_ref().map_or(0, SunTransmittance::len);
-        let aerial = scene.sky.extinction().map(|extinction| {
-            let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
-            let reuse = base.and_then(|b| {
-                let same = b.fan.as_ref().zip(fan.as_ref()).is_some_and(|(x, y)| {
-                    x.elevations_rad()
-                        .iter()
-                        .map(|a| a.to_bits())
-                        .eq(alphas.iter().map(|a| a.to_bits()))
-                        && y.len() == alphas.len()
-                });
-                same.then(|| b.shader.aerial.as_ref().and_then(|a| a.paths.clone()))
-            });
-            let paths = match reuse {
-                Some(paths) => paths,
-                None => {
-                    let scales = extinction.scale_heights_m();
-                    let paths =
-                        AirPaths::build(tracer, cam.height_m, &view.distances_m, scales, &alphas)
-                            .map(Arc::new);
-                    if let Some(b) = base {
-                        let base_has = b.shader.aerial.as_ref().is_some_and(|a| a.paths.is_some());
-                        shares_base &= base_has == paths.is_some();
-                    }
-                    paths
-                }
-            };
-            stats.air_path_rays = paths.as_ref().map_or(0, |p| p.len());
-            AerialShading {
-                extinction,
-                camera_height_m: cam.height_m,
-                earth_radius_m: scene.earth_radius_m,
-                distances_m: view.distances_m.clone(),
-                paths,
-            }
-        });
-        let sun_transmittance =
-            scene.sun.map(
-                |_| match base.and_then(|b| b.shader.sun_transmittance.clone()) {
-                    Some(t) => t,
-                    None => Arc::new(AngleTable::new(elevations.0, elevations.1, |e| {
-                        sky.transmittance(e)
-                    })),
-                },
-            );
-        if let Some(b) = base {
-            shares_base &= same_arc(&b.shader.terrain, &terrain);
-        }
-        let shader = Shader {
-            distances_m: view.distances_m,
-            reflection,
-            terrain,
-            cards: view.cards,
-            sky_table,
-            sea_table: Arc::clone(&sea.sea_table),
-            sun: scene.sun.as_ref().map(SunDisc::new),
-            sun_transmittance,
-            sun_path,
-            heading_rad: cam.heading_rad,
-            // A lost (trapped) ray travels in the lowest air: show the horizon sky.
-            fallback: scene.sky.radiance(0.0),
-            aerial,
+        let mut stats = RenderStats {
+            cards_in_view: view.cards.len(),
+            fan_rays: fan.as_ref().map_or(0, ElevationFan::len),
+            fan_depth: fan.as_ref().map_or(0, |f| f.max_depth_reached),
+            air_path_rays: aerial
+                .as_ref()
+                .and_then(|a| a.paths.as_ref())
+                .map_or(0, |p| p.len()),
+            ..RenderStats::default()
         };
+        let shader = inputs.shader(ShaderParts {
+            view,
+            terrain,
+            sky_table,
+            sea: &sea,
+            aerial,
+            traced: &traced,
+            base,
+        });
+        stats.sea_fan_rays = shader
+            .reflection
+            .as_ref()
+            .and_then(|r| r.fan.as_ref())
+            .map_or(0, |f| f.len());
+        stats.sun_rays = shader.sun_path.as_ref().map_or(0, SunTransmittance::len);
         Ok(FramePlan {
             frame,
             width,
@@ -548,11 +571,64 @@ impl<'a> FramePlan<'a> {
                 * cam.min_pixel_angle_rad(),
             tracer,
             camera_height_m: cam.height_m,
-            need_sky_direction,
+            need_sky_direction: scene.sun.is_some(),
             sea,
             stats,
             shares_base,
         })
+    }
+}
+
+/// The parts of a frame's [`Shader`] built before it.
+struct ShaderParts<'a, 'b> {
+    view: ViewCards<'a>,
+    terrain: Option<Arc<TerrainView<'a>>>,
+    sky_table: Arc<AngleTable>,
+    sea: &'b SeaTables,
+    aerial: Option<AerialShading>,
+    /// The rays the sun's transmittance is integrated along, with their ends.
+    traced: &'b [(f64, FanEnd)],
+    base: Option<&'b FramePlan<'a>>,
+}
+
+impl<'a> PlanInputs<'a> {
+    /// The frame's shader from its `parts`, with the sun's own: its disc, its transmittance
+    /// along the rays, and its glitter or mirror image on the sea.
+    fn shader(&self, parts: ShaderParts<'a, '_>) -> Shader<'a> {
+        let (scene, tracer) = (self.scene, self.tracer);
+        let (sky, cam) = (scene.sky, &scene.camera);
+        let sun_path = scene.sun.and_then(|sun| {
+            let band = sun_band_rad(&sun, self.pixel_rad);
+            SunTransmittance::build(
+                tracer,
+                cam.height_m,
+                &sky.sun_extinction(),
+                band,
+                parts.traced,
+            )
+        });
+        let (lo, hi) = self.elevations;
+        let sun_transmittance = scene.sun.map(|_| {
+            parts
+                .base
+                .and_then(|b| b.shader.sun_transmittance.clone())
+                .unwrap_or_else(|| Arc::new(AngleTable::new(lo, hi, |e| sky.transmittance(e))))
+        });
+        Shader {
+            distances_m: parts.view.distances_m,
+            reflection: sea_reflection(scene, tracer, parts.sea),
+            terrain: parts.terrain,
+            cards: parts.view.cards,
+            sky_table: parts.sky_table,
+            sea_table: Arc::clone(&parts.sea.sea_table),
+            sun: scene.sun.as_ref().map(SunDisc::new),
+            sun_transmittance,
+            sun_path,
+            heading_rad: cam.heading_rad,
+            // A lost (trapped) ray travels in the lowest air: show the horizon sky.
+            fallback: sky.radiance(0.0),
+            aerial: parts.aerial,
+        }
     }
 }
 

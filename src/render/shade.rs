@@ -44,8 +44,21 @@ impl AerialShading {
         height_m: f64,
         distance_m: f64,
     ) -> [f64; 3] {
+        let tau = self.optical_depth(elevation_rad, meets, height_m, distance_m);
+        self.extinction.attenuate(radiance, alpha, tau)
+    }
+
+    /// The optical depth per channel that [`Self::seen`] attenuates by.
+    #[inline]
+    fn optical_depth(
+        &self,
+        elevation_rad: f64,
+        meets: Meets,
+        height_m: f64,
+        distance_m: f64,
+    ) -> [f64; 3] {
         let along = self.paths.as_ref().and_then(|p| p.at(elevation_rad, meets));
-        let tau = match along {
+        match along {
             Some(d) => self.extinction.path_optical_depth(d),
             None => self.extinction.chord_optical_depth(
                 self.earth_radius_m,
@@ -53,8 +66,7 @@ impl AerialShading {
                 height_m,
                 distance_m,
             ),
-        };
-        self.extinction.attenuate(radiance, alpha, tau)
+        }
     }
 }
 
@@ -426,7 +438,8 @@ impl<'a> Shader<'a> {
     }
 
     /// [`Self::background`]; without `reflections` the sea shows only its tabulated sky
-    /// reflection (no mirrored cards, no sun): what a flat band shares across its columns.
+    /// reflection (no mirrored cards, no sun) and the sky no sun: what a flat band shares
+    /// across its columns.
     #[inline]
     pub(super) fn background_with(
         &self,
@@ -455,13 +468,75 @@ impl<'a> Shader<'a> {
             FanEnd::Sky { elevation_rad } => {
                 let l = self.sky_table.at(alpha);
                 // The elevation test is the disc's own quick reject, done before the azimuth.
-                if self.may_meet_sun(end) {
+                if reflections && self.may_meet_sun(end) {
                     self.with_sun(l, alpha, elevation_rad, dir)
                 } else {
                     l
                 }
             }
             FanEnd::Trapped | FanEnd::Lost => self.fallback,
+        }
+    }
+
+    /// The transmittance per channel of the air from the sea, where the ray at apparent
+    /// elevation `alpha` meets it at ground distance `distance_m`, to the camera (1 without
+    /// aerial perspective): what the sea's own radiance is attenuated by.
+    pub(super) fn sea_transmittance(&self, alpha: f64, distance_m: f64) -> [f64; 3] {
+        match &self.aerial {
+            Some(aerial) => {
+                let tau = aerial.optical_depth(alpha, Meets::Sea, 0.0, distance_m);
+                aerial.extinction.attenuate([1.0; 3], 0.0, tau)
+            }
+            None => [1.0; 3],
+        }
+    }
+
+    /// The sun's azimuth (rad, clockwise from north), when the scene has a sun.
+    pub(super) fn sun_azimuth_rad(&self) -> Option<f64> {
+        self.sun.as_ref().map(SunDisc::azimuth_rad)
+    }
+
+    /// The sun's disc (attenuated along the ray) as seen by a sample at apparent elevation
+    /// `alpha` and azimuth offset `azimuth_offset_rad` from the heading, whose ray leaves
+    /// towards `elevation_rad`: what [`Self::with_sun`] adds to the sky.
+    pub(super) fn sun_disc(
+        &self,
+        alpha: f64,
+        elevation_rad: f64,
+        azimuth_offset_rad: f64,
+    ) -> [f64; 3] {
+        let (Some(sun), Some(table)) = (&self.sun, &self.sun_transmittance) else {
+            return [0.0; 3];
+        };
+        let disc = sun.radiance(self.heading_rad + azimuth_offset_rad, elevation_rad);
+        if disc > 0.0 {
+            let t = match &self.sun_path {
+                Some(path) => path.at(alpha),
+                None => table.at(alpha),
+            };
+            t.map(|t| disc * t)
+        } else {
+            [0.0; 3]
+        }
+    }
+
+    /// The sun's glitter or mirror image on the sea towards azimuth offset
+    /// `azimuth_offset_rad` from the heading, for a ray meeting the sea at `grazing_rad` and
+    /// `distance_m` (before the air between the sea and the camera): what the sea's
+    /// reflections add for the sun.
+    pub(super) fn sea_sun(
+        &self,
+        grazing_rad: f64,
+        distance_m: f64,
+        azimuth_offset_rad: f64,
+    ) -> [f64; 3] {
+        match &self.reflection {
+            Some(refl) if refl.may_show_sun(grazing_rad, distance_m) => refl.sun(
+                grazing_rad,
+                distance_m,
+                self.heading_rad + azimuth_offset_rad,
+            ),
+            _ => [0.0; 3],
         }
     }
 

@@ -344,6 +344,11 @@ impl SunDisc {
         }
     }
 
+    /// The disc centre's azimuth (rad, clockwise from north).
+    pub fn azimuth_rad(&self) -> f64 {
+        self.azimuth_rad
+    }
+
     /// Whether a direction at `elevation_rad` is within the disc's band of elevations.
     #[inline]
     pub fn may_meet(&self, elevation_rad: f64) -> bool {
