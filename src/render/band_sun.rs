@@ -15,6 +15,7 @@
 //! glitter, the addition is within about that tolerance of the exact shading.
 
 use super::ray_model::FanEnd;
+use super::reflection::SeaSunAt;
 use super::shade::{Shader, wrap_pi};
 use crate::scene::camera::CameraFrame;
 
@@ -30,13 +31,16 @@ pub const FLOOR: f64 = 1e-6;
 /// What of the sun a flat band may show.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum BandSun {
-    /// The disc, for a ray that leaves at final elevation `elevation_rad`.
-    Disc { alpha: f64, elevation_rad: f64 },
-    /// The glitter or mirror image on the sea, for a ray that meets it at `grazing_rad` and
-    /// `distance_m`, seen through the air with `transmittance` per channel.
+    /// The disc, for a ray that leaves at final elevation `elevation_rad` with `transmittance`
+    /// towards the sun.
+    Disc {
+        elevation_rad: f64,
+        transmittance: [f64; 3],
+    },
+    /// The glitter or mirror image on the sea, for a ray that meets it where `sun` says,
+    /// seen through the air with `transmittance` per channel.
     Sea {
-        grazing_rad: f64,
-        distance_m: f64,
+        sun: SeaSunAt,
         transmittance: [f64; 3],
     },
 }
@@ -47,15 +51,14 @@ impl BandSun {
     pub(super) fn of(shader: &Shader<'_>, alpha: f64, end: FanEnd) -> Option<Self> {
         match end {
             FanEnd::Sky { elevation_rad } if shader.may_meet_sun(end) => Some(BandSun::Disc {
-                alpha,
                 elevation_rad,
+                transmittance: shader.sun_transmittance_at(alpha)?,
             }),
             FanEnd::Ground {
                 grazing_rad,
                 distance_m,
             } if shader.may_meet_glint(end) => Some(BandSun::Sea {
-                grazing_rad,
-                distance_m,
+                sun: shader.reflection.as_ref()?.sun_at(grazing_rad, distance_m),
                 transmittance: shader.sea_transmittance(alpha, distance_m),
             }),
             _ => None,
@@ -66,17 +69,16 @@ impl BandSun {
     fn at(&self, shader: &Shader<'_>, azimuth_offset_rad: f64) -> [f64; 3] {
         match *self {
             BandSun::Disc {
-                alpha,
                 elevation_rad,
-            } => shader.sun_disc(alpha, elevation_rad, azimuth_offset_rad),
-            BandSun::Sea {
-                grazing_rad,
-                distance_m,
                 transmittance,
-            } => {
-                let sun = shader.sea_sun(grazing_rad, distance_m, azimuth_offset_rad);
-                [0, 1, 2].map(|c| sun[c] * transmittance[c])
-            }
+            } => shader.sun_disc(elevation_rad, azimuth_offset_rad, transmittance),
+            BandSun::Sea { sun, transmittance } => match &shader.reflection {
+                Some(refl) => {
+                    let sun = sun.at(refl, shader.heading_rad + azimuth_offset_rad);
+                    [0, 1, 2].map(|c| sun[c] * transmittance[c])
+                }
+                None => [0.0; 3],
+            },
         }
     }
 }

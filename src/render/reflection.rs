@@ -23,7 +23,7 @@ use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader};
 use super::terrain::piece_density;
 use crate::scene::camera::ViewDirection;
-use crate::scene::sea::FacetNode;
+use crate::scene::sea::{FacetNode, GlintGeometry};
 use crate::scene::sky::SunDisc;
 use crate::scene::{Sea, Sky, Sun};
 
@@ -379,19 +379,6 @@ pub(super) fn sea_level_sun_launch_rad(
 }
 
 impl Reflection {
-    /// The sun's elevation above the local horizontal of a sea point at ground distance
-    /// `distance_m` along `azimuth_rad` (the true direction tilted by the Earth's curvature, plus
-    /// the sea-level refraction), and its azimuth relative to the ray there.
-    #[inline]
-    fn local_sun(&self, glint: &Glint, azimuth_rad: f64, distance_m: f64) -> (f64, f64) {
-        let phi = glint.sun.azimuth_rad - azimuth_rad;
-        let tilt = distance_m / self.earth_radius_m;
-        (
-            glint.sun.elevation_rad + glint.refraction_rad + tilt * phi.cos(),
-            phi,
-        )
-    }
-
     /// Whether a ray meeting the sea at `grazing_rad`, `distance_m` may show the sun's glitter
     /// or mirror image (then the sea's colour depends on the azimuth).
     pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
@@ -437,30 +424,98 @@ impl Reflection {
     /// The sun's glitter (rough sea) or mirror image (mirror sea) along a ray meeting the sea at
     /// `grazing_rad`, `distance_m` towards absolute azimuth `azimuth_rad`.
     pub(super) fn sun(&self, grazing_rad: f64, distance_m: f64, azimuth_rad: f64) -> [f64; 3] {
-        if let Some(g) = &self.glint {
-            let (e, phi) = self.local_sun(g, azimuth_rad, distance_m);
-            let k = self.sea.glint_per_irradiance(grazing_rad, e, phi);
-            if k <= 0.0 {
-                return [0.0; 3];
-            }
-            let rho = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
-            return [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]));
-        }
-        let (Some((_, disc)), Some(fan)) = (&self.mirror_sun, &self.fan) else {
-            return [0.0; 3];
-        };
-        let Some(end) = fan.sky_elevation(grazing_rad) else {
-            return [0.0; 3];
-        };
+        self.sun_at(grazing_rad, distance_m).at(self, azimuth_rad)
+    }
+
+    /// [`Self::sun`] for rays meeting the sea at `grazing_rad` and `distance_m`, towards any
+    /// azimuth ([`SeaSunAt::at`]).
+    pub(super) fn sun_at(&self, grazing_rad: f64, distance_m: f64) -> SeaSunAt {
         // The reflection point's vertical is tilted by d/R towards the ray's azimuth.
-        let elevation = end - distance_m / self.earth_radius_m;
-        let disc = disc.radiance(azimuth_rad, elevation);
-        if disc <= 0.0 {
-            return [0.0; 3];
+        let tilt = distance_m / self.earth_radius_m;
+        let facet = || self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
+        if self.glint.is_some() {
+            return SeaSunAt::Glint {
+                geometry: self.sea.glint_geometry(grazing_rad),
+                tilt,
+                rho: facet(),
+            };
         }
-        let f = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
-        let t = self.sky.transmittance(grazing_rad);
-        t.map(|t| f * disc * t)
+        let (Some(_), Some(fan)) = (&self.mirror_sun, &self.fan) else {
+            return SeaSunAt::Nothing;
+        };
+        match fan.sky_elevation(grazing_rad) {
+            Some(end) => SeaSunAt::Mirror {
+                elevation_rad: end - tilt,
+                reflectance: facet(),
+                transmittance: self.sky.transmittance(grazing_rad),
+            },
+            None => SeaSunAt::Nothing,
+        }
+    }
+}
+
+/// What [`Reflection::sun`] needs of rays meeting the sea at one grazing angle and distance,
+/// worked out once for every azimuth (the same values as worked out per ray).
+#[derive(Debug, Clone, Copy)]
+pub(super) enum SeaSunAt {
+    /// No sun on this sea.
+    Nothing,
+    /// A rough sea's glitter: the facet geometry of the grazing angle, the tilt (rad) of the
+    /// reflection point's vertical, and the Fresnel reflectance that caps the glint.
+    Glint {
+        geometry: GlintGeometry,
+        tilt: f64,
+        rho: f64,
+    },
+    /// A mirror sea's image of the disc: the reflected ray's final elevation above the
+    /// observer's horizontal (rad), the reflectance and the sky's transmittance at the grazing
+    /// angle.
+    Mirror {
+        elevation_rad: f64,
+        reflectance: f64,
+        transmittance: [f64; 3],
+    },
+}
+
+impl SeaSunAt {
+    /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
+    pub(super) fn at(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
+        match *self {
+            SeaSunAt::Glint {
+                geometry,
+                tilt,
+                rho,
+            } => {
+                let Some(g) = &refl.glint else {
+                    return [0.0; 3];
+                };
+                // The sun's elevation above the local horizontal of the sea point (the true
+                // direction tilted by the Earth's curvature, plus the sea-level refraction),
+                // and its azimuth relative to the ray there.
+                let phi = g.sun.azimuth_rad - azimuth_rad;
+                let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
+                let k = geometry.per_irradiance(e, phi);
+                if k <= 0.0 {
+                    return [0.0; 3];
+                }
+                [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
+            }
+            SeaSunAt::Mirror {
+                elevation_rad,
+                reflectance,
+                transmittance,
+            } => {
+                let Some((_, disc)) = &refl.mirror_sun else {
+                    return [0.0; 3];
+                };
+                let disc = disc.radiance(azimuth_rad, elevation_rad);
+                if disc <= 0.0 {
+                    return [0.0; 3];
+                }
+                transmittance.map(|t| reflectance * disc * t)
+            }
+            SeaSunAt::Nothing => [0.0; 3],
+        }
     }
 }
 

@@ -496,47 +496,35 @@ impl<'a> Shader<'a> {
         self.sun.as_ref().map(SunDisc::azimuth_rad)
     }
 
-    /// The sun's disc (attenuated along the ray) as seen by a sample at apparent elevation
-    /// `alpha` and azimuth offset `azimuth_offset_rad` from the heading, whose ray leaves
-    /// towards `elevation_rad`: what [`Self::with_sun`] adds to the sky.
+    /// The transmittance towards the sun of the ray at apparent elevation `alpha` (along its
+    /// own path where it was integrated, else by air mass); `None` without a sun.
+    #[inline]
+    pub(super) fn sun_transmittance_at(&self, alpha: f64) -> Option<[f64; 3]> {
+        let table = self.sun_transmittance.as_ref()?;
+        Some(match &self.sun_path {
+            Some(path) => path.at(alpha),
+            None => table.at(alpha),
+        })
+    }
+
+    /// The sun's disc towards azimuth offset `azimuth_offset_rad` from the heading, for a ray
+    /// that leaves towards `elevation_rad` with `transmittance` towards the sun
+    /// ([`Self::sun_transmittance_at`]): what [`Self::with_sun`] adds to the sky.
+    #[inline]
     pub(super) fn sun_disc(
         &self,
-        alpha: f64,
         elevation_rad: f64,
         azimuth_offset_rad: f64,
+        transmittance: [f64; 3],
     ) -> [f64; 3] {
-        let (Some(sun), Some(table)) = (&self.sun, &self.sun_transmittance) else {
+        let Some(sun) = &self.sun else {
             return [0.0; 3];
         };
         let disc = sun.radiance(self.heading_rad + azimuth_offset_rad, elevation_rad);
         if disc > 0.0 {
-            let t = match &self.sun_path {
-                Some(path) => path.at(alpha),
-                None => table.at(alpha),
-            };
-            t.map(|t| disc * t)
+            transmittance.map(|t| disc * t)
         } else {
             [0.0; 3]
-        }
-    }
-
-    /// The sun's glitter or mirror image on the sea towards azimuth offset
-    /// `azimuth_offset_rad` from the heading, for a ray meeting the sea at `grazing_rad` and
-    /// `distance_m` (before the air between the sea and the camera): what the sea's
-    /// reflections add for the sun.
-    pub(super) fn sea_sun(
-        &self,
-        grazing_rad: f64,
-        distance_m: f64,
-        azimuth_offset_rad: f64,
-    ) -> [f64; 3] {
-        match &self.reflection {
-            Some(refl) if refl.may_show_sun(grazing_rad, distance_m) => refl.sun(
-                grazing_rad,
-                distance_m,
-                self.heading_rad + azimuth_offset_rad,
-            ),
-            _ => [0.0; 3],
         }
     }
 
