@@ -300,6 +300,37 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_range_test_for_glint_holds_wherever_a_point_in_the_ranges_may_glint() {
+        // Grazing and sun ranges from −2° to 10° in 0.25° steps: wherever the range test
+        // says no, every point of the ranges says no too.
+        let sea = Sea::default();
+        let deg = |i: i32| f64::from(i) * 0.25f64.to_radians();
+        let (mut refused, mut checked) = (0, 0);
+        for g0 in -8..40 {
+            for g1 in g0..(g0 + 6).min(40) {
+                for s0 in -8..40 {
+                    let s1 = s0 + 3;
+                    let (g, sun) = ((deg(g0), deg(g1)), (deg(s0), deg(s1)));
+                    if sea.may_glint_range(g, sun) {
+                        continue;
+                    }
+                    refused += 1;
+                    for k in 0..=4 {
+                        let x = g.0 + (g.1 - g.0) * f64::from(k) / 4.0;
+                        for j in 0..=4 {
+                            let e = sun.0 + (sun.1 - sun.0) * f64::from(j) / 4.0;
+                            checked += 1;
+                            assert!(!sea.may_glint(x, (e, e)), "{x} {e}");
+                            assert!(!sea.may_glint(x, (sun.0, e.max(sun.0))), "{x} {e}");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(refused > 100 && checked > 1000, "{refused} {checked}");
+    }
+
+    #[test]
     fn fresnel_limits() {
         // Normal incidence: ((n−1)/(n+1))² = 0.02037 for n = 1.333.
         let r0 = fresnel_reflectance(std::f64::consts::FRAC_PI_2, 1.333);

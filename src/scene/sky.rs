@@ -402,6 +402,26 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_disc_range_test_holds_wherever_an_elevation_in_the_range_meets_the_band() {
+        let disc = SunDisc::new(&Sun {
+            elevation_rad: -0.02,
+            azimuth_rad: 0.0,
+            angular_diameter_rad: 0.533f64.to_radians(),
+            limb_darkening: 0.6,
+            intensity: 1.0,
+        });
+        for i in -200..200 {
+            let lo = f64::from(i) * 2e-4;
+            for width in [0.0, 1e-5, 3e-3] {
+                let hi = lo + width;
+                let any = (0..=20).any(|k| disc.may_meet(lo + width * f64::from(k) / 20.0));
+                assert!(!any || disc.may_meet_range(lo, hi), "{lo} {hi}");
+            }
+        }
+        assert!(disc.may_meet_range(-0.03, 0.0) && !disc.may_meet_range(0.0, 0.1));
+    }
+
+    #[test]
     fn air_mass_matches_kasten_young() {
         // Kasten & Young (1989): m(90°) = 1 and m(0°) = 37.92 (their formula and table).
         assert!((relative_air_mass(std::f64::consts::FRAC_PI_2) - 1.0).abs() < 1e-3);
