@@ -32,7 +32,8 @@ use rayon::prelude::*;
 use super::air_paths::AirPaths;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
-use super::reflection::{self, FacetTable, Glint, Reflection, SeaFan};
+use super::reflection::{FacetTable, Glint, Reflection, SeaFan};
+use super::sea_sun::SeaSunTable;
 use super::shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
@@ -306,37 +307,43 @@ fn sea_fan_and_facets(
     Some((fan, Arc::new(FacetTable::new(&sea, max_grazing))))
 }
 
-/// The sun's glitter on a rough sea: its light at the sea comes along its own curved ray from
-/// the sea surface (a ray skimming a surface duct crosses far more air than any air-mass
-/// formula of its elevation gives); none when the sun is below the sea's apparent horizon.
-fn glint(scene: &Scene, tracer: &dyn RayTracer) -> Option<Glint> {
+/// The sun's glitter on a rough sea: its light at a sea point comes along its own curved ray
+/// from there (a ray skimming a surface duct crosses far more air than any air-mass formula of
+/// its elevation gives), at the apparent elevation the sea-level refraction of its true
+/// elevation there gives; tabulated over the true elevations of the sea points of the frame's
+/// `traced` rays (their tilts reach the farthest one's distance / R).
+fn glint(scene: &Scene, tracer: &dyn RayTracer, traced: &[(f64, FanEnd)]) -> Option<Glint> {
     let sky = scene.sky;
-    scene
-        .sun
-        .filter(|_| scene.sea.wave_slope_rad != 0.0)
-        .map(|sun| {
-            let launch = reflection::sea_level_sun_launch_rad(tracer, sun.elevation_rad);
-            let extinction = sky.sun_extinction();
-            let t = launch
-                .and_then(|a| tracer.density_paths_m(0.0, a, extinction.scale_heights_m()))
-                .map_or([0.0; 3], |paths| {
-                    extinction.path_optical_depth(paths).map(|tau| (-tau).exp())
-                });
-            let refraction_rad = launch.map_or(0.0, |a| a - sun.elevation_rad);
-            let r = 0.5 * sun.angular_diameter_rad;
-            let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
-            Glint {
-                sun,
-                refraction_rad,
-                irradiance: t.map(|t| sun.intensity * solid_angle * t),
-                radiance_cap: t.map(|t| sun.intensity * t),
-            }
+    let sun = scene.sun.filter(|_| scene.sea.wave_slope_rad != 0.0)?;
+    let farthest_m = traced
+        .iter()
+        .filter_map(|(_, end)| match end {
+            FanEnd::Ground { distance_m, .. } if distance_m.is_finite() => Some(*distance_m),
+            _ => None,
         })
+        .fold(0.0f64, f64::max);
+    // A quarter more than the farthest traced sea point, for samples between the traced rays.
+    let max_tilt_rad = 1.25 * farthest_m / scene.earth_radius_m;
+    let extinction = sky.sun_extinction();
+    let at_sea = SeaSunTable::build(tracer, sun.elevation_rad, max_tilt_rad, &extinction);
+    let r = 0.5 * sun.angular_diameter_rad;
+    let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
+    Some(Glint {
+        sun,
+        at_sea,
+        irradiance: [sun.intensity * solid_angle; 3],
+        radiance_cap: [sun.intensity; 3],
+    })
 }
 
 /// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter
 /// or mirror image.
-fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> Option<Reflection> {
+fn sea_reflection(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    tables: &SeaTables,
+    traced: &[(f64, FanEnd)],
+) -> Option<Reflection> {
     let (fan, facets) = tables.reflection.clone()?;
     let mirror = scene.sea.wave_slope_rad == 0.0;
     Some(Reflection {
@@ -346,7 +353,7 @@ fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> 
         fan,
         sky_table: Arc::clone(&tables.reflected_sky),
         facets,
-        glint: glint(scene, tracer),
+        glint: glint(scene, tracer, traced),
         mirror_sun: scene
             .sun
             .filter(|_| mirror)
@@ -616,7 +623,7 @@ impl<'a> PlanInputs<'a> {
         });
         Shader {
             distances_m: parts.view.distances_m,
-            reflection: sea_reflection(scene, tracer, parts.sea),
+            reflection: sea_reflection(scene, tracer, parts.sea, parts.traced),
             terrain: parts.terrain,
             cards: parts.view.cards,
             sky_table: parts.sky_table,

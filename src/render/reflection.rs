@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 use super::objects::{RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
+use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader};
 use super::terrain::piece_density;
 use crate::scene::camera::ViewDirection;
@@ -320,12 +321,14 @@ impl FacetTable {
 /// The sun's glitter on a rough sea, resolved once per frame.
 pub(super) struct Glint {
     pub(super) sun: Sun,
-    /// Apparent minus true elevation of the sun seen from the sea surface (rad).
-    pub(super) refraction_rad: f64,
-    /// Solar irradiance normal to the beam at the sea, per channel (film units × sr): the sun
-    /// attenuated along its own curved ray from the sea surface below the camera to the top.
+    /// The sun seen from the sea surface by its true elevation above a sea point's horizontal:
+    /// its apparent elevation there and the optical depth of its own curved ray from there.
+    pub(super) at_sea: SeaSunTable,
+    /// Solar irradiance normal to the beam outside the atmosphere, per channel (film units ×
+    /// sr); at the sea it is attenuated by the table's optical depth.
     pub(super) irradiance: [f64; 3],
-    /// The sun's attenuated disc-centre radiance at the sea (the glint's cap before ρ).
+    /// The sun's disc-centre radiance outside the atmosphere (the glint's cap before ρ and the
+    /// attenuation).
     pub(super) radiance_cap: [f64; 3],
 }
 
@@ -384,10 +387,9 @@ impl Reflection {
     pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
         let tilt = distance_m / self.earth_radius_m;
         if let Some(g) = &self.glint {
-            let e = g.sun.elevation_rad + g.refraction_rad;
-            return self
-                .sea
-                .may_glint(grazing_rad, (e - tilt.abs(), e + tilt.abs()));
+            let s = g.sun.elevation_rad;
+            let e = g.at_sea.apparent_range((s - tilt.abs(), s + tilt.abs()));
+            return self.sea.may_glint(grazing_rad, e);
         }
         match (&self.mirror_sun, &self.fan) {
             (Some((sun, _)), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
@@ -415,8 +417,9 @@ impl Reflection {
             if !tilt.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
                 return true;
             }
-            let e = g.sun.elevation_rad + g.refraction_rad;
-            return self.sea.may_glint_range(grazing_rad, (e - tilt, e + tilt));
+            let s = g.sun.elevation_rad;
+            let e = g.at_sea.apparent_range((s - tilt, s + tilt));
+            return self.sea.may_glint_range(grazing_rad, e);
         }
         self.mirror_sun.is_some() && self.fan.is_some()
     }
@@ -489,16 +492,20 @@ impl SeaSunAt {
                 let Some(g) = &refl.glint else {
                     return [0.0; 3];
                 };
-                // The sun's elevation above the local horizontal of the sea point (the true
-                // direction tilted by the Earth's curvature, plus the sea-level refraction),
-                // and its azimuth relative to the ray there.
+                // The sun's true elevation above the local horizontal of the sea point (tilted
+                // by the Earth's curvature), its apparent one there (the sea-level refraction of
+                // that elevation) with the attenuation of its light, and its azimuth relative
+                // to the ray there.
                 let phi = g.sun.azimuth_rad - azimuth_rad;
-                let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
+                let (e, depth) = g.at_sea.at(g.sun.elevation_rad + tilt * phi.cos());
                 let k = geometry.per_irradiance(e, phi);
                 if k <= 0.0 {
                     return [0.0; 3];
                 }
-                [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
+                [0, 1, 2].map(|c| {
+                    let t = (-depth[c]).exp();
+                    (k * g.irradiance[c]).min(rho * g.radiance_cap[c]) * t
+                })
             }
             SeaSunAt::Mirror {
                 elevation_rad,
