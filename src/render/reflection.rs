@@ -347,11 +347,17 @@ pub(super) struct Reflection {
 }
 
 /// The launch elevation (rad) at the sea surface of the ray that leaves the atmosphere towards
-/// a sun at true elevation `sun_elevation_rad`: bisection on the launch elevation of rays from
-/// height 0 over [0, 0.5 rad], where a ray that does not leave (trapped in a surface duct, or
-/// back on the sea) counts as passing below the sun. Above the reach of the 0.5 rad ray, the
-/// sun's true elevation plus that ray's refraction. `None` when every ray from the sea surface
-/// leaves above the sun: the sun's centre is below the sea's apparent horizon.
+/// a sun at true elevation `sun_elevation_rad`, to within [`SEA_SUN_LAUNCH_TOLERANCE_RAD`]:
+/// a bracketed search on the launch elevation of rays from height 0 over [0, 0.5 rad], where a
+/// ray that does not leave (trapped in a surface duct, or back on the sea) counts as passing
+/// below the sun. Above the reach of the 0.5 rad ray, the sun's true elevation plus that ray's
+/// refraction. `None` when every ray from the sea surface leaves above the sun: the sun's centre
+/// is below the sea's apparent horizon.
+///
+/// The search is regula falsi with the Illinois modification (the final elevation is smooth in
+/// the launch elevation wherever rays leave), falling back to bisection where an end of the
+/// bracket does not leave or the bracket has not halved in two steps: a handful of rays where
+/// bisection alone took 32 (each frame of a sun sweep needs its own search).
 pub(super) fn sea_level_sun_launch_rad(
     tracer: &dyn RayTracer,
     sun_elevation_rad: f64,
@@ -365,18 +371,56 @@ pub(super) fn sea_level_sun_launch_rad(
     if top < sun_elevation_rad {
         return Some(sun_elevation_rad + (hi - top));
     }
-    if end(lo).is_some_and(|e| e > sun_elevation_rad) {
+    let mut f_lo = end(lo).map(|e| e - sun_elevation_rad);
+    if f_lo.is_some_and(|f| f > 0.0) {
         return None;
     }
-    for _ in 0..30 {
-        let mid = 0.5 * (lo + hi);
+    // f_hi ≥ 0 ≥ f_lo (when the low end leaves): the crossing lies in [lo, hi].
+    let mut f_hi = top - sun_elevation_rad;
+    // Which end the last step moved (1: high, −1: low), and the bracket's widths one and two
+    // steps ago.
+    let (mut side, mut widths) = (0i8, [f64::INFINITY; 2]);
+    for _ in 0..MAX_LAUNCH_STEPS {
+        let width = hi - lo;
+        if width <= SEA_SUN_LAUNCH_TOLERANCE_RAD {
+            break;
+        }
+        let mid = match f_lo {
+            Some(fl) if f_hi > fl && width < 0.5 * widths[1] => {
+                let t = (-fl / (f_hi - fl)).clamp(0.0, 1.0);
+                // Strictly inside, so every step shrinks the bracket.
+                (lo + width * t).clamp(lo + 1e-3 * width, hi - 1e-3 * width)
+            }
+            _ => 0.5 * (lo + hi),
+        };
+        widths = [width, widths[0]];
         match end(mid) {
-            Some(e) if e >= sun_elevation_rad => hi = mid,
-            _ => lo = mid,
+            Some(e) if e >= sun_elevation_rad => {
+                (hi, f_hi) = (mid, e - sun_elevation_rad);
+                if side > 0 {
+                    f_lo = f_lo.map(|f| 0.5 * f);
+                }
+                side = 1;
+            }
+            r => {
+                (lo, f_lo) = (mid, r.map(|e| e - sun_elevation_rad));
+                if side < 0 {
+                    f_hi *= 0.5;
+                }
+                side = -1;
+            }
         }
     }
     Some(0.5 * (lo + hi))
 }
+
+/// How closely [`sea_level_sun_launch_rad`] brackets the launch elevation (rad): a thousandth of
+/// an arcsecond, far below any pixel.
+pub(super) const SEA_SUN_LAUNCH_TOLERANCE_RAD: f64 = 5e-9;
+
+/// The most rays [`sea_level_sun_launch_rad`] traces after its first two (bisection alone
+/// reaches its tolerance from 0.5 rad in 27).
+const MAX_LAUNCH_STEPS: usize = 64;
 
 impl Reflection {
     /// Whether a ray meeting the sea at `grazing_rad`, `distance_m` may show the sun's glitter
@@ -478,28 +522,43 @@ pub(super) enum SeaSunAt {
 }
 
 impl SeaSunAt {
+    /// A rough sea's glitter towards absolute azimuth `azimuth_rad` per unit irradiance from
+    /// the sun ([`GlintGeometry::per_irradiance`]): a smooth function of the azimuth, which
+    /// [`Self::glint_radiance`] turns into radiance. `None` when this is not glitter.
+    #[inline]
+    pub(super) fn glint_factor(&self, refl: &Reflection, azimuth_rad: f64) -> Option<f64> {
+        let (SeaSunAt::Glint { geometry, tilt, .. }, Some(g)) = (self, &refl.glint) else {
+            return None;
+        };
+        // The sun's elevation above the local horizontal of the sea point (the true direction
+        // tilted by the Earth's curvature, plus the sea-level refraction), and its azimuth
+        // relative to the ray there.
+        let phi = g.sun.azimuth_rad - azimuth_rad;
+        let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
+        Some(geometry.per_irradiance(e, phi))
+    }
+
+    /// The glitter's radiance for the factor `k` of [`Self::glint_factor`]: the sun's
+    /// irradiance times `k`, capped by the Fresnel-reflected disc (zero where `k` ≤ 0, or when
+    /// this is not glitter).
+    #[inline]
+    pub(super) fn glint_radiance(&self, refl: &Reflection, k: f64) -> [f64; 3] {
+        let (SeaSunAt::Glint { rho, .. }, Some(g)) = (self, &refl.glint) else {
+            return [0.0; 3];
+        };
+        if k <= 0.0 {
+            return [0.0; 3];
+        }
+        [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
+    }
+
     /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
     pub(super) fn at(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
         match *self {
-            SeaSunAt::Glint {
-                geometry,
-                tilt,
-                rho,
-            } => {
-                let Some(g) = &refl.glint else {
-                    return [0.0; 3];
-                };
-                // The sun's elevation above the local horizontal of the sea point (the true
-                // direction tilted by the Earth's curvature, plus the sea-level refraction),
-                // and its azimuth relative to the ray there.
-                let phi = g.sun.azimuth_rad - azimuth_rad;
-                let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
-                let k = geometry.per_irradiance(e, phi);
-                if k <= 0.0 {
-                    return [0.0; 3];
-                }
-                [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
-            }
+            SeaSunAt::Glint { .. } => match self.glint_factor(refl, azimuth_rad) {
+                Some(k) => self.glint_radiance(refl, k),
+                None => [0.0; 3],
+            },
             SeaSunAt::Mirror {
                 elevation_rad,
                 reflectance,
@@ -593,5 +652,104 @@ impl Shader<'_> {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    use super::*;
+    use crate::render::ray_model::FanRay;
+
+    /// Rays from the sea whose final elevation is `leave(launch)` (`None`: they do not leave),
+    /// counting the traces.
+    struct Leaving<F> {
+        leave: F,
+        traces: AtomicUsize,
+    }
+
+    impl<F: Fn(f64) -> Option<f64> + Sync> RayTracer for Leaving<F> {
+        fn trace(&self, _h: f64, elevation_rad: f64, _d: &[f64], _sky: bool) -> FanRay {
+            self.traces.fetch_add(1, Ordering::Relaxed);
+            FanRay {
+                elevation_rad,
+                heights_m: Vec::new(),
+                end: match (self.leave)(elevation_rad) {
+                    Some(e) => FanEnd::Sky { elevation_rad: e },
+                    None => FanEnd::Trapped,
+                },
+                monotone: false,
+            }
+        }
+    }
+
+    /// The launch whose ray leaves at `sun` by 200 bisection steps (the reference).
+    fn bisected(leave: impl Fn(f64) -> Option<f64>, sun: f64) -> f64 {
+        let (mut lo, mut hi) = (0.0f64, 0.5f64);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            match leave(mid) {
+                Some(e) if e >= sun => hi = mid,
+                _ => lo = mid,
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
+    #[test]
+    fn the_sea_level_sun_launch_is_found_within_its_tolerance_in_few_rays() {
+        // Refraction falling from 0.6° at the surface (a strong duct) and a duct that traps
+        // every ray launched below 0.2°.
+        let smooth = |e: f64| Some(e - 0.0105 * (-e / 0.02).exp());
+        let ducted = |e: f64| (e >= 0.0035).then(|| e - 0.0105 * (-e / 0.02).exp());
+        for sun_deg in [-0.5, -0.1, 0.0, 0.3, 1.0, 5.0, 20.0] {
+            let sun = f64::to_radians(sun_deg);
+            // Bisection alone traces 32 rays; a trapped low end costs bisection steps until
+            // the bracket's low end leaves.
+            for (name, limit, leave) in [
+                (
+                    "smooth",
+                    12,
+                    &smooth as &(dyn Fn(f64) -> Option<f64> + Sync),
+                ),
+                ("ducted", 20, &ducted),
+            ] {
+                let tracer = Leaving {
+                    leave,
+                    traces: AtomicUsize::new(0),
+                };
+                let want = bisected(leave, sun);
+                match sea_level_sun_launch_rad(&tracer, sun) {
+                    Some(got) => {
+                        assert!(
+                            (got - want).abs() <= 0.5 * SEA_SUN_LAUNCH_TOLERANCE_RAD,
+                            "{name} {sun_deg}°: {got} vs {want}"
+                        );
+                        // Where the sun is below every ray that leaves, the launch is the
+                        // duct's edge, found by bisection alone.
+                        let traces = tracer.traces.load(Ordering::Relaxed);
+                        let smooth_there = leave(want - 1e-6).is_some();
+                        assert!(
+                            traces <= limit || !smooth_there,
+                            "{name} {sun_deg}°: {traces} rays"
+                        );
+                    }
+                    None => assert!(
+                        leave(0.0).is_some_and(|e| e > sun),
+                        "{name} {sun_deg}°: none, yet the surface ray leaves below the sun"
+                    ),
+                }
+            }
+        }
+        // Every ray from the surface leaves above a sun 0.8° below the horizon: hidden.
+        let tracer = Leaving {
+            leave: smooth,
+            traces: AtomicUsize::new(0),
+        };
+        assert_eq!(
+            sea_level_sun_launch_rad(&tracer, f64::to_radians(-0.8)),
+            None
+        );
     }
 }
