@@ -43,8 +43,10 @@ mod sun;
 pub mod sweep;
 pub mod sweep_plot;
 pub mod terrain;
+mod texture_box;
 
 use std::io::IsTerminal;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
@@ -761,19 +763,47 @@ fn sea_reflection(
             radiance_cap: t.map(|t| sun.intensity * t),
         }
     });
+    let facets = if mirror {
+        reflection::Facets::Mirror(reflection::FacetTable::new(&sea, max_grazing))
+    } else if fan.is_some() {
+        reflection::Facets::Rough(reflection::SlopeTable::new(
+            &sea,
+            max_grazing,
+            &reflected_sky,
+        ))
+    } else {
+        reflection::Facets::None
+    };
     Some(reflection::Reflection {
         sea,
         sky,
         earth_radius_m: scene.earth_radius_m,
         fan,
         sky_table: reflected_sky,
-        facets: reflection::FacetTable::new(&sea, max_grazing),
+        facets,
         glint,
         mirror_sun: scene
             .sun
             .filter(|_| mirror)
             .map(|sun| (sun, SunDisc::new(&sun))),
     })
+}
+
+/// The column integrals of `texture`, built once per image: `built` holds those built so far.
+fn texture_columns(
+    built: &mut Vec<(
+        *const crate::scene::Texture,
+        Arc<texture_box::TextureColumns>,
+    )>,
+    texture: &Arc<crate::scene::Texture>,
+) -> Arc<texture_box::TextureColumns> {
+    let key = Arc::as_ptr(texture);
+    if let Some((_, c)) = built.iter().find(|(k, _)| *k == key) {
+        return c.clone();
+    }
+    let c = Arc::new(texture_box::TextureColumns::new(texture));
+    built.push((key, c.clone()));
+    c
 }
 
 /// Render `scene` through `tracer`.
@@ -807,6 +837,9 @@ pub fn render_scene(
     let mut distances_m: Vec<f64> = Vec::new();
     let mut max_top_m: Vec<f64> = Vec::new();
     let mut cards = Vec::new();
+    // A rough sea mirrors the cards' textures averaged over heights (once per image).
+    let blurred = scene.sea.reflections && scene.sea.wave_slope_rad > 0.0;
+    let mut columns = Vec::new();
     for i in order {
         let c = &scene.cards[i];
         let ground_radius = radius * (c.distance_m / radius).sin();
@@ -838,7 +871,13 @@ pub fn render_scene(
             top_m,
             height_m: c.height_m,
             texture: &c.texture,
+            columns: blurred.then(|| texture_columns(&mut columns, &c.texture)),
+            reflected_haze: None,
         });
+        if blurred && let Some(extinction) = scene.sky.extinction() {
+            let card = cards.last_mut().expect("just pushed");
+            card.reflected_haze = Some(shade::ReflectedHaze::new(&extinction, radius, card));
+        }
     }
     let elevations = elevation_range(&frame, width, height, pixel_rad);
     let terrain = scene.terrain.as_ref().and_then(|t| {
@@ -854,7 +893,11 @@ pub fn render_scene(
             brightness: scene.sky.brightness,
             scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
         };
-        TerrainView::new(t, tracer, frame, options.exact)
+        let mut view = TerrainView::new(t, tracer, frame, options.exact)?;
+        if scene.sea.reflections && scene.sea.wave_slope_rad > 0.0 {
+            view.prepare_reflections();
+        }
+        Some(view)
     });
     let (sky, sea) = (scene.sky, scene.sea);
     // The optical depths once per frame, not once per table entry (same values).
