@@ -704,41 +704,83 @@ impl SlopeSpan<'_> {
         self.position(0.0).clamp(0.0, 1.0)
     }
 
-    /// Cumulative value `c` (0: the share, 1–3: the share-weighted sky) of the knots at span
-    /// position `t` (clamped to [0, 1]).
+    /// The knot interval of span position `t` (clamped to [0, 1]) and the position's offset
+    /// into it.
     #[inline]
-    fn cumulative<const N: usize>(&self, t: f64, channels: [usize; N]) -> [f64; N] {
+    fn knot(&self, t: f64) -> (usize, f64) {
         let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
         let n = SLOPE_KNOTS as f64;
         let x = t * n;
         let k = (x as usize).min(SLOPE_KNOTS - 1);
-        let tau = (x - k as f64) / n;
-        channels.map(|c| {
-            let at = |knots: &[SlopeKnot; SLOPE_KNOTS + 1]| {
-                let (sum, q0, q1) = (
-                    knots[k][2 * c],
-                    knots[k][2 * c + 1],
-                    knots[k + 1][2 * c + 1],
-                );
-                sum + tau * (q0 + 0.5 * (q1 - q0) * tau * n)
-            };
-            let (a, b) = (at(self.a), at(self.b));
-            a + (b - a) * self.f
-        })
+        (k, (x - k as f64) / n)
+    }
+
+    /// Cumulative value `c` (0: the share, 1–3: the share-weighted sky) at offset `tau` into
+    /// knot interval `k`: the integral of the density linear across the interval.
+    #[inline(always)]
+    fn cumulative(&self, k: usize, tau: f64, c: usize) -> f64 {
+        let n = SLOPE_KNOTS as f64;
+        let at = |knots: &[SlopeKnot; SLOPE_KNOTS + 1]| {
+            let (sum, q0, q1) = (
+                knots[k][2 * c],
+                knots[k][2 * c + 1],
+                knots[k + 1][2 * c + 1],
+            );
+            sum + tau * (q0 + 0.5 * (q1 - q0) * tau * n)
+        };
+        let (a, b) = (at(self.a), at(self.b));
+        a + (b - a) * self.f
     }
 
     /// The cumulative share (weight × reflectance) of the facets from the span's start to
     /// position `t` (clamped to [0, 1]).
     #[inline]
     pub(super) fn share(&self, t: f64) -> f64 {
-        self.cumulative(t, [0])[0]
+        let (k, tau) = self.knot(t);
+        self.cumulative(k, tau, 0)
     }
 
     /// The cumulative share-weighted sky radiance the facets reflect from the span's start to
     /// position `t` (clamped to [0, 1]).
     #[inline]
     pub(super) fn sky(&self, t: f64) -> [f64; 3] {
-        self.cumulative(t, [1, 2, 3])
+        let (k, tau) = self.knot(t);
+        [
+            self.cumulative(k, tau, 1),
+            self.cumulative(k, tau, 2),
+            self.cumulative(k, tau, 3),
+        ]
+    }
+
+    /// The span position where the cumulative share reaches `share` (the inverse of
+    /// [`Self::share`]: the knot interval by bisection, then the quadratic within it); 1 if it
+    /// never does.
+    pub(super) fn position_of_share(&self, share: f64) -> f64 {
+        let n = SLOPE_KNOTS as f64;
+        let at = |k: usize, c: usize| self.a[k][c] + (self.b[k][c] - self.a[k][c]) * self.f;
+        if !(share < at(SLOPE_KNOTS, 0)) {
+            return 1.0;
+        }
+        // The last knot at or below the share.
+        let (mut lo, mut hi) = (0usize, SLOPE_KNOTS);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if at(mid, 0) <= share {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (c0, q0, q1) = (at(lo, 0), at(lo, 1), at(lo + 1, 1));
+        // c0 + q0 τ + a τ² = share, a = (q1 − q0) n / 2, for τ in [0, 1/n].
+        let (a, rest) = (0.5 * (q1 - q0) * n, share - c0);
+        let disc = (q0 * q0 + 4.0 * a * rest).max(0.0);
+        let tau = if q0 + disc.sqrt() > 0.0 {
+            2.0 * rest / (q0 + disc.sqrt())
+        } else {
+            0.0
+        };
+        (lo as f64 + (tau * n).clamp(0.0, 1.0)) / n
     }
 
     /// The share of the facets whose reflected rays leave between elevations `e0` and `e1`.
@@ -1019,9 +1061,18 @@ impl Shader<'_> {
             .terrain
             .as_ref()
             .and_then(|t| terrain_cover(t, fan, &span, az, distance_m));
-        if spans.len() == 0 && cover.is_none() {
-            return out;
+        if spans.len() == 0 {
+            return match cover {
+                Some((top, weight)) => self
+                    .terrain_image(fan, &span, dir, az, distance_m, top)
+                    .map(|v| v * weight),
+                None => out,
+            };
         }
+        let weight_at = |e: f64| match cover {
+            Some((top, w)) if e <= top => w.max(spans.weight_at(e)),
+            _ => spans.weight_at(e),
+        };
         let mut breaks = Breaks::new(&span);
         for &(a, b) in spans.since(0) {
             breaks.push(span.position(a));
@@ -1030,17 +1081,24 @@ impl Shader<'_> {
         if let Some((e, _)) = cover {
             breaks.push(span.position(e));
         }
+        // The cells' bounds where they cut an image (elsewhere they would cut nothing).
+        for c in 1..SLOPE_CELLS {
+            let t = c as f64 / SLOPE_CELLS as f64;
+            if weight_at(span.elevation(t)) > 0.0 {
+                breaks.push(t);
+            }
+        }
         for (t0, t1) in breaks.parts() {
-            let (e0, e1) = (span.elevation(t0), span.elevation(t1));
             let e = span.elevation(0.5 * (t0 + t1));
-            let weight = match cover {
-                Some((top, w)) if e <= top => w.max(spans.weight_at(e)),
-                _ => spans.weight_at(e),
-            };
+            let weight = weight_at(e);
+            if !(weight > 0.0) {
+                continue;
+            }
             let w = weight * (span.share(t1) - span.share(t0));
             if !(w > 0.0) {
                 continue;
             }
+            let (e0, e1) = (span.elevation(t0), span.elevation(t1));
             let (sky0, sky1) = (span.sky(t0), span.sky(t1));
             let ray = SampleRay::with_azimuth(
                 dir,
@@ -1062,6 +1120,40 @@ impl Shader<'_> {
             }
         }
         out
+    }
+
+    /// The terrain's blurred image alone (no card mirrored), its reflected rays leaving
+    /// between elevation 0 and `top`: one ray, at the median of their shares, stands for them
+    /// all (the ground's colour is seen once; the share and the sky it hides are exact).
+    fn terrain_image(
+        &self,
+        fan: &SeaFan,
+        span: &SlopeSpan<'_>,
+        dir: &ViewDirection,
+        az: f64,
+        distance_m: f64,
+        top: f64,
+    ) -> [f64; 3] {
+        let t_top = span.position(top).max(span.skimming());
+        let share = span.share(t_top);
+        if !(share > 0.0) {
+            return [0.0; 3];
+        }
+        let median = span.position_of_share(0.5 * share).min(t_top);
+        let ray = SampleRay::with_azimuth(
+            dir,
+            RayAlong::Reflected {
+                fan,
+                elevation_rad: span.elevation(median),
+                from_m: distance_m,
+                span_rad: (span.elevation(0.0), top),
+            },
+            az,
+        );
+        let found = self.compose(&ray);
+        let covered = 1.0 - found.transmittance;
+        let sky = span.sky(t_top);
+        [0, 1, 2].map(|c| share * found.radiance[c] - covered * sky[c])
     }
 
     /// Append to `spans` the reflected elevations of `span` whose rays from the sea at
@@ -1130,9 +1222,9 @@ pub(super) const SLOPE_CELLS: usize = 8;
 /// Most cuts of one sample's slope span.
 const MAX_BREAKS: usize = SLOPE_CELLS + 2 * MAX_SPANS + 4;
 
-/// The positions (span positions t) where one sample's slope span is cut: the cells, the
-/// start of the rays that leave above the sea (below it they all skim it at elevation 0: one
-/// part), and the objects' edges.
+/// The positions (span positions t) where one sample's slope span is cut: the start of the rays
+/// that leave above the sea (below it they all skim it at elevation 0: one part), the objects'
+/// edges, and the cells' bounds within images.
 struct Breaks {
     items: [f64; MAX_BREAKS],
     len: usize,
@@ -1151,9 +1243,6 @@ impl Breaks {
         out.push(0.0);
         out.push(skim);
         out.push(1.0);
-        for c in 1..SLOPE_CELLS {
-            out.push(c as f64 / SLOPE_CELLS as f64);
-        }
         out
     }
 
