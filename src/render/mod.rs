@@ -476,6 +476,8 @@ fn shade_bands(
         }
     };
     let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
+    // A rough sea's parts of the slopes, found once per band and set of mirrored cards.
+    let mut parts = reflection::PartsCache::default();
     let fills: Vec<[f32; 4]> = bands
         .iter()
         .map(|b| {
@@ -504,7 +506,8 @@ fn shade_bands(
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
             let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
             let background = if band.reflects {
-                ctx.shader.background(&dir, band.fan_end)
+                ctx.shader
+                    .band_background(&dir, band.fan_end, k, &mut parts)
             } else {
                 band.background
             };

@@ -973,6 +973,60 @@ impl Shader<'_> {
         out
     }
 
+    /// [`Self::sea_reflections`] for a sample of flat band `band` (every sample of a band meets
+    /// the sea at the same grazing angle and distance) on a rough sea mirroring only cards:
+    /// the parts of its slopes ([`Self::blur_parts`]) depend then only on which cards the
+    /// sample's azimuth is within, so they are found once per band and set of cards (`cache`)
+    /// and only composed per sample; the same result. `None` where that does not hold (a calm
+    /// sea, terrain, the sun's glitter, more than 64 cards).
+    pub(super) fn band_reflections(
+        &self,
+        dir: &ViewDirection,
+        grazing_rad: f64,
+        distance_m: f64,
+        band: usize,
+        cache: &mut PartsCache,
+    ) -> Option<[f64; 3]> {
+        let refl = self.reflection.as_ref()?;
+        let (Facets::Rough(table), Some(fan)) = (&refl.facets, &refl.fan) else {
+            return None;
+        };
+        if self.terrain.is_some()
+            || self.cards.len() > 64
+            || refl.may_show_sun(grazing_rad, distance_m)
+        {
+            return None;
+        }
+        let az = dir.azimuth_offset_rad();
+        let cards = self
+            .cards
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.distance_m > distance_m && in_range(c, az))
+            .fold(0u64, |mask, (i, _)| mask | 1 << i);
+        let at = match cache
+            .entries
+            .iter()
+            .position(|e| e.band == band && e.cards == cards)
+        {
+            Some(at) => at,
+            None => {
+                let mut parts = Vec::new();
+                self.blur_parts(fan, table, grazing_rad, distance_m, az, |p| parts.push(p));
+                cache.entries.push(CachedParts { band, cards, parts });
+                cache.entries.len() - 1
+            }
+        };
+        let mut out = [0.0; 3];
+        for part in &cache.entries[at].parts {
+            let image = self.blur_part(fan, dir, az, distance_m, part);
+            for c in 0..3 {
+                out[c] += image[c];
+            }
+        }
+        Some(out)
+    }
+
     /// The mirror images on a calm sea: the one reflected ray of [`FacetTable`].
     fn mirror_images(
         &self,
@@ -1032,13 +1086,8 @@ impl Shader<'_> {
         out
     }
 
-    /// The blurred images on a rough sea: the slope span is cut into [`SLOPE_CELLS`] cells and
-    /// further at the elevations where the objects' images begin and end (each card's heights
-    /// through the sea fan, the terrain's highest reflected elevation); each part that meets
-    /// something is composed once at its middle, the cards' textures averaged over the heights
-    /// the part's reflected rays span, and weighted by the part's exact Fresnel-weighted share
-    /// ([`SlopeSpan::share`]). So an image edge moves continuously with the grazing angle and
-    /// is spread over the rows the slope distribution spreads it over.
+    /// The blurred images on a rough sea ([`Self::blur_parts`], each part composed at its
+    /// middle elevation).
     fn blurred_images(
         &self,
         fan: &SeaFan,
@@ -1049,9 +1098,71 @@ impl Shader<'_> {
         azimuth: &mut impl FnMut() -> f64,
     ) -> [f64; 3] {
         let mut out = [0.0; 3];
+        let az = azimuth();
+        self.blur_parts(fan, table, grazing_rad, distance_m, az, |part| {
+            let image = self.blur_part(fan, dir, az, distance_m, &part);
+            for c in 0..3 {
+                out[c] += image[c];
+            }
+        });
+        out
+    }
+
+    /// What one part of a rough sea's slopes adds along `dir` (azimuth offset `az`), reflected
+    /// at `distance_m`: the objects its middle ray meets, weighted by the part's share, over the
+    /// sky they hide.
+    #[inline]
+    pub(super) fn blur_part(
+        &self,
+        fan: &SeaFan,
+        dir: &ViewDirection,
+        az: f64,
+        distance_m: f64,
+        part: &BlurPart,
+    ) -> [f64; 3] {
+        let ray = SampleRay::with_azimuth(
+            dir,
+            RayAlong::Reflected {
+                fan,
+                elevation_rad: part.elevation_rad,
+                from_m: distance_m,
+                span_rad: part.span_rad,
+            },
+            az,
+        );
+        let found = self.compose(&ray);
+        let covered = 1.0 - found.transmittance;
+        if covered == 0.0 {
+            return [0.0; 3];
+        }
+        let mut out = [0.0; 3];
+        for c in 0..3 {
+            out[c] = part.share * found.radiance[c] - covered * part.sky[c];
+        }
+        out
+    }
+
+    /// The parts of the slopes a ray meeting a rough sea at `grazing_rad`, `distance_m` (azimuth
+    /// offset `az`) sees that mirror something, passed to `each` in order. The slope span is
+    /// cut at the elevations where the objects' images begin and end (each card's heights
+    /// through the sea fan, [`Self::card_spans`]; the terrain's highest reflected elevation,
+    /// [`terrain_cover`]) and, within images, at the bounds of [`SLOPE_CELLS`] cells; each part
+    /// stands for its rays by its middle one (the cards' textures averaged over the heights
+    /// its rays span), weighted by its exact Fresnel-weighted share and sky
+    /// ([`SlopeSpan::share`], [`SlopeSpan::sky`]). So an image edge moves continuously with
+    /// the grazing angle and is spread over the rows the slope distribution spreads it over.
+    /// A terrain image with no card mirrored is one part, at the median of its share.
+    pub(super) fn blur_parts(
+        &self,
+        fan: &SeaFan,
+        table: &SlopeTable,
+        grazing_rad: f64,
+        distance_m: f64,
+        az: f64,
+        mut each: impl FnMut(BlurPart),
+    ) {
         let span = table.span(grazing_rad);
         let mut spans = Spans::new();
-        let az = azimuth();
         for card in &self.cards {
             if card.distance_m > distance_m && in_range(card, az) {
                 self.card_spans(fan, &span, card, distance_m, &mut spans);
@@ -1062,12 +1173,10 @@ impl Shader<'_> {
             .as_ref()
             .and_then(|t| terrain_cover(t, fan, &span, az, distance_m));
         if spans.len() == 0 {
-            return match cover {
-                Some((top, weight)) => self
-                    .terrain_image(fan, &span, dir, az, distance_m, top)
-                    .map(|v| v * weight),
-                None => out,
-            };
+            if let Some((top, weight)) = cover {
+                each(terrain_part(&span, top, weight));
+            }
+            return;
         }
         let weight_at = |e: f64| match cover {
             Some((top, w)) if e <= top => w.max(spans.weight_at(e)),
@@ -1094,66 +1203,18 @@ impl Shader<'_> {
             if !(weight > 0.0) {
                 continue;
             }
-            let w = weight * (span.share(t1) - span.share(t0));
-            if !(w > 0.0) {
+            let share = weight * (span.share(t1) - span.share(t0));
+            if !(share > 0.0) {
                 continue;
             }
-            let (e0, e1) = (span.elevation(t0), span.elevation(t1));
             let (sky0, sky1) = (span.sky(t0), span.sky(t1));
-            let ray = SampleRay::with_azimuth(
-                dir,
-                RayAlong::Reflected {
-                    fan,
-                    elevation_rad: e,
-                    from_m: distance_m,
-                    span_rad: (e0, e1),
-                },
-                az,
-            );
-            let found = self.compose(&ray);
-            let covered = 1.0 - found.transmittance;
-            if covered == 0.0 {
-                continue;
-            }
-            for c in 0..3 {
-                out[c] += w * found.radiance[c] - weight * covered * (sky1[c] - sky0[c]);
-            }
+            each(BlurPart {
+                elevation_rad: e,
+                span_rad: (span.elevation(t0), span.elevation(t1)),
+                share,
+                sky: [0, 1, 2].map(|c| weight * (sky1[c] - sky0[c])),
+            });
         }
-        out
-    }
-
-    /// The terrain's blurred image alone (no card mirrored), its reflected rays leaving
-    /// between elevation 0 and `top`: one ray, at the median of their shares, stands for them
-    /// all (the ground's colour is seen once; the share and the sky it hides are exact).
-    fn terrain_image(
-        &self,
-        fan: &SeaFan,
-        span: &SlopeSpan<'_>,
-        dir: &ViewDirection,
-        az: f64,
-        distance_m: f64,
-        top: f64,
-    ) -> [f64; 3] {
-        let t_top = span.position(top).max(span.skimming());
-        let share = span.share(t_top);
-        if !(share > 0.0) {
-            return [0.0; 3];
-        }
-        let median = span.position_of_share(0.5 * share).min(t_top);
-        let ray = SampleRay::with_azimuth(
-            dir,
-            RayAlong::Reflected {
-                fan,
-                elevation_rad: span.elevation(median),
-                from_m: distance_m,
-                span_rad: (span.elevation(0.0), top),
-            },
-            az,
-        );
-        let found = self.compose(&ray);
-        let covered = 1.0 - found.transmittance;
-        let sky = span.sky(t_top);
-        [0, 1, 2].map(|c| share * found.radiance[c] - covered * sky[c])
     }
 
     /// Append to `spans` the reflected elevations of `span` whose rays from the sea at
@@ -1203,6 +1264,48 @@ fn terrain_cover(
     let top = terrain.reflected_cover(az, fan, distance_m, (e_lo, e_hi))?;
     let weight = fade(span.share_between(e_lo, top));
     (weight > 0.0).then_some((top, weight))
+}
+
+/// The parts of a rough sea's slopes found for the samples of one image row's flat bands
+/// ([`Shader::band_reflections`]), by band and set of mirrored cards.
+#[derive(Default)]
+pub(super) struct PartsCache {
+    entries: Vec<CachedParts>,
+}
+
+struct CachedParts {
+    band: usize,
+    /// Bit i: card i of the shader is mirrored.
+    cards: u64,
+    parts: Vec<BlurPart>,
+}
+
+/// One part of a rough sea's slopes that mirrors something ([`Shader::blur_parts`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct BlurPart {
+    /// The elevation (rad) of the ray that stands for the part.
+    pub(super) elevation_rad: f64,
+    /// The elevations its rays span (rad).
+    pub(super) span_rad: (f64, f64),
+    /// Its Fresnel-weighted share of the reflected light (with its image's weight, [`fade`]).
+    pub(super) share: f64,
+    /// Its share-weighted sky radiance, per channel (as `share`).
+    pub(super) sky: [f64; 3],
+}
+
+/// A terrain image with no card mirrored, its reflected rays leaving `span` between its
+/// lowest elevation and `top`, with weight `weight`: one part whose ray stands at the median of
+/// their shares (the ground's colour is seen once; the share and the sky it hides are exact).
+fn terrain_part(span: &SlopeSpan<'_>, top: f64, weight: f64) -> BlurPart {
+    let t_top = span.position(top).max(span.skimming());
+    let share = span.share(t_top);
+    let median = span.position_of_share(0.5 * share).min(t_top);
+    BlurPart {
+        elevation_rad: span.elevation(median),
+        span_rad: (span.elevation(0.0), top),
+        share: weight * share,
+        sky: span.sky(t_top).map(|v| weight * v),
+    }
 }
 
 /// Whether `card`'s azimuth range holds azimuth offset `az`.

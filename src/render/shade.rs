@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use super::air_paths::{AirPaths, Meets};
 use super::objects::{Composed, Meet, OPAQUE, Object, RayAlong, SampleRay, SceneObject, compose};
 use super::ray_model::FanEnd;
-use super::reflection::{Facets, MIN_NODE_SHARE, Spans};
+use super::reflection::{Facets, MIN_NODE_SHARE, PartsCache, Spans};
 use super::sun::SunTransmittance;
 use super::terrain::TerrainView;
 use super::texture_box::TextureColumns;
@@ -119,7 +119,11 @@ impl ReflectedHaze {
         let i = (p as usize).min(self.values.len() - 2);
         let f = p - i as f64;
         let (a, b) = (self.values[i], self.values[i + 1]);
-        [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * f)
+        let mut out = [0.0; 3];
+        for c in 0..3 {
+            out[c] = a[c] + (b[c] - a[c]) * f;
+        }
+        out
     }
 }
 
@@ -236,7 +240,9 @@ impl SceneObject for ViewCard<'_> {
                 // A part of a rough sea's slopes: the chord to the card's middle height.
                 let t = haze.at(self.distance_m - from_m);
                 let path = aerial.extinction.path_radiance;
-                rgb = [0, 1, 2].map(|c| rgb[c] * t[c] + alpha * path[c] * (1.0 - t[c]));
+                for c in 0..3 {
+                    rgb[c] = rgb[c] * t[c] + alpha * path[c] * (1.0 - t[c]);
+                }
             }
             (RayAlong::Reflected { from_m, .. }, Some(aerial), Some(refl)) => {
                 // From the card to the sea (the chord); the sea's own haze is added after.
@@ -555,6 +561,35 @@ impl<'a> Shader<'a> {
                 }
             }
             FanEnd::Trapped | FanEnd::Lost => self.fallback,
+        }
+    }
+
+    /// [`Self::background`] for a sample of flat band `band`, whose ray ended with `end`: the
+    /// same, the rough sea's parts found once per band ([`Self::band_reflections`]).
+    pub(super) fn band_background(
+        &self,
+        dir: &ViewDirection,
+        end: FanEnd,
+        band: usize,
+        cache: &mut PartsCache,
+    ) -> [f64; 3] {
+        let FanEnd::Ground {
+            grazing_rad,
+            distance_m,
+        } = end
+        else {
+            return self.background(dir, end);
+        };
+        let Some(extra) = self.band_reflections(dir, grazing_rad, distance_m, band, cache) else {
+            return self.background(dir, end);
+        };
+        let mut sea = self.sea_table.at(grazing_rad);
+        for c in 0..3 {
+            sea[c] += extra[c];
+        }
+        match &self.aerial {
+            Some(aerial) => aerial.seen(sea, 1.0, dir.elevation_rad, Meets::Sea, 0.0, distance_m),
+            None => sea,
         }
     }
 

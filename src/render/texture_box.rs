@@ -57,20 +57,32 @@ impl TextureColumns {
     #[inline]
     fn integral(&self, texture: &Texture, x: usize, y: f64) -> [f64; 4] {
         let h = self.height;
-        let texel = |k: usize| texture.texels[k * self.width + x].map(f64::from);
+        let texel = |k: usize| {
+            let t = texture.texels[k * self.width + x];
+            [t[0] as f64, t[1] as f64, t[2] as f64, t[3] as f64]
+        };
         let column = &self.prefix[x * h..(x + 1) * h];
         let last = (h - 1) as f64;
+        let mut out = [0.0; 4];
         if y <= 0.0 {
-            return texel(0).map(|t| y * t);
-        }
-        if y >= last {
+            let t = texel(0);
+            for c in 0..4 {
+                out[c] = y * t[c];
+            }
+        } else if y >= last {
             let (p, t) = (column[h - 1], texel(h - 1));
-            return [0, 1, 2, 3].map(|c| p[c] + (y - last) * t[c]);
+            for c in 0..4 {
+                out[c] = p[c] + (y - last) * t[c];
+            }
+        } else {
+            let k = (y as usize).min(h - 2);
+            let f = y - k as f64;
+            let (p, a, b) = (column[k], texel(k), texel(k + 1));
+            for c in 0..4 {
+                out[c] = p[c] + f * a[c] + 0.5 * f * f * (b[c] - a[c]);
+            }
         }
-        let k = (y as usize).min(h - 2);
-        let f = y - k as f64;
-        let (p, a, b) = (column[k], texel(k), texel(k + 1));
-        [0, 1, 2, 3].map(|c| p[c] + f * a[c] + 0.5 * f * f * (b[c] - a[c]))
+        out
     }
 
     /// Mean of column `x` over v ∈ [`v0`, `v1`] (`v0` < `v1`), transparent outside [0, 1].
@@ -86,7 +98,11 @@ impl TextureColumns {
             self.integral(texture, x, b * h - 0.5),
         );
         let scale = 1.0 / (h * (v1 - v0));
-        [0, 1, 2, 3].map(|c| (ib[c] - ia[c]) * scale)
+        let mut out = [0.0; 4];
+        for c in 0..4 {
+            out[c] = (ib[c] - ia[c]) * scale;
+        }
+        out
     }
 
     /// Mean of `texture` (the texture these integrals were built from) at horizontal
@@ -107,7 +123,11 @@ impl TextureColumns {
             self.column_mean(texture, x0, v0, v1),
             self.column_mean(texture, x1, v0, v1),
         );
-        [0, 1, 2, 3].map(|c| (a[c] + (b[c] - a[c]) * fx) as f32)
+        let mut out = [0.0f32; 4];
+        for c in 0..4 {
+            out[c] = (a[c] + (b[c] - a[c]) * fx) as f32;
+        }
+        out
     }
 }
 
