@@ -562,7 +562,7 @@ impl FacetTable {
 }
 
 /// Knots per grazing angle of a [`SlopeTable`].
-const SLOPE_KNOTS: usize = 32;
+const SLOPE_KNOTS: usize = 64;
 
 /// One knot of a [`SlopeTable`]: the cumulative share and its density (per unit of the span),
 /// then the cumulative share-weighted sky radiance and its density, per channel.
@@ -585,7 +585,7 @@ pub(super) struct SlopeTable {
 
 impl SlopeTable {
     /// Grazing angles in the table.
-    const ENTRIES: usize = 1024;
+    const ENTRIES: usize = 512;
 
     /// The table of `sea` (σ > 0) over grazing angles [0, `g_hi`] (π/2 if not positive), with
     /// the sky radiance `sky` by elevation.

@@ -61,3 +61,43 @@ pub fn blurred_reflection(
     }
     sum.map(|v| v / total)
 }
+
+/// Assert that a rendered column profile (what an image adds to the sea, row by row) matches
+/// the `expected` one: in every row within 0.5 % of the image's `strongest` value (the
+/// renderer's tables of the slope distribution) plus, through the fan (`exact` false), 0.15 of
+/// the expected profile's change over a row there (the fan places features to 0.1 pixel, flat
+/// rows to 0.01 more); the column's sum within 1 % in each channel.
+pub fn assert_profile_matches(
+    rendered: &[[f64; 3]],
+    expected: &[[f64; 3]],
+    strongest: f64,
+    exact: bool,
+) {
+    let n = expected.len();
+    let mut closest = 0.0f64;
+    for y in 0..n {
+        let (lo, hi) = (y.saturating_sub(1), (y + 1).min(n - 1));
+        for c in 0..3 {
+            let slope = 0.5 * (expected[hi][c] - expected[lo][c]).abs();
+            let allowed = 0.005 * strongest + if exact { 0.0 } else { 0.15 * slope };
+            let off = (rendered[y][c] - expected[y][c]).abs();
+            closest = closest.max(off / allowed);
+            assert!(
+                off <= allowed,
+                "exact={exact}: row {y} channel {c}: {} vs {} (off {off:.3e}, allowed \
+                 {allowed:.3e})",
+                rendered[y][c],
+                expected[y][c]
+            );
+        }
+    }
+    eprintln!("exact={exact}: the worst row is off by {closest:.2} of what is allowed");
+    for c in 0..3 {
+        let sum_r: f64 = rendered.iter().map(|v| v[c]).sum();
+        let sum_e: f64 = expected.iter().map(|v| v[c]).sum();
+        assert!(
+            (sum_r - sum_e).abs() <= 0.01 * sum_e.abs().max(strongest),
+            "exact={exact} channel {c}: column sum {sum_r} vs {sum_e}"
+        );
+    }
+}
