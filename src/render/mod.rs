@@ -20,8 +20,10 @@
 //!
 //! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
 //! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
-//! band whose sea mirrors a card shades that card's columns pixel by pixel, and rows whose sea
-//! may show the sun's glitter are shaded pixel by pixel like rows that meet the sun.
+//! band whose sea mirrors a card shades that card's columns pixel by pixel (on a rough sea, the
+//! parts of the slopes that mirror something are found once per band and set of mirrored cards),
+//! and rows whose sea may show the sun's glitter are shaded pixel by pixel like rows that meet
+//! the sun.
 //!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
@@ -724,8 +726,9 @@ fn sea_reflection(
         .max(inp.pixel_rad);
     let mirror = sea.wave_slope_rad == 0.0;
     // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
-    // elevation, so interpolation is exact for them); an eighth of the facet slope spread
-    // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
+    // elevation, so interpolation is exact for them); an eighth of the rms facet slope σ′
+    // otherwise (a rough sea's images are integrated over reflected elevations spread by ±8σ′,
+    // with heights linear between the fan's rays).
     let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
     // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
     let need_sky = mirror && scene.sun.is_some();

@@ -9,10 +9,15 @@
 //! ray's height on a uniform grid of ranges (from the reflection point) and is interpolated
 //! bilinearly. A reflected ray from a hit at distance d meets a card at distance D > d at range
 //! D − d; the terrain's profile along the sample's azimuth is marched from d on
-//! (`super::terrain`). The wave facets ([`Sea::facet_nodes`]) spread the reflected rays over a few elevations;
-//! their card images are Fresnel-weighted, and seen through the air from the card to the sea
-//! (the chord) when the sky has aerial perspective (the renderer then attenuates the whole sea
-//! radiance from the sea to the camera). Exact mode uses the same sea fan.
+//! (`super::terrain`). On a calm sea there is one reflected ray; on a rough one the wave facets
+//! spread the reflected rays over many elevations, and a sample integrates over them
+//! ([`Shader::blur_parts`]): its slopes are cut where each object's image begins and ends and
+//! into cells, each part weighted by its exact Fresnel-weighted share from a per-frame table
+//! ([`SlopeTable`]) and shaded by one ray (cards averaged over the heights the part spans,
+//! `super::texture_box`), so images are smooth blurs, not copies at a few slopes. Card images
+//! are seen through the air from the card to the sea (the chord) when the sky has aerial
+//! perspective (the renderer then attenuates the whole sea radiance from the sea to the camera).
+//! Exact mode uses the same sea fan.
 
 use rayon::prelude::*;
 
@@ -28,9 +33,10 @@ use crate::scene::{Sea, Sky, Sun};
 /// Facet classes per sample for the cards' mirror images (the sky uses more, in its table).
 pub(super) const CARD_FACET_NODES: usize = 8;
 
-/// Facet classes whose share of the reflected light (weight × Fresnel reflectance) is below this
-/// are not traced to the cards: they change a pixel by less than 1e-3 of the card's radiance,
-/// a quarter of an 8-bit step.
+/// Facet classes (calm sea) or images (rough sea) whose share of the reflected light (weight ×
+/// Fresnel reflectance) is below this are not traced to the cards and the terrain: they change a
+/// pixel by less than 1e-3 of the object's radiance, a quarter of an 8-bit step (on a rough sea
+/// an image fades in up to twice this, [`fade`]).
 pub(super) const MIN_NODE_SHARE: f64 = 1e-3;
 
 /// Most elevations in a sea fan.

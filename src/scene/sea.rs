@@ -11,7 +11,10 @@
 //!   reflects the ray upwards at elevation g + 2s (clamped to ≥ 0: a ray sent back into the sea
 //!   is taken to skim it) with the Fresnel reflectance at its own grazing angle g + s. The sea is
 //!   `Σ wᵢ (Fᵢ Lᵢ + (1 − Fᵢ) L_water)` over a few such facet classes, Lᵢ being what the reflected
-//!   ray sees (sky, sun, cards). σ = 0 is a mirror: one class, the reflected ray at g.
+//!   ray sees (sky, sun, cards). σ = 0 is a mirror: one class, the reflected ray at g. For the
+//!   mirror images of cards and terrain, whose Lᵢ changes abruptly with the reflected elevation,
+//!   the renderer integrates the density itself ([`Sea::facet_density`]) over intervals of
+//!   slopes instead of sampling it at a few classes.
 //! * **Sun glitter** ([`Sea::glint_per_irradiance`], σ > 0): the sun is too small to be found by
 //!   a few reflected rays, so its reflection is the Cox–Munk glint radiance
 //!   `L = E ρ(ω) p(z_x, z_y) / (4 cos θ_v cos⁴ β)` (E: solar irradiance normal to the beam, β the
