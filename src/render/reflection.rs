@@ -590,8 +590,13 @@ pub(super) struct SlopeTable {
 }
 
 impl SlopeTable {
-    /// Grazing angles in the table.
-    const ENTRIES: usize = 512;
+    /// Most grazing angles in the table.
+    const MAX_ENTRIES: usize = 512;
+    /// Fewest grazing angles in the table.
+    const MIN_ENTRIES: usize = 16;
+    /// Grazing angles per rms along-ray slope σ′ (the shares change with g on the scale of σ′:
+    /// linear interpolation between entries σ′/64 apart errs by some 1e-5 of them).
+    const ENTRIES_PER_SIGMA: f64 = 64.0;
 
     /// The table of `sea` (σ > 0) over grazing angles [0, `g_hi`] (π/2 if not positive), with
     /// the sky radiance `sky` by elevation.
@@ -601,12 +606,18 @@ impl SlopeTable {
         } else {
             std::f64::consts::FRAC_PI_2
         };
-        let step = g_hi / (Self::ENTRIES - 1) as f64;
         let sigma_along = sea.along_ray_slope();
+        let wanted = (g_hi / sigma_along * Self::ENTRIES_PER_SIGMA).ceil();
+        let entries = if wanted.is_finite() {
+            (wanted as usize + 1).clamp(Self::MIN_ENTRIES, Self::MAX_ENTRIES)
+        } else {
+            Self::MAX_ENTRIES
+        };
+        let step = g_hi / (entries - 1) as f64;
         Self {
             sigma_along,
             inv_step: 1.0 / step,
-            knots: (0..Self::ENTRIES)
+            knots: (0..entries)
                 .into_par_iter()
                 .with_min_len(64)
                 .map(|i| Self::entry(sea, i as f64 * step, sigma_along, sky))
