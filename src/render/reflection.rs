@@ -1179,16 +1179,7 @@ impl Shader<'_> {
         mut each: impl FnMut(BlurPart),
     ) {
         let span = table.span(grazing_rad);
-        let mut spans = Spans::new();
-        for card in &self.cards {
-            if card.distance_m > distance_m && in_range(card, az) {
-                self.card_spans(fan, &span, card, distance_m, &mut spans);
-            }
-        }
-        let cover = self
-            .terrain
-            .as_ref()
-            .and_then(|t| terrain_cover(t, fan, &span, az, distance_m));
+        let (spans, cover) = self.images(fan, &span, distance_m, az);
         if spans.len() == 0 {
             if let Some((top, weight)) = cover {
                 each(terrain_part(&span, top, weight));
@@ -1232,6 +1223,29 @@ impl Shader<'_> {
                 sky: [0, 1, 2].map(|c| weight * (sky1[c] - sky0[c])),
             });
         }
+    }
+
+    /// The reflected elevations of `span` whose rays from the sea at `distance_m` (azimuth
+    /// offset `az`) meet each card, with their weights ([`Self::card_spans`]), and the highest
+    /// that meets the terrain with its weight ([`terrain_cover`]).
+    fn images(
+        &self,
+        fan: &SeaFan,
+        span: &SlopeSpan<'_>,
+        distance_m: f64,
+        az: f64,
+    ) -> (Spans, Option<(f64, f64)>) {
+        let mut spans = Spans::new();
+        for card in &self.cards {
+            if card.distance_m > distance_m && in_range(card, az) {
+                self.card_spans(fan, span, card, distance_m, &mut spans);
+            }
+        }
+        let cover = self
+            .terrain
+            .as_ref()
+            .and_then(|t| terrain_cover(t, fan, span, az, distance_m));
+        (spans, cover)
     }
 
     /// Append to `spans` the reflected elevations of `span` whose rays from the sea at

@@ -151,6 +151,34 @@ impl ViewCard<'_> {
     }
 }
 
+impl ViewCard<'_> {
+    /// The card's premultiplied texture where `ray` meets it at `meet`: the sample there, or
+    /// for a ray standing for a span of a rough sea's reflected rays, the mean over the heights
+    /// they meet (at the span's ends, as the sea fan interpolates them; the card's own edges
+    /// where a ray there has ended).
+    #[inline]
+    fn texel(&self, ray: &SampleRay<'_>, meet: &Meet) -> [f32; 4] {
+        let v = |h: f64| (self.top_m - h) / self.height_m;
+        match (ray.along, &self.columns) {
+            (
+                RayAlong::Reflected {
+                    fan,
+                    from_m,
+                    span_rad: (e0, e1),
+                    ..
+                },
+                Some(columns),
+            ) if e1 > e0 => {
+                let range_m = self.distance_m - from_m;
+                let end = |e: f64, edge: f64| fan.height(e, range_m).map_or(edge, v);
+                let (v0, v1) = (end(e0, 1.0), end(e1, 0.0));
+                columns.mean(self.texture, meet.u, v0, v1)
+            }
+            _ => self.texture.sample(meet.u, v(meet.height_m)),
+        }
+    }
+}
+
 /// Whether azimuth offset `offset` (rad) lies within `half_width` of a card's centre, wrapped
 /// into (−π, π] when it is beyond.
 #[inline]
@@ -211,26 +239,7 @@ impl SceneObject for ViewCard<'_> {
 
     #[inline]
     fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
-        let v = |h: f64| (self.top_m - h) / self.height_m;
-        let t = match (ray.along, &self.columns) {
-            (
-                RayAlong::Reflected {
-                    fan,
-                    from_m,
-                    span_rad: (e0, e1),
-                    ..
-                },
-                Some(columns),
-            ) if e1 > e0 => {
-                // The mean over the heights the span's rays meet (at its ends, as the sea fan
-                // interpolates them; the card's own edges where a ray there has ended).
-                let range_m = self.distance_m - from_m;
-                let end = |e: f64, edge: f64| fan.height(e, range_m).map_or(edge, v);
-                let (v0, v1) = (end(e0, 1.0), end(e1, 0.0));
-                columns.mean(self.texture, meet.u, v0, v1)
-            }
-            _ => self.texture.sample(meet.u, v(meet.height_m)),
-        };
+        let t = self.texel(ray, meet);
         let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
         let alpha = t[3] as f64;
         match (ray.along, &shader.aerial, &shader.reflection) {
