@@ -297,15 +297,15 @@ impl SeaFan {
         let Some(height) = self.at_range(range_m) else {
             return;
         };
-        if !(e_b >= e_a) {
+        if e_b.is_nan() || e_a.is_nan() || e_b < e_a {
             return;
         }
         let last = self.n_e - 1;
         let first = ((e_a * self.inv_step_e).max(0.0) as usize).min(last - 1);
         let end = ((e_b * self.inv_step_e).ceil().max(1.0) as usize).min(last);
         let blocks = &self.bounds[m * self.n_bounds..(m + 1) * self.n_bounds];
-        for b in first / BOUND_BLOCK..=(end - 1) / BOUND_BLOCK {
-            let [low, high] = blocks[b];
+        let (b_first, b_last) = (first / BOUND_BLOCK, (end - 1) / BOUND_BLOCK);
+        for (b, &[low, high]) in blocks.iter().enumerate().take(b_last + 1).skip(b_first) {
             if f64::from(high) < h_lo || f64::from(low) > h_hi {
                 continue;
             }
@@ -644,7 +644,7 @@ impl SlopeTable {
             .sum::<f64>()
             / k_max;
         let mut out = [[0.0; 8]; SLOPE_KNOTS + 1];
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return out;
         }
         let mut sums = [0.0; 4];
@@ -775,7 +775,7 @@ impl SlopeSpan<'_> {
     pub(super) fn position_of_share(&self, share: f64) -> f64 {
         let n = SLOPE_KNOTS as f64;
         let at = |k: usize, c: usize| self.a[k][c] + (self.b[k][c] - self.a[k][c]) * self.f;
-        if !(share < at(SLOPE_KNOTS, 0)) {
+        if share.is_nan() || share >= at(SLOPE_KNOTS, 0) {
             return 1.0;
         }
         // The last knot at or below the share.
@@ -1153,8 +1153,8 @@ impl Shader<'_> {
             return [0.0; 3];
         }
         let mut out = [0.0; 3];
-        for c in 0..3 {
-            out[c] = part.share * found.radiance[c] - covered * part.sky[c];
+        for (c, v) in out.iter_mut().enumerate() {
+            *v = part.share * found.radiance[c] - covered * part.sky[c];
         }
         out
     }
@@ -1208,11 +1208,11 @@ impl Shader<'_> {
         for (t0, t1) in breaks.parts() {
             let e = span.elevation(0.5 * (t0 + t1));
             let weight = weight_at(e);
-            if !(weight > 0.0) {
+            if weight.is_nan() || weight <= 0.0 {
                 continue;
             }
             let share = weight * (span.share(t1) - span.share(t0));
-            if !(share > 0.0) {
+            if share.is_nan() || share <= 0.0 {
                 continue;
             }
             let (sky0, sky1) = (span.sky(t0), span.sky(t1));

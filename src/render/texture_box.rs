@@ -111,7 +111,10 @@ impl TextureColumns {
     #[inline]
     pub(super) fn mean(&self, texture: &Texture, u: f64, v0: f64, v1: f64) -> [f32; 4] {
         let (v0, v1) = (v0.min(v1), v0.max(v1));
-        if !(v1 > v0) || self.prefix.is_empty() || !(0.0..=1.0).contains(&u) {
+        if v1.is_nan() || v0.is_nan() || v1 <= v0 || self.prefix.is_empty() {
+            return texture.sample(u, 0.5 * (v0 + v1));
+        }
+        if !(0.0..=1.0).contains(&u) {
             return texture.sample(u, 0.5 * (v0 + v1));
         }
         let w = self.width;
@@ -141,7 +144,7 @@ mod tests {
         let texels = (0..w * h)
             .map(|i| {
                 let (x, y) = ((i % w) as f32, (i / w) as f32);
-                let a = if (x + y) as u32 % 3 == 0 {
+                let a = if ((x + y) as u32).is_multiple_of(3) {
                     0.0
                 } else {
                     0.5 + 0.05 * y
