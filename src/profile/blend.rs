@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use super::{AirColumn, AirSample, normalise_breaks};
+use super::{AirColumn, AirSample, FineZone, normalise_breaks};
 
 /// Two air columns interpolated in time (module docs).
 pub struct TimeBlend {
@@ -19,6 +19,7 @@ pub struct TimeBlend {
     second: Arc<dyn AirColumn>,
     weight: f64,
     breaks_m: Vec<f64>,
+    fine_zones_m: Vec<FineZone>,
 }
 
 impl TimeBlend {
@@ -27,7 +28,10 @@ impl TimeBlend {
     pub fn new(first: Arc<dyn AirColumn>, second: Arc<dyn AirColumn>, weight: f64) -> Self {
         let mut breaks = first.breaks_m();
         breaks.extend(second.breaks_m());
+        let mut fine_zones_m = first.fine_zones_m();
+        fine_zones_m.extend(second.fine_zones_m());
         TimeBlend {
+            fine_zones_m,
             first,
             second,
             weight: weight.clamp(0.0, 1.0),
@@ -72,6 +76,10 @@ impl AirColumn for TimeBlend {
 
     fn breaks_m(&self) -> Vec<f64> {
         self.breaks_m.clone()
+    }
+
+    fn fine_zones_m(&self) -> Vec<FineZone> {
+        self.fine_zones_m.clone()
     }
 }
 

@@ -80,6 +80,49 @@ pub trait AirColumn: Send + Sync {
     fn breaks_m(&self) -> Vec<f64> {
         Vec::new()
     }
+    /// Height bands (m above mean sea level) where the column changes on a vertical scale
+    /// shorter than the tracer's default step would resolve and no break marks it (a smooth bump
+    /// such as the join above a sounding's top): each with the largest height change a step may
+    /// make there. Default: none.
+    fn fine_zones_m(&self) -> Vec<FineZone> {
+        Vec::new()
+    }
+}
+
+/// A height band where the air changes on a short vertical scale without a break (see
+/// [`AirColumn::fine_zones_m`]). Heights are above mean sea level in an [`AirColumn`] and above
+/// the surface in a [`StratifiedIndex`](crate::tracer::StratifiedIndex).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FineZone {
+    /// Bottom of the band (m).
+    pub lo_m: f64,
+    /// Top of the band (m).
+    pub hi_m: f64,
+    /// Largest height change (m) of one integration step inside the band or reaching into it.
+    pub max_rise_m: f64,
+}
+
+impl FineZone {
+    /// The same band `offset_m` lower (heights above the surface from heights above sea level).
+    pub fn lowered(self, offset_m: f64) -> Self {
+        FineZone {
+            lo_m: self.lo_m - offset_m,
+            hi_m: self.hi_m - offset_m,
+            ..self
+        }
+    }
+
+    /// The largest height change allowed to a step from `height_m` that may change height by up
+    /// to `limit_m`: `limit_m`, or less where the step could reach one of `zones`.
+    pub fn limit_rise_m(zones: &[FineZone], height_m: f64, limit_m: f64) -> f64 {
+        zones.iter().fold(limit_m, |limit, z| {
+            if height_m + limit > z.lo_m && height_m - limit < z.hi_m {
+                limit.min(z.max_rise_m)
+            } else {
+                limit
+            }
+        })
+    }
 }
 
 /// Sort heights, drop non-finite ones and merge those closer than 1 mm (one break).
@@ -117,4 +160,30 @@ pub struct InversionLayer {
     pub max_gradient_k_per_m: f64,
     /// Surface-based or elevated.
     pub kind: InversionKind,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FineZone;
+
+    #[test]
+    fn a_step_that_could_reach_a_fine_zone_takes_its_cap() {
+        let zones = [FineZone {
+            lo_m: 1000.0,
+            hi_m: 1500.0,
+            max_rise_m: 20.0,
+        }];
+        // Inside, and within reach below and above: the zone's cap.
+        assert_eq!(FineZone::limit_rise_m(&zones, 1200.0, 100.0), 20.0);
+        assert_eq!(FineZone::limit_rise_m(&zones, 950.0, 100.0), 20.0);
+        assert_eq!(FineZone::limit_rise_m(&zones, 1550.0, 100.0), 20.0);
+        // Out of reach: the caller's limit; a smaller limit than the zone's is kept.
+        assert_eq!(FineZone::limit_rise_m(&zones, 800.0, 100.0), 100.0);
+        assert_eq!(FineZone::limit_rise_m(&zones, 1200.0, 5.0), 5.0);
+        let lowered = zones[0].lowered(300.0);
+        assert_eq!(
+            (lowered.lo_m, lowered.hi_m, lowered.max_rise_m),
+            (700.0, 1200.0, 20.0)
+        );
+    }
 }

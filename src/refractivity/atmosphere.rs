@@ -26,7 +26,7 @@ use super::RefractivityError;
 use super::ciddor::{CiddorDispersion, DEFAULT_CO2_PPM};
 use super::dual::Dual;
 use super::table::{GridError, HermiteGrid, Lookup};
-use crate::profile::{AirColumn, AirSample};
+use crate::profile::{AirColumn, AirSample, FineZone};
 use crate::tracer::{MinorBreak, ScanGrid, StratifiedIndex};
 
 /// Lowest and highest wavelength (nm) the Ciddor formula is fitted for.
@@ -151,6 +151,8 @@ pub struct RefractiveAtmosphere {
     breaks_agl_m: Vec<f64>,
     /// The column's breaks where only d²n/dh² jumps.
     minor_breaks: Vec<MinorBreak>,
+    /// The column's fine zones, as heights above the surface (m).
+    fine_zones: Vec<FineZone>,
 }
 
 impl std::fmt::Debug for RefractiveAtmosphere {
@@ -278,6 +280,11 @@ impl RefractiveAtmosphere {
             error: OnceLock::new(),
             breaks_agl_m,
             minor_breaks,
+            fine_zones: column
+                .fine_zones_m()
+                .into_iter()
+                .map(|z| z.lowered(surface_m))
+                .collect(),
             column,
         })
     }
@@ -474,6 +481,12 @@ impl StratifiedIndex for RefractiveAtmosphere {
     /// The column's breaks where only d²n/dh² jumps, with the jump.
     fn minor_breaks(&self) -> &[MinorBreak] {
         &self.minor_breaks
+    }
+
+    /// The air column's fine zones (heights above the surface; see
+    /// [`AirColumn::fine_zones_m`](crate::profile::AirColumn::fine_zones_m)).
+    fn fine_zones(&self) -> &[FineZone] {
+        &self.fine_zones
     }
 }
 

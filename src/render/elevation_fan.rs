@@ -100,6 +100,27 @@ fn same_kind(a: &FanEnd, b: &FanEnd) -> bool {
     kind(a) == kind(b)
 }
 
+/// Whether two ends are the same, bit for bit.
+fn same_end(a: &FanEnd, b: &FanEnd) -> bool {
+    match (a, b) {
+        (
+            FanEnd::Ground {
+                distance_m: d0,
+                grazing_rad: g0,
+            },
+            FanEnd::Ground {
+                distance_m: d1,
+                grazing_rad: g1,
+            },
+        ) => d0.to_bits() == d1.to_bits() && g0.to_bits() == g1.to_bits(),
+        (FanEnd::Sky { elevation_rad: e0 }, FanEnd::Sky { elevation_rad: e1 }) => {
+            e0.to_bits() == e1.to_bits()
+        }
+        (FanEnd::Trapped, FanEnd::Trapped) | (FanEnd::Lost, FanEnd::Lost) => true,
+        _ => false,
+    }
+}
+
 /// Does the interval (a, b) with traced midpoint m need more bisection?
 fn needs_refinement(spec: &FanSpec, a: &FanRay, m: &FanRay, b: &FanRay) -> bool {
     if !same_kind(&a.end, &m.end) || !same_kind(&m.end, &b.end) {
@@ -366,9 +387,10 @@ impl ElevationFan {
             .collect()
     }
 
-    /// Index i of the interval [αᵢ, αᵢ₊₁] holding `alpha` (clamped to the fan), in O(1).
+    /// Index i of the interval [αᵢ, αᵢ₊₁] holding `alpha` (clamped to the fan), in O(1): the
+    /// one every lookup of `alpha` reads.
     #[inline]
-    fn interval(&self, alpha: f64) -> usize {
+    pub(crate) fn interval(&self, alpha: f64) -> usize {
         let n = self.alphas.len();
         if n < 2 {
             return 0;
@@ -380,10 +402,54 @@ impl ElevationFan {
             .min((self.guide.len() - 1) as f64);
         let b = b as i32 as usize;
         let mut i = self.guide[b] as usize;
+        // The bucket's start is rounded: should it land a node past `alpha`, step back, so
+        // the interval depends on the traced elevations alone (not on the guide's width).
+        while i > 0 && self.alphas[i] > alpha {
+            i -= 1;
+        }
         while i + 2 < n && self.alphas[i + 1] <= alpha {
             i += 1;
         }
         i
+    }
+
+    /// Whether every lookup of an elevation in [`lo`, `hi`] (rad) — [`Self::interpolate`],
+    /// [`Self::interpolate_end`], [`Self::height_range`] — reads the same traced rays, bit for
+    /// bit, in this fan as in `other`, and so gives the same answer. Both fans must have been
+    /// traced by the same tracer for the same spec but the sun band: the rays one node either
+    /// side of the intervals that hold `lo` and `hi` are compared (one more below than the
+    /// lookups read, for tables indexed by the fan's elevations with the other bracketing
+    /// convention, such as the air paths).
+    pub fn same_rays_over(&self, other: &ElevationFan, lo: f64, hi: f64) -> bool {
+        if self.n_distances != other.n_distances || self.len() < 2 || other.len() < 2 {
+            return false;
+        }
+        let window = |fan: &ElevationFan| {
+            let first = fan.interval(lo).saturating_sub(1);
+            let last = (fan.interval(hi) + 1).min(fan.len() - 1);
+            (first, last)
+        };
+        let ((a0, a1), (b0, b1)) = (window(self), window(other));
+        // A window at an end of one fan must be at the same end of the other (lookups clamp
+        // there).
+        if (a0 == 0) != (b0 == 0)
+            || (a1 == self.len() - 1) != (b1 == other.len() - 1)
+            || a1 - a0 != b1 - b0
+        {
+            return false;
+        }
+        (0..=a1 - a0).all(|k| self.same_ray(a0 + k, other, b0 + k))
+    }
+
+    /// Whether ray `i` of this fan and ray `j` of `other` are the same, bit for bit.
+    fn same_ray(&self, i: usize, other: &ElevationFan, j: usize) -> bool {
+        let d = self.n_distances;
+        self.alphas[i].to_bits() == other.alphas[j].to_bits()
+            && same_end(&self.ends[i], &other.ends[j])
+            && self.heights[i * d..(i + 1) * d]
+                .iter()
+                .zip(&other.heights[j * d..(j + 1) * d])
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits))
     }
 
     /// The interval i of the fan holding `alpha` (clamped) and the fraction t ∈ [0, 1] of the

@@ -14,16 +14,21 @@
 //! less than [`FLAT_ROW_FRACTION`] × the fan tolerance (the elevation changes by ≈ α·u²/2 across
 //! a row: one band for every row of a narrow mirage frame at 400×200, one to a few at
 //! 1920×1080). Each band is shaded at the elevation of its first column: one fan lookup, one sea
-//! or sky colour, and per pixel only the card tests in card columns. Rows whose ray may meet
-//! the sun, or that would need more than a few bands, are shaded pixel by pixel (the disc
-//! depends on each pixel's own elevation and azimuth).
+//! or sky colour, and per pixel only the card tests in card columns. Rows that would need more
+//! than a few bands are shaded pixel by pixel. A band whose ray may show the sun — its disc, or
+//! its glitter or mirror image on the sea, which depend on each pixel's azimuth — adds the sun's
+//! part column by column, exact at node columns and interpolated between them within a
+//! documented tolerance (`band_sun`).
 //!
 //! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
 //! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
-//! band whose sea mirrors a card shades that card's columns pixel by pixel (on a rough sea, the
-//! parts of the slopes that mirror something are found once per band and set of mirrored cards),
-//! and rows whose sea may show the sun's glitter are shaded pixel by pixel like rows that meet
-//! the sun.
+//! band whose sea mirrors a card shades that card's columns pixel by pixel (with the sun's part,
+//! exact, when the band may show it; on a rough sea, the parts of the slopes that mirror
+//! something are found once per band and set of mirrored cards).
+//!
+//! **Frame plans** (`plan`): everything a frame's rows are shaded from (fan, tables, shader) is
+//! built first, then each row is shaded on its own; a sun sweep (`sweep`) shades only the rows
+//! that its sun can change and copies the others from its first frame.
 //!
 //! Exact mode instead calls the tracer for every sample (no fan, no interpolation, no flat rows):
 //! it validates the fast path and is the benchmark baseline.
@@ -33,10 +38,12 @@
 //! own). With one sample per pixel the pixel centre is used.
 
 mod air_paths;
+mod band_sun;
 pub mod curved;
 pub mod elevation_fan;
 mod memo;
 mod objects;
+mod plan;
 pub mod ray_model;
 mod reflection;
 mod shade;
@@ -47,25 +54,21 @@ pub mod sweep_plot;
 pub mod terrain;
 mod texture_box;
 
-use std::io::IsTerminal;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::scene::camera::{CameraFrame, ViewDirection};
-use crate::scene::sky::SunDisc;
-use crate::scene::{Scene, Sun, samples_per_pixel_root};
-use air_paths::AirPaths;
+use crate::scene::{Scene, Sun};
+use band_sun::{BandColumns, BandSun};
 pub use curved::{CurvedRays, ExactRays, PrepareError, prepare_tracer, render_tracer_config};
 pub use elevation_fan::{ElevationFan, FanSpec};
 pub use memo::MemoRays;
 use objects::{RayAlong, SampleRay};
+use plan::FramePlan;
 pub use ray_model::{ConstantCurvatureRays, FanEnd, FanRay, RayTracer, StraightRays};
-use shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
-use sun::SunTransmittance;
-use terrain::{TerrainFrame, TerrainView};
+use shade::{Shader, ViewCard, wrap_pi};
+use terrain::TerrainView;
 
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
@@ -266,6 +269,8 @@ struct RowScratch {
     band_columns: Vec<(usize, (usize, usize))>,
     /// Interpolated heights at the card distances of each flat band, band after band.
     band_heights: Vec<Option<f64>>,
+    /// What the sun adds in each column of a flat row whose band may show it.
+    sun_added: Vec<[f64; 3]>,
 }
 
 impl RowScratch {
@@ -276,6 +281,7 @@ impl RowScratch {
             card_columns: Vec::new(),
             band_columns: Vec::new(),
             band_heights: Vec::new(),
+            sun_added: Vec::new(),
         }
     }
 
@@ -308,7 +314,8 @@ impl RowScratch {
 /// half-width in radians): across a 1° mirage frame at α = 0.3° that is 0.005 px at 400 px wide
 /// (every row of the paper frames at 400×200 is one band) but 0.02 px at 1920 (rows of a 1080p
 /// frame take one to a few bands). A band shares one ray — one fan lookup, the sea or sky colour once —
-/// and only columns that can meet a card (or rows that meet the sun) are shaded pixel by pixel.
+/// and only columns that can meet a card (or, for the sun's part, that may show the sun) are
+/// shaded pixel by pixel.
 /// Features are then misplaced by at most (1 + this) × the fan tolerance.
 pub const FLAT_ROW_FRACTION: f64 = 0.1;
 
@@ -339,6 +346,8 @@ struct FlatBand {
     /// Whether the sea it meets may mirror a card (its card columns then shade the sea's
     /// reflections pixel by pixel).
     reflects: bool,
+    /// Whether it may show the sun (its columns then add the sun's part, `band_sun`).
+    sun: bool,
 }
 
 /// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
@@ -381,8 +390,9 @@ pub fn flat_bands(
     Some(bands)
 }
 
-/// Shade row `y` (1 sample per pixel) band by band ([`flat_bands`]: each band at one elevation),
-/// if it can be cut into few enough bands and no band meets the sun; returns whether it did.
+/// Shade row `y` (1 sample per pixel) band by band ([`flat_bands`]: each band at one elevation,
+/// with the sun's part per column where a band may show it), if it can be cut into few enough
+/// bands and no band's sea may mirror the terrain; returns whether it did.
 fn shade_flat_row(
     ctx: &FlatRow<'_>,
     row: &mut [[f32; 4]],
@@ -398,6 +408,7 @@ fn shade_flat_row(
     let RowScratch {
         band_heights,
         band_columns: columns,
+        sun_added,
         ..
     } = scratch;
     band_heights.clear();
@@ -416,15 +427,30 @@ fn shade_flat_row(
                 clear_sky: true,
                 fan_end: FanEnd::Lost,
                 reflects: false,
+                sun: false,
             });
             continue;
         }
         let fan_end = ctx.fan.interpolate(alpha, heights);
-        if ctx.shader.may_meet_sun(fan_end)
-            || ctx.shader.may_meet_glint(fan_end)
-            || ctx.shader.may_reflect_terrain(fan_end)
-        {
+        if ctx.shader.may_reflect_terrain(fan_end) {
             return false;
+        }
+        let dir = ctx
+            .frame
+            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
+        let background = ctx.shader.background_with(&dir, fan_end, false);
+        let sun = BandSun::of(ctx.shader, alpha, fan_end);
+        if let Some(sun) = sun {
+            sun_added.resize(width as usize, [0.0; 3]);
+            let run = BandColumns {
+                shader: ctx.shader,
+                frame: ctx.frame,
+                film_y,
+                alpha,
+                sun,
+                background,
+            };
+            run.fill_band((start, end), width as usize, sun_added);
         }
         let mut reflects = false;
         for card in &ctx.shader.cards {
@@ -438,20 +464,27 @@ fn shade_flat_row(
                 columns.push((k, range.unwrap_or((0, width as usize))));
             }
         }
-        let dir = ctx
-            .frame
-            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
         bands.push(FlatBand {
             start,
             end,
             alpha,
-            background: ctx.shader.background_with(&dir, fan_end, false),
+            background,
             clear_sky: false,
             fan_end,
             reflects,
+            sun: sun.is_some(),
         });
     }
-    shade_bands(ctx, row, &bands, band_heights, columns, non_finite);
+    let sun_added = &sun_added[..];
+    shade_bands(
+        ctx,
+        row,
+        &bands,
+        band_heights,
+        columns,
+        sun_added,
+        non_finite,
+    );
     true
 }
 
@@ -463,6 +496,7 @@ fn shade_bands(
     bands: &[FlatBand],
     band_heights: &[Option<f64>],
     columns: &[(usize, (usize, usize))],
+    sun_added: &[[f64; 3]],
     non_finite: &AtomicU64,
 ) {
     let width = row.len();
@@ -507,13 +541,16 @@ fn shade_bands(
                 .frame
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
             let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
-            let background = if band.reflects {
+            let background = if band.reflects || band.sun {
                 ctx.shader
                     .band_background(&dir, band.fan_end, k, &mut parts)
             } else {
                 band.background
             };
             pixel(finite(ctx.shader.composite(&dir, heights, background)))
+        } else if band.sun {
+            let (c, add) = (band.background, sun_added[x]);
+            pixel(finite([c[0] + add[0], c[1] + add[1], c[2] + add[2]]))
         } else {
             if !band.background.iter().all(|v| v.is_finite()) {
                 non_finite.fetch_add(1, Ordering::Relaxed);
@@ -669,494 +706,20 @@ fn traced_grid(
         .collect()
 }
 
-/// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
-const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
-
-/// What [`sea_reflection`] needs of the frame.
-struct SeaReflectionInputs<'a> {
-    scene: &'a Scene,
-    tracer: &'a dyn RayTracer,
-    fan: Option<&'a ElevationFan>,
-    elevations: (f64, f64),
-    pixel_rad: f64,
-    camera_height_m: f64,
-    /// The card distances in view (m).
-    distances_m: &'a [f64],
-    /// The farthest card in view (m), if any.
-    farthest_card_m: Option<f64>,
-    /// The farthest ground distance of the terrain in view (m), if any.
-    farthest_terrain_m: Option<f64>,
-}
-
-/// The sea's reflections for a frame: a sea fan when a card or terrain is in view (over the reflected
-/// elevations the frame's grazing angles and the wave facets reach), the sun's glitter or mirror
-/// image. `None` when the scene turns reflections off or the frame shows no sea.
-/// `reflected_sky`: the sky by elevation over [0, π/2].
-fn sea_reflection(
-    reflected_sky: AngleTable,
-    inp: &SeaReflectionInputs<'_>,
-) -> Option<reflection::Reflection> {
-    let scene = inp.scene;
-    let sea = scene.sea;
-    if !sea.reflections {
-        return None;
-    }
-    // The steepest grazing angle in the frame: the fan's, or in exact mode that of the frame's
-    // lowest ray (Bouguer's invariant n(h)(R + h) cos e fixes cos g = n_c (R + h_c) cos α /
-    // (n_0 R): the steepest launch meets the sea steepest).
-    let max_grazing = match inp.fan {
-        Some(fan) => fan.max_grazing_rad(),
-        None => {
-            let ray = inp.tracer.trace(
-                inp.camera_height_m,
-                inp.elevations.0,
-                inp.distances_m,
-                false,
-            );
-            match ray.end {
-                FanEnd::Ground { grazing_rad, .. } if grazing_rad.is_finite() => Some(grazing_rad),
-                _ => None,
-            }
-        }
-    }?;
-    let half_pi = std::f64::consts::FRAC_PI_2;
-    let sigma_along = sea.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2;
-    let e_hi = (max_grazing + 8.0 * sigma_along)
-        .min(half_pi)
-        .max(inp.pixel_rad);
-    let mirror = sea.wave_slope_rad == 0.0;
-    // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
-    // elevation, so interpolation is exact for them); an eighth of the rms facet slope σ′
-    // otherwise (a rough sea's images are integrated over reflected elevations spread by ±8σ′,
-    // with heights linear between the fan's rays).
-    let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
-    // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
-    let need_sky = mirror && scene.sun.is_some();
-    let max_range_m = match (inp.farthest_card_m, inp.farthest_terrain_m) {
-        (Some(a), Some(b)) => Some(a.max(b)),
-        (a, b) => a.or(b),
-    }
-    .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
-    // The air along reflected rays to the terrain is summed in the fan (cards take the chord).
-    let density = inp
-        .farthest_terrain_m
-        .and(scene.sky.extinction())
-        .map(|e| (e.scale_heights_m(), scene.earth_radius_m));
-    let fan = max_range_m
-        .and_then(|d| reflection::SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density));
-    let sky = scene.sky;
-    let glint = scene.sun.filter(|_| !mirror).map(|sun| {
-        // The sun's light at the sea comes along its own curved ray from the sea surface (a
-        // ray skimming a surface duct crosses far more air than any air-mass formula of its
-        // elevation gives); none when the sun is below the sea's apparent horizon.
-        let launch = reflection::sea_level_sun_launch_rad(inp.tracer, sun.elevation_rad);
-        let extinction = sky.sun_extinction();
-        let t = launch
-            .and_then(|a| {
-                inp.tracer
-                    .density_paths_m(0.0, a, extinction.scale_heights_m())
-            })
-            .map_or([0.0; 3], |paths| {
-                extinction.path_optical_depth(paths).map(|tau| (-tau).exp())
-            });
-        let refraction_rad = launch.map_or(0.0, |a| a - sun.elevation_rad);
-        let r = 0.5 * sun.angular_diameter_rad;
-        let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
-        reflection::Glint {
-            sun,
-            refraction_rad,
-            irradiance: t.map(|t| sun.intensity * solid_angle * t),
-            radiance_cap: t.map(|t| sun.intensity * t),
-        }
-    });
-    let facets = if mirror {
-        reflection::Facets::Mirror(reflection::FacetTable::new(&sea, max_grazing))
-    } else if fan.is_some() {
-        reflection::Facets::Rough(reflection::SlopeTable::new(
-            &sea,
-            max_grazing,
-            &reflected_sky,
-        ))
-    } else {
-        reflection::Facets::None
-    };
-    Some(reflection::Reflection {
-        sea,
-        sky,
-        earth_radius_m: scene.earth_radius_m,
-        fan,
-        sky_table: reflected_sky,
-        facets,
-        glint,
-        mirror_sun: scene
-            .sun
-            .filter(|_| mirror)
-            .map(|sun| (sun, SunDisc::new(&sun))),
-    })
-}
-
-/// The column integrals of `texture`, built once per image: `built` holds those built so far.
-fn texture_columns(
-    built: &mut Vec<(
-        *const crate::scene::Texture,
-        Arc<texture_box::TextureColumns>,
-    )>,
-    texture: &Arc<crate::scene::Texture>,
-) -> Arc<texture_box::TextureColumns> {
-    let key = Arc::as_ptr(texture);
-    if let Some((_, c)) = built.iter().find(|(k, _)| *k == key) {
-        return c.clone();
-    }
-    let c = Arc::new(texture_box::TextureColumns::new(texture));
-    built.push((key, c.clone()));
-    c
-}
-
 /// Render `scene` through `tracer`.
 pub fn render_scene(
     scene: &Scene,
     tracer: &dyn RayTracer,
     options: &RenderOptions,
 ) -> Result<Film, RenderError> {
-    let spp = options
-        .samples_per_pixel
-        .unwrap_or(scene.camera.samples_per_pixel);
-    let n = samples_per_pixel_root(spp).ok_or(RenderError::SamplesPerPixel(spp))?;
-    if !(options.tolerance_px.is_finite() && options.tolerance_px > 0.0) {
-        return Err(RenderError::Tolerance(options.tolerance_px));
-    }
-    check_tracer_tolerance(options.tolerance_m)?;
-    let cam = &scene.camera;
-    let frame = cam.frame();
-    let pixel_rad = 1.0 / frame.focal_px;
-    let (width, height) = (cam.width, cam.height);
-    let radius = scene.earth_radius_m;
-
-    // Cards in view (by azimuth), nearest first; the distances the tracer must report.
-    let span = azimuth_span(&frame, width, height, cam.heading_rad);
-    let mut order: Vec<usize> = (0..scene.cards.len()).collect();
-    order.sort_by(|&a, &b| {
-        scene.cards[a]
-            .distance_m
-            .total_cmp(&scene.cards[b].distance_m)
-    });
-    let mut distances_m: Vec<f64> = Vec::new();
-    let mut max_top_m: Vec<f64> = Vec::new();
-    let mut cards = Vec::new();
-    // A rough sea mirrors the cards' textures averaged over heights (once per image).
-    let blurred = scene.sea.reflections && scene.sea.wave_slope_rad > 0.0;
-    let mut columns = Vec::new();
-    for i in order {
-        let c = &scene.cards[i];
-        let ground_radius = radius * (c.distance_m / radius).sin();
-        let half_width_rad = if ground_radius > 0.5 * c.width_m {
-            (0.5 * c.width_m / ground_radius).min(std::f64::consts::PI)
-        } else {
-            std::f64::consts::PI
-        };
-        if let Some((lo, hi)) = span {
-            let off = wrap_pi(c.azimuth_rad - cam.heading_rad);
-            let pad = half_width_rad + 2.0 * pixel_rad;
-            if off + pad < lo || off - pad > hi {
-                continue;
-            }
-        }
-        let top_m = c.base_m + c.height_m;
-        if distances_m.last() != Some(&c.distance_m) {
-            distances_m.push(c.distance_m);
-            max_top_m.push(top_m);
-        }
-        let k = distances_m.len() - 1;
-        max_top_m[k] = max_top_m[k].max(top_m);
-        cards.push(ViewCard {
-            distance_index: k,
-            distance_m: c.distance_m,
-            offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),
-            half_width_rad,
-            base_m: c.base_m,
-            top_m,
-            height_m: c.height_m,
-            texture: &c.texture,
-            columns: blurred.then(|| texture_columns(&mut columns, &c.texture)),
-            reflected_haze: None,
-        });
-        if blurred && let Some(extinction) = scene.sky.extinction() {
-            let card = cards.last_mut().expect("just pushed");
-            card.reflected_haze = Some(shade::ReflectedHaze::new(&extinction, radius, card));
-        }
-    }
-    let elevations = elevation_range(&frame, width, height, pixel_rad);
-    let terrain = scene.terrain.as_ref().and_then(|t| {
-        let frame = TerrainFrame {
-            camera_height_m: cam.height_m,
-            heading_rad: cam.heading_rad,
-            earth_radius_m: radius,
-            azimuth_span_rad: span,
-            elevation_range_rad: elevations,
-            pixel_rad: cam.min_pixel_angle_rad(),
-            tolerance_px: options.tolerance_px,
-            max_depth: options.max_refine_depth,
-            brightness: scene.sky.brightness,
-            scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
-        };
-        let mut view = TerrainView::new(t, tracer, frame, options.exact)?;
-        if scene.sea.reflections && scene.sea.wave_slope_rad > 0.0 {
-            view.prepare_reflections();
-        }
-        Some(view)
-    });
-    let (sky, sea) = (scene.sky, scene.sea);
-    // The optical depths once per frame, not once per table entry (same values).
-    let depths = sky.optical_depths();
-    let need_sky_direction = scene.sun.is_some();
-    let mut stats = RenderStats {
-        cards_in_view: cards.len(),
-        ..RenderStats::default()
-    };
-
-    // Samples at or above this elevation see only sky (no sun, above every card): shade them
-    // from the sky table alone — the same result as the full path, without the fan lookup.
-    let mut clear_sky_from = f64::INFINITY;
-    let build_fan = || {
-        if options.exact {
-            return None;
-        }
-        let spec = FanSpec {
-            camera_height_m: cam.height_m,
-            distances_m: distances_m.clone(),
-            max_top_m,
-            need_sky_direction,
-            sun_band_rad: scene.sun.map(|s| sun_band_rad(&s, pixel_rad)),
-            elevation_range_rad: elevations,
-            // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
-            // sub-pixel bound holds everywhere, not only at the centre.
-            pixel_rad: cam.min_pixel_angle_rad(),
-            tolerance_px: options.tolerance_px,
-            max_depth: options.max_refine_depth,
-        };
-        let fan = ElevationFan::build(tracer, &spec);
-        let clear_sky_from = if scene.sun.is_none() {
-            fan.clear_sky_from(&spec.max_top_m)
-        } else {
-            f64::INFINITY
-        };
-        Some((fan, clear_sky_from))
-    };
-    // The sky table needs no fan: build both at once.
-    let (fan, sky_table) = rayon::join(build_fan, || {
-        AngleTable::new(elevations.0, elevations.1, |e| {
-            sky.radiance_with_depths(e, depths)
-        })
-    });
-    let fan = fan.map(|(fan, from)| {
-        clear_sky_from = from;
-        // Samples that may meet the terrain are not clear sky.
-        if let Some(t) = &terrain
-            && t.may_hit_rad.0 <= t.may_hit_rad.1
-        {
-            clear_sky_from = clear_sky_from.max(t.may_hit_rad.1.next_up());
-        }
-        stats.fan_rays = fan.len();
-        stats.fan_depth = fan.max_depth_reached;
-        fan
-    });
-
-    // The sea table spans grazing angles from 0 (where a NaN grazing angle is shaded) to the
-    // steepest the frame can show: with a fan, the steepest fan ray (interpolation stays between
-    // neighbours); per-sample tracing, 90°.
-    let sea_hi = fan
-        .as_ref()
-        .and_then(ElevationFan::max_grazing_rad)
-        .map_or(std::f64::consts::FRAC_PI_2, |g| {
-            g.min(std::f64::consts::FRAC_PI_2)
-        });
-    // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact mode.
-    let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
-    let traced = match &fan {
-        Some(fan) if needs_paths => fan.rays_and_ends(),
-        None if needs_paths => traced_grid(tracer, cam.height_m, elevations, pixel_rad),
-        _ => Vec::new(),
-    };
-    let sun_path = scene.sun.and_then(|sun| {
-        let band = sun_band_rad(&sun, pixel_rad);
-        SunTransmittance::build(tracer, cam.height_m, &sky.sun_extinction(), band, &traced)
-    });
-    // The sky by the elevation of a reflected ray, from the sea table's facet classes and the
-    // sea's reflections alike.
-    let reflected_sky = AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
-        sky.radiance_with_depths(e, depths)
-    });
-    let sea_table = AngleTable::new(0.0, sea_hi, |g| {
-        sea.radiance_reflecting(g, |e| reflected_sky.at(e))
-    });
-    let reflection = sea_reflection(
-        reflected_sky,
-        &SeaReflectionInputs {
-            scene,
-            tracer,
-            fan: fan.as_ref(),
-            elevations,
-            pixel_rad,
-            camera_height_m: cam.height_m,
-            distances_m: &distances_m,
-            farthest_card_m: distances_m.last().copied(),
-            farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
-        },
-    );
-    stats.sea_fan_rays = reflection
-        .as_ref()
-        .and_then(|r| r.fan.as_ref())
-        .map_or(0, reflection::SeaFan::len);
-    let shader = Shader {
-        distances_m: distances_m.clone(),
-        reflection,
-        terrain,
-        cards,
-        sky_table,
-        sea_table,
-        sun: scene.sun.as_ref().map(SunDisc::new),
-        sun_transmittance: scene
-            .sun
-            .map(|_| AngleTable::new(elevations.0, elevations.1, |e| sky.transmittance(e))),
-        sun_path: sun_path.inspect(|p| stats.sun_rays = p.len()),
-        heading_rad: cam.heading_rad,
-        // A lost (trapped) ray travels in the lowest air: show the horizon sky.
-        fallback: scene.sky.radiance(0.0),
-        aerial: scene.sky.extinction().map(|extinction| {
-            let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
-            let scales = extinction.scale_heights_m();
-            let paths = AirPaths::build(tracer, cam.height_m, &distances_m, scales, &alphas);
-            stats.air_path_rays = paths.as_ref().map_or(0, AirPaths::len);
-            AerialShading {
-                extinction,
-                camera_height_m: cam.height_m,
-                earth_radius_m: radius,
-                distances_m: distances_m.clone(),
-                paths,
-            }
-        }),
-    };
-
-    let traced_sample = TracedSample {
-        tracer,
-        camera_height_m: cam.height_m,
-        distances_m: &distances_m,
-        need_sky_direction,
-    };
-    let bar = if options.quiet || !std::io::stderr().is_terminal() {
-        ProgressBar::hidden()
-    } else {
-        let bar = ProgressBar::new(height as u64);
-        if let Ok(style) =
-            ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} rows ({eta})")
-        {
-            bar.set_style(style);
-        }
-        bar
-    };
-
-    // A row whose elevations span less than this is shaded at one elevation (see
-    // [`FLAT_ROW_FRACTION`]).
-    let flat_row_limit_rad = FLAT_ROW_FRACTION * options.tolerance_px * cam.min_pixel_angle_rad();
-    let non_finite = AtomicU64::new(0);
-    let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
-    let inv_samples = 1.0 / (n * n) as f64;
-    let n_dist = distances_m.len();
-    let samples_per_row = width as usize * (n * n) as usize;
-    pixels
-        .par_chunks_mut(width as usize)
-        .enumerate()
-        .progress_with(bar.clone())
-        .for_each_init(
-            || RowScratch::new(samples_per_row, n_dist),
-            |scratch, (y, row)| {
-                if let Some(fan) = &fan
-                    && n == 1
-                    && shader
-                        .terrain
-                        .as_ref()
-                        .is_none_or(|t| !row_may_meet_terrain(t, &frame, y as u32, width))
-                    && shade_flat_row(
-                        &FlatRow {
-                            frame: &frame,
-                            fan,
-                            shader: &shader,
-                            clear_sky_from,
-                            limit_rad: flat_row_limit_rad,
-                            y: y as u32,
-                        },
-                        row,
-                        scratch,
-                        &non_finite,
-                    )
-                {
-                    return;
-                }
-                scratch.directions(&frame, y as u32, width, n);
-                let RowScratch {
-                    dirs,
-                    heights,
-                    card_columns,
-                    ..
-                } = scratch;
-                // Which pixels' rays may meet a card: all of them when tracing per sample;
-                // with a fan, those in the column range of a card that the row's rays can reach.
-                card_columns.clear();
-                match &fan {
-                    None => card_columns.push((0, width as usize)),
-                    Some(fan) => {
-                        let (lo, hi) = dirs
-                            .iter()
-                            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
-                                (a.min(d.elevation_rad), b.max(d.elevation_rad))
-                            });
-                        card_columns.extend(shader.cards.iter().filter_map(|card| {
-                            card_columns_in_row(card, fan, (lo, hi), &frame, y as u32, width)
-                        }));
-                    }
-                }
-                for (x, px) in row.iter_mut().enumerate() {
-                    let may_meet_card = card_columns.iter().any(|&(a, b)| (a..b).contains(&x));
-                    let mut acc = [0.0f64; 3];
-                    let first = x * (n * n) as usize;
-                    for dir in &dirs[first..first + (n * n) as usize] {
-                        let alpha = dir.elevation_rad;
-                        let c = match &fan {
-                            Some(_) if alpha >= clear_sky_from => shader.sky_table.at(alpha),
-                            Some(fan) => {
-                                shade_fan_sample(&shader, fan, dir, may_meet_card, heights)
-                            }
-                            None => shade_traced_sample(&shader, &traced_sample, dir),
-                        };
-                        let c = if c.iter().all(|v| v.is_finite()) {
-                            c
-                        } else {
-                            non_finite.fetch_add(1, Ordering::Relaxed);
-                            shader.fallback
-                        };
-                        for i in 0..3 {
-                            acc[i] += c[i];
-                        }
-                    }
-                    *px = [
-                        (acc[0] * inv_samples) as f32,
-                        (acc[1] * inv_samples) as f32,
-                        (acc[2] * inv_samples) as f32,
-                        1.0,
-                    ];
-                }
-            },
-        );
-    bar.finish_and_clear();
-    stats.non_finite_samples = non_finite.load(Ordering::Relaxed);
-    if options.exact {
-        stats.sample_rays = width as u64 * height as u64 * (n * n) as u64;
-    }
+    let plan = FramePlan::new(scene, tracer, options, None)?;
+    let (pixels, non_finite) = plan.shade_all(options.quiet);
+    let (width, height) = plan.size();
     Ok(Film {
         width,
         height,
         pixels,
-        stats,
+        stats: plan.stats(non_finite),
     })
 }
 

@@ -302,8 +302,8 @@ mod tests {
     fn shader() -> Shader<'static> {
         Shader {
             cards: Vec::new(),
-            sky_table: AngleTable::new(0.0, 1.0, |_| [1.0; 3]),
-            sea_table: AngleTable::new(0.0, 1.0, |_| [0.0; 3]),
+            sky_table: std::sync::Arc::new(AngleTable::new(0.0, 1.0, |_| [1.0; 3])),
+            sea_table: std::sync::Arc::new(AngleTable::new(0.0, 1.0, |_| [0.0; 3])),
             sun: None,
             sun_transmittance: None,
             sun_path: None,

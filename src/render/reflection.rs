@@ -19,6 +19,8 @@
 //! perspective (the renderer then attenuates the whole sea radiance from the sea to the camera).
 //! Exact mode uses the same sea fan.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::objects::{RayAlong, SampleRay};
@@ -26,7 +28,7 @@ use super::ray_model::{FanEnd, RayTracer};
 use super::shade::{AngleTable, Shader, ViewCard};
 use super::terrain::{TerrainView, piece_density};
 use crate::scene::camera::ViewDirection;
-use crate::scene::sea::{FacetNode, facet_slope_range};
+use crate::scene::sea::{FacetNode, GlintGeometry, facet_slope_range};
 use crate::scene::sky::SunDisc;
 use crate::scene::{Sea, Sky, Sun};
 
@@ -841,11 +843,11 @@ pub(super) struct Reflection {
     pub(super) sky: Sky,
     pub(super) earth_radius_m: f64,
     /// Rays from the sea surface (absent without cards beyond the nearest sea).
-    pub(super) fan: Option<SeaFan>,
+    pub(super) fan: Option<Arc<SeaFan>>,
     /// Sky radiance by the reflected rays' elevation.
-    pub(super) sky_table: AngleTable,
+    pub(super) sky_table: Arc<AngleTable>,
     /// The facets by grazing angle.
-    pub(super) facets: Facets,
+    pub(super) facets: Arc<Facets>,
     /// Rough-sea sun glitter (a sun and σ > 0).
     pub(super) glint: Option<Glint>,
     /// The sun, for its mirror image on a mirror sea (σ = 0), and its disc prepared once.
@@ -885,19 +887,6 @@ pub(super) fn sea_level_sun_launch_rad(
 }
 
 impl Reflection {
-    /// The sun's elevation above the local horizontal of a sea point at ground distance
-    /// `distance_m` along `azimuth_rad` (the true direction tilted by the Earth's curvature, plus
-    /// the sea-level refraction), and its azimuth relative to the ray there.
-    #[inline]
-    fn local_sun(&self, glint: &Glint, azimuth_rad: f64, distance_m: f64) -> (f64, f64) {
-        let phi = glint.sun.azimuth_rad - azimuth_rad;
-        let tilt = distance_m / self.earth_radius_m;
-        (
-            glint.sun.elevation_rad + glint.refraction_rad + tilt * phi.cos(),
-            phi,
-        )
-    }
-
     /// Whether a ray meeting the sea at `grazing_rad`, `distance_m` may show the sun's glitter
     /// or mirror image (then the sea's colour depends on the azimuth).
     pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
@@ -917,33 +906,124 @@ impl Reflection {
         }
     }
 
+    /// Whether some ray meeting the sea at a grazing angle in `grazing_rad` (lo, hi) and a
+    /// ground distance in `distance_m` (lo, hi) may show the sun: when this is false,
+    /// [`Self::may_show_sun`] is false for every such ray. A mirror sea's sun image is not
+    /// bounded here: any ray that meets such a sea may show it.
+    pub(super) fn may_show_sun_range(
+        &self,
+        grazing_rad: (f64, f64),
+        distance_m: (f64, f64),
+    ) -> bool {
+        if let Some(g) = &self.glint {
+            // The farthest hit tilts the sun most (padded for the rounding of interpolated
+            // distances); a NaN distance bounds nothing.
+            let far = distance_m.0.abs().max(distance_m.1.abs());
+            let tilt = far / self.earth_radius_m * (1.0 + 1e-9) + 1e-12;
+            if !tilt.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
+                return true;
+            }
+            let e = g.sun.elevation_rad + g.refraction_rad;
+            return self.sea.may_glint_range(grazing_rad, (e - tilt, e + tilt));
+        }
+        self.mirror_sun.is_some() && self.fan.is_some()
+    }
+
     /// The sun's glitter (rough sea) or mirror image (mirror sea) along a ray meeting the sea at
     /// `grazing_rad`, `distance_m` towards absolute azimuth `azimuth_rad`.
     pub(super) fn sun(&self, grazing_rad: f64, distance_m: f64, azimuth_rad: f64) -> [f64; 3] {
-        if let Some(g) = &self.glint {
-            let (e, phi) = self.local_sun(g, azimuth_rad, distance_m);
-            let k = self.sea.glint_per_irradiance(grazing_rad, e, phi);
-            if k <= 0.0 {
-                return [0.0; 3];
-            }
-            let rho = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
-            return [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]));
-        }
-        let (Some((_, disc)), Some(fan)) = (&self.mirror_sun, &self.fan) else {
-            return [0.0; 3];
-        };
-        let Some(end) = fan.sky_elevation(grazing_rad) else {
-            return [0.0; 3];
-        };
+        self.sun_at(grazing_rad, distance_m).at(self, azimuth_rad)
+    }
+
+    /// [`Self::sun`] for rays meeting the sea at `grazing_rad` and `distance_m`, towards any
+    /// azimuth ([`SeaSunAt::at`]).
+    pub(super) fn sun_at(&self, grazing_rad: f64, distance_m: f64) -> SeaSunAt {
         // The reflection point's vertical is tilted by d/R towards the ray's azimuth.
-        let elevation = end - distance_m / self.earth_radius_m;
-        let disc = disc.radiance(azimuth_rad, elevation);
-        if disc <= 0.0 {
-            return [0.0; 3];
+        let tilt = distance_m / self.earth_radius_m;
+        let facet = || self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
+        if self.glint.is_some() {
+            return SeaSunAt::Glint {
+                geometry: self.sea.glint_geometry(grazing_rad),
+                tilt,
+                rho: facet(),
+            };
         }
-        let f = self.sea.facet_nodes::<1>(grazing_rad)[0].reflectance;
-        let t = self.sky.transmittance(grazing_rad);
-        t.map(|t| f * disc * t)
+        let (Some(_), Some(fan)) = (&self.mirror_sun, &self.fan) else {
+            return SeaSunAt::Nothing;
+        };
+        match fan.sky_elevation(grazing_rad) {
+            Some(end) => SeaSunAt::Mirror {
+                elevation_rad: end - tilt,
+                reflectance: facet(),
+                transmittance: self.sky.transmittance(grazing_rad),
+            },
+            None => SeaSunAt::Nothing,
+        }
+    }
+}
+
+/// What [`Reflection::sun`] needs of rays meeting the sea at one grazing angle and distance,
+/// worked out once for every azimuth (the same values as worked out per ray).
+#[derive(Debug, Clone, Copy)]
+pub(super) enum SeaSunAt {
+    /// No sun on this sea.
+    Nothing,
+    /// A rough sea's glitter: the facet geometry of the grazing angle, the tilt (rad) of the
+    /// reflection point's vertical, and the Fresnel reflectance that caps the glint.
+    Glint {
+        geometry: GlintGeometry,
+        tilt: f64,
+        rho: f64,
+    },
+    /// A mirror sea's image of the disc: the reflected ray's final elevation above the
+    /// observer's horizontal (rad), the reflectance and the sky's transmittance at the grazing
+    /// angle.
+    Mirror {
+        elevation_rad: f64,
+        reflectance: f64,
+        transmittance: [f64; 3],
+    },
+}
+
+impl SeaSunAt {
+    /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
+    pub(super) fn at(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
+        match *self {
+            SeaSunAt::Glint {
+                geometry,
+                tilt,
+                rho,
+            } => {
+                let Some(g) = &refl.glint else {
+                    return [0.0; 3];
+                };
+                // The sun's elevation above the local horizontal of the sea point (the true
+                // direction tilted by the Earth's curvature, plus the sea-level refraction),
+                // and its azimuth relative to the ray there.
+                let phi = g.sun.azimuth_rad - azimuth_rad;
+                let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
+                let k = geometry.per_irradiance(e, phi);
+                if k <= 0.0 {
+                    return [0.0; 3];
+                }
+                [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
+            }
+            SeaSunAt::Mirror {
+                elevation_rad,
+                reflectance,
+                transmittance,
+            } => {
+                let Some((_, disc)) = &refl.mirror_sun else {
+                    return [0.0; 3];
+                };
+                let disc = disc.radiance(azimuth_rad, elevation_rad);
+                if disc <= 0.0 {
+                    return [0.0; 3];
+                }
+                transmittance.map(|t| reflectance * disc * t)
+            }
+            SeaSunAt::Nothing => [0.0; 3],
+        }
     }
 }
 
@@ -975,7 +1055,7 @@ impl Shader<'_> {
         if self.terrain.is_none() && !self.cards.iter().any(beyond) {
             return out;
         }
-        let images = match &refl.facets {
+        let images = match &*refl.facets {
             Facets::Mirror(table) => {
                 self.mirror_images(fan, table, dir, grazing_rad, distance_m, &mut azimuth)
             }
@@ -1005,7 +1085,7 @@ impl Shader<'_> {
         cache: &mut PartsCache,
     ) -> Option<[f64; 3]> {
         let refl = self.reflection.as_ref()?;
-        let (Facets::Rough(table), Some(fan)) = (&refl.facets, &refl.fan) else {
+        let (Facets::Rough(table), Some(fan)) = (&*refl.facets, &refl.fan) else {
             return None;
         };
         if self.terrain.is_some()

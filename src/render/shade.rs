@@ -28,7 +28,7 @@ pub(super) struct AerialShading {
     /// The card distances (m), indexed like a ray's heights.
     pub(super) distances_m: Vec<f64>,
     /// The rays' own paths to the cards and the sea, where the tracer can integrate them.
-    pub(super) paths: Option<AirPaths>,
+    pub(super) paths: Option<Arc<AirPaths>>,
 }
 
 impl AerialShading {
@@ -46,8 +46,21 @@ impl AerialShading {
         height_m: f64,
         distance_m: f64,
     ) -> [f64; 3] {
+        let tau = self.optical_depth(elevation_rad, meets, height_m, distance_m);
+        self.extinction.attenuate(radiance, alpha, tau)
+    }
+
+    /// The optical depth per channel that [`Self::seen`] attenuates by.
+    #[inline]
+    fn optical_depth(
+        &self,
+        elevation_rad: f64,
+        meets: Meets,
+        height_m: f64,
+        distance_m: f64,
+    ) -> [f64; 3] {
         let along = self.paths.as_ref().and_then(|p| p.at(elevation_rad, meets));
-        let tau = match along {
+        match along {
             Some(d) => self.extinction.path_optical_depth(d),
             None => self.extinction.chord_optical_depth(
                 self.earth_radius_m,
@@ -55,8 +68,7 @@ impl AerialShading {
                 height_m,
                 distance_m,
             ),
-        };
-        self.extinction.attenuate(radiance, alpha, tau)
+        }
     }
 }
 
@@ -341,11 +353,11 @@ impl AngleTable {
 /// Everything shading needs, resolved once per frame.
 pub(super) struct Shader<'a> {
     pub(super) cards: Vec<ViewCard<'a>>,
-    pub(super) sky_table: AngleTable,
-    pub(super) sea_table: AngleTable,
+    pub(super) sky_table: Arc<AngleTable>,
+    pub(super) sea_table: Arc<AngleTable>,
     pub(super) sun: Option<SunDisc>,
     /// The sky's transmittance towards the sun by apparent elevation (with a sun only).
-    pub(super) sun_transmittance: Option<AngleTable>,
+    pub(super) sun_transmittance: Option<Arc<AngleTable>>,
     /// The transmittance towards the sun along each ray's own path, where the tracer could
     /// integrate it (preferred over `sun_transmittance`, the air-mass fallback).
     pub(super) sun_path: Option<SunTransmittance>,
@@ -359,7 +371,7 @@ pub(super) struct Shader<'a> {
     /// The sea's reflections of the cards and the sun (`None`: the sky reflection alone).
     pub(super) reflection: Option<super::reflection::Reflection>,
     /// The terrain in view, if any.
-    pub(super) terrain: Option<TerrainView<'a>>,
+    pub(super) terrain: Option<Arc<TerrainView<'a>>>,
 }
 
 #[inline]
@@ -411,7 +423,7 @@ impl<'a> Shader<'a> {
         let Some(fan) = &r.fan else {
             return false;
         };
-        match &r.facets {
+        match &*r.facets {
             Facets::Mirror(table) => table.at(grazing_rad).iter().any(|node| {
                 node.weight * node.reflectance >= MIN_NODE_SHARE
                     && terrain.may_be_reflected(fan, node.reflected_elevation_rad, distance_m)
@@ -446,7 +458,7 @@ impl<'a> Shader<'a> {
         if range_m <= 0.0 {
             return false;
         }
-        match &r.facets {
+        match &*r.facets {
             Facets::Mirror(table) => table.at(grazing_rad).iter().any(|node| {
                 node.weight * node.reflectance >= MIN_NODE_SHARE
                     && fan
@@ -487,7 +499,7 @@ impl<'a> Shader<'a> {
     pub(super) fn compose(&self, ray: &SampleRay<'_>) -> Composed {
         compose(
             ray,
-            self.terrain.iter().map(Object::Terrain),
+            self.terrain.iter().map(|t| Object::Terrain(t)),
             self.cards.iter().map(Object::Card),
             self,
         )
@@ -534,7 +546,8 @@ impl<'a> Shader<'a> {
     }
 
     /// [`Self::background`]; without `reflections` the sea shows only its tabulated sky
-    /// reflection (no mirrored cards, no sun): what a flat band shares across its columns.
+    /// reflection (no mirrored cards, no sun) and the sky no sun: what a flat band shares
+    /// across its columns.
     #[inline]
     pub(super) fn background_with(
         &self,
@@ -563,7 +576,7 @@ impl<'a> Shader<'a> {
             FanEnd::Sky { elevation_rad } => {
                 let l = self.sky_table.at(alpha);
                 // The elevation test is the disc's own quick reject, done before the azimuth.
-                if self.may_meet_sun(end) {
+                if reflections && self.may_meet_sun(end) {
                     self.with_sun(l, alpha, elevation_rad, dir)
                 } else {
                     l
@@ -599,6 +612,56 @@ impl<'a> Shader<'a> {
         match &self.aerial {
             Some(aerial) => aerial.seen(sea, 1.0, dir.elevation_rad, Meets::Sea, 0.0, distance_m),
             None => sea,
+        }
+    }
+
+    /// The transmittance per channel of the air from the sea, where the ray at apparent
+    /// elevation `alpha` meets it at ground distance `distance_m`, to the camera (1 without
+    /// aerial perspective): what the sea's own radiance is attenuated by.
+    pub(super) fn sea_transmittance(&self, alpha: f64, distance_m: f64) -> [f64; 3] {
+        match &self.aerial {
+            Some(aerial) => {
+                let tau = aerial.optical_depth(alpha, Meets::Sea, 0.0, distance_m);
+                aerial.extinction.attenuate([1.0; 3], 0.0, tau)
+            }
+            None => [1.0; 3],
+        }
+    }
+
+    /// The sun's azimuth (rad, clockwise from north), when the scene has a sun.
+    pub(super) fn sun_azimuth_rad(&self) -> Option<f64> {
+        self.sun.as_ref().map(SunDisc::azimuth_rad)
+    }
+
+    /// The transmittance towards the sun of the ray at apparent elevation `alpha` (along its
+    /// own path where it was integrated, else by air mass); `None` without a sun.
+    #[inline]
+    pub(super) fn sun_transmittance_at(&self, alpha: f64) -> Option<[f64; 3]> {
+        let table = self.sun_transmittance.as_ref()?;
+        Some(match &self.sun_path {
+            Some(path) => path.at(alpha),
+            None => table.at(alpha),
+        })
+    }
+
+    /// The sun's disc towards azimuth offset `azimuth_offset_rad` from the heading, for a ray
+    /// that leaves towards `elevation_rad` with `transmittance` towards the sun
+    /// ([`Self::sun_transmittance_at`]): what [`Self::with_sun`] adds to the sky.
+    #[inline]
+    pub(super) fn sun_disc(
+        &self,
+        elevation_rad: f64,
+        azimuth_offset_rad: f64,
+        transmittance: [f64; 3],
+    ) -> [f64; 3] {
+        let Some(sun) = &self.sun else {
+            return [0.0; 3];
+        };
+        let disc = sun.radiance(self.heading_rad + azimuth_offset_rad, elevation_rad);
+        if disc > 0.0 {
+            transmittance.map(|t| disc * t)
+        } else {
+            [0.0; 3]
         }
     }
 

@@ -28,13 +28,16 @@
 //! card's distance between its base and top (nearer cards and terrain not considered); each
 //! maximal run of such rows is one image.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::memo::MemoRays;
+use super::plan::{FramePlan, SunReads};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::wrap_pi;
-use super::{Film, RenderError, RenderOptions, render_scene};
-use crate::scene::{Card, Scene, Sun};
+use super::{Film, RenderError, RenderOptions, RenderStats, render_scene};
+use crate::scene::{Card, Scene, Sun, Texture};
 
 /// What the traced map says of the sun in one frame, along the column of [`sun_column`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,6 +93,10 @@ pub struct SweepFrame {
     /// The transfer curve at the farthest card's distance, when asked for and the scene has a
     /// card.
     pub transfer: Option<TransferSamples>,
+    /// Rows of the film this frame shaded itself: all of them, unless it differs from the
+    /// sweep's first frame only in its sun; then the rows its sun cannot change are copied
+    /// from the first frame, which they equal (module docs).
+    pub rows_shaded: u32,
 }
 
 /// The column whose pixel centre on the middle row is nearest azimuth `azimuth_rad`, when that
@@ -229,10 +236,141 @@ pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> T
     }
 }
 
+/// The first frame of a sweep, rendered alone, with what frames that differ from it only in
+/// their sun need to copy its rows (`None` in exact mode, or when no such frame follows).
+struct SweepBase<'a> {
+    plan: FramePlan<'a>,
+    film: Film,
+    /// Per row: the elevations its lookups span, and its non-finite samples.
+    rows: Vec<((f64, f64), u64)>,
+    reads: SunReads,
+}
+
+impl<'a> SweepBase<'a> {
+    /// Render `scene` (the film [`render_scene`] gives), keeping per row what
+    /// [`render_on_base`] needs when `keep_rows`.
+    fn new(
+        scene: &'a Scene,
+        tracer: &'a dyn RayTracer,
+        options: &RenderOptions,
+        keep_rows: bool,
+    ) -> Result<(Film, Option<Self>), RenderError> {
+        let plan = FramePlan::new(scene, tracer, options, None)?;
+        let reads = plan.sun_reads().filter(|_| keep_rows);
+        let (width, height) = plan.size();
+        let Some(reads) = reads else {
+            let (pixels, non_finite) = plan.shade_all(true);
+            let stats = plan.stats(non_finite);
+            return Ok((film_of(width, height, pixels, stats), None));
+        };
+        let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
+        let rows: Vec<((f64, f64), u64)> = pixels
+            .par_chunks_mut(width as usize)
+            .enumerate()
+            .map_init(
+                || plan.scratch(),
+                |scratch, (y, row)| {
+                    let y = y as u32;
+                    let bad = plan.shade_row(y, row, scratch);
+                    (plan.row_elevations(y, scratch), bad)
+                },
+            )
+            .collect();
+        let stats = plan.stats(rows.iter().map(|r| r.1).sum());
+        let film = film_of(width, height, pixels, stats);
+        let base = SweepBase {
+            plan,
+            film: film.clone(),
+            rows,
+            reads,
+        };
+        Ok((film, Some(base)))
+    }
+}
+
+fn film_of(width: u32, height: u32, pixels: Vec<[f32; 4]>, stats: RenderStats) -> Film {
+    Film {
+        width,
+        height,
+        pixels,
+        stats,
+    }
+}
+
+/// Render `scene`, which differs from the base's scene only in its sun, copying the base's
+/// rows that its sun cannot change ([`FramePlan::copies_base_row`]) and shading the others:
+/// the film [`render_scene`] gives, and the number of rows shaded.
+fn render_on_base<'a>(
+    base: &SweepBase<'a>,
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    options: &RenderOptions,
+) -> Result<(Film, u32), RenderError> {
+    let plan = FramePlan::new(scene, tracer, options, Some(&base.plan))?;
+    let Some(reads) = plan.sun_reads() else {
+        return Ok((render_scene(scene, tracer, options)?, scene.camera.height));
+    };
+    let (width, height) = plan.size();
+    let mut pixels = base.film.pixels.clone();
+    let (shaded, non_finite) = pixels
+        .par_chunks_mut(width as usize)
+        .zip(&base.rows)
+        .enumerate()
+        .map_init(
+            || plan.scratch(),
+            |scratch, (y, (row, &(elevations, base_bad)))| {
+                if plan.copies_base_row(&reads, &base.plan, &base.reads, elevations) {
+                    (0, base_bad)
+                } else {
+                    (1, plan.shade_row(y as u32, row, scratch))
+                }
+            },
+        )
+        .reduce(|| (0u32, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
+    let film = film_of(width, height, pixels, plan.stats(non_finite));
+    Ok((film, shaded))
+}
+
+/// Whether `a` and `b` are the same scene but for their suns (both have one): then a frame of
+/// one can be rendered on the other ([`render_on_base`]).
+fn differ_only_in_sun(a: &Scene, b: &Scene) -> bool {
+    if a.sun.is_none() || b.sun.is_none() || a.cards.len() != b.cards.len() {
+        return false;
+    }
+    let same = |x: &Arc<Texture>, y: &Arc<Texture>| Arc::ptr_eq(x, y) || x == y;
+    let cards = a
+        .cards
+        .iter()
+        .zip(&b.cards)
+        .all(|(x, y)| same(&x.texture, &y.texture));
+    let terrain = match (&a.terrain, &b.terrain) {
+        (None, None) => true,
+        (Some(x), Some(y)) => {
+            Arc::ptr_eq(&x.dem, &y.dem)
+                && Arc::ptr_eq(&x.gradients, &y.gradients)
+                && match (&x.orthophoto, &y.orthophoto) {
+                    (None, None) => true,
+                    (Some(p), Some(q)) => same(&p.texture, &q.texture),
+                    _ => false,
+                }
+        }
+        _ => false,
+    };
+    // Everything else by its serialised record (exact for numbers), without the sun.
+    let record = |s: &Scene| {
+        let mut s = s.clone();
+        s.sun = None;
+        serde_json::to_string(&s).ok()
+    };
+    cards && terrain && record(a).is_some() && record(a) == record(b)
+}
+
 /// Render every scene of `scenes` through one ray cache over `tracer` (module docs). The
 /// scenes must all be renderable by `tracer` (same atmosphere, camera height, Earth radius and
 /// highest card or terrain): then each film is the one [`render_scene`] gives with `tracer`.
-/// `transfer`: also sample each frame's transfer curve at its farthest card's distance.
+/// Frames that differ from the first only in their sun copy the rows of the first frame that
+/// their sun cannot change (module docs). `transfer`: also sample each frame's transfer curve
+/// at its farthest card's distance.
 pub fn render_shared(
     scenes: &[Scene],
     tracer: &dyn RayTracer,
@@ -240,23 +378,31 @@ pub fn render_shared(
     transfer: bool,
 ) -> Result<Vec<SweepFrame>, RenderError> {
     let memo = MemoRays::new(tracer);
-    let render_one = |scene: &Scene| -> Result<SweepFrame, RenderError> {
-        let film = render_scene(scene, &memo, options)?;
-        let facts = frame_facts(scene, &memo);
-        let transfer = farthest_card(scene)
+    let finish = |scene: &Scene, film: Film, rows_shaded: u32| SweepFrame {
+        film,
+        facts: frame_facts(scene, &memo),
+        transfer: farthest_card(scene)
             .filter(|_| transfer)
-            .map(|card| transfer_samples(scene, &memo, card));
-        Ok(SweepFrame {
-            film,
-            facts,
-            transfer,
-        })
+            .map(|card| transfer_samples(scene, &memo, card)),
+        rows_shaded,
     };
     let Some((first, rest)) = scenes.split_first() else {
         return Ok(Vec::new());
     };
-    let mut frames = vec![render_one(first)?];
-    let rest: Vec<SweepFrame> = rest.par_iter().map(render_one).collect::<Result<_, _>>()?;
+    let on_base: Vec<bool> = rest.iter().map(|s| differ_only_in_sun(first, s)).collect();
+    let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
+    let mut frames = vec![finish(first, film, first.camera.height)];
+    let rest: Vec<SweepFrame> = rest
+        .par_iter()
+        .zip(&on_base)
+        .map(|(scene, &on_base)| {
+            let (film, rows) = match &base {
+                Some(base) if on_base => render_on_base(base, scene, &memo, options)?,
+                _ => (render_scene(scene, &memo, options)?, scene.camera.height),
+            };
+            Ok(finish(scene, film, rows))
+        })
+        .collect::<Result<_, RenderError>>()?;
     frames.extend(rest);
     Ok(frames)
 }

@@ -233,26 +233,20 @@ impl Sea {
         sun_elevation_rad: f64,
         sun_azimuth_rad: f64,
     ) -> f64 {
-        let sigma2 = self.wave_slope_rad.tan().powi(2);
-        let g = grazing_rad;
-        if !(sigma2 > 0.0 && g > 0.0 && sun_elevation_rad > 0.0) {
-            return 0.0;
+        self.glint_geometry(grazing_rad)
+            .per_irradiance(sun_elevation_rad, sun_azimuth_rad)
+    }
+
+    /// What [`Self::glint_per_irradiance`] needs of the sea and of the grazing angle, worked out
+    /// once for many suns or azimuths (the same values).
+    pub fn glint_geometry(&self, grazing_rad: f64) -> GlintGeometry {
+        GlintGeometry {
+            sigma2: self.wave_slope_rad.tan().powi(2),
+            grazing_rad,
+            sin_grazing: grazing_rad.sin(),
+            cos_grazing: grazing_rad.cos(),
+            refractive_index: self.refractive_index,
         }
-        let (se, ce) = sun_elevation_rad.sin_cos();
-        let (sa, ca) = sun_azimuth_rad.sin_cos();
-        // Towards the sun, and back along the ray towards the camera: (forward, right, up).
-        let sun = [ce * ca, ce * sa, se];
-        let view = [-g.cos(), 0.0, g.sin()];
-        let h = [sun[0] + view[0], sun[1] + view[1], sun[2] + view[2]];
-        let norm = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
-        if norm.is_nan() || norm <= 0.0 || h[2] <= 0.0 {
-            return 0.0;
-        }
-        let cos_tilt = h[2] / norm;
-        let tan2 = (h[0] * h[0] + h[1] * h[1]) / (h[2] * h[2]);
-        let cos_incidence = (h[0] * sun[0] + h[1] * sun[1] + h[2] * sun[2]) / norm;
-        let rho = fresnel_reflectance(cos_incidence.clamp(-1.0, 1.0).asin(), self.refractive_index);
-        rho * cox_munk_pdf(tan2, sigma2) / (4.0 * g.sin() * cos_tilt.powi(4))
     }
 
     /// Whether a ray meeting the sea at `grazing_rad` can show a glint of relative size above
@@ -273,11 +267,93 @@ impl Sea {
         };
         (0.5 * gap).tan().powi(2) / sigma2 < 40.0
     }
+
+    /// Whether [`Self::may_glint`] may hold for some grazing angle in `grazing_rad` (lo, hi)
+    /// with a sun range inside `sun_elevation_rad`: when this is false, it is false for every
+    /// such pair (the gap between the ranges is at most the gap between any two of their
+    /// points, and the test only loosens as the gap narrows).
+    pub fn may_glint_range(&self, grazing_rad: (f64, f64), sun_elevation_rad: (f64, f64)) -> bool {
+        let sigma2 = self.wave_slope_rad.tan().powi(2);
+        if !(sigma2 > 0.0 && grazing_rad.1 > 0.0 && sun_elevation_rad.1 > 0.0) {
+            return false;
+        }
+        let gap = (grazing_rad.0 - sun_elevation_rad.1)
+            .max(sun_elevation_rad.0 - grazing_rad.1)
+            .max(0.0);
+        (0.5 * gap).tan().powi(2) / sigma2 < 40.0
+    }
+}
+
+/// A sea and one grazing angle, for [`Sea::glint_per_irradiance`] ([`Sea::glint_geometry`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GlintGeometry {
+    /// tan² of the wave slope: the facet slopes' variance.
+    sigma2: f64,
+    grazing_rad: f64,
+    sin_grazing: f64,
+    cos_grazing: f64,
+    refractive_index: f64,
+}
+
+impl GlintGeometry {
+    /// [`Sea::glint_per_irradiance`] at this grazing angle.
+    pub fn per_irradiance(&self, sun_elevation_rad: f64, sun_azimuth_rad: f64) -> f64 {
+        let (sigma2, g) = (self.sigma2, self.grazing_rad);
+        if !(sigma2 > 0.0 && g > 0.0 && sun_elevation_rad > 0.0) {
+            return 0.0;
+        }
+        let (se, ce) = sun_elevation_rad.sin_cos();
+        let (sa, ca) = sun_azimuth_rad.sin_cos();
+        // Towards the sun, and back along the ray towards the camera: (forward, right, up).
+        let sun = [ce * ca, ce * sa, se];
+        let view = [-self.cos_grazing, 0.0, self.sin_grazing];
+        let h = [sun[0] + view[0], sun[1] + view[1], sun[2] + view[2]];
+        let norm = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+        if norm.is_nan() || norm <= 0.0 || h[2] <= 0.0 {
+            return 0.0;
+        }
+        let cos_tilt = h[2] / norm;
+        let tan2 = (h[0] * h[0] + h[1] * h[1]) / (h[2] * h[2]);
+        let cos_incidence = (h[0] * sun[0] + h[1] * sun[1] + h[2] * sun[2]) / norm;
+        let rho = fresnel_reflectance(cos_incidence.clamp(-1.0, 1.0).asin(), self.refractive_index);
+        rho * cox_munk_pdf(tan2, sigma2) / (4.0 * self.sin_grazing * cos_tilt.powi(4))
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_range_test_for_glint_holds_wherever_a_point_in_the_ranges_may_glint() {
+        // Grazing and sun ranges from −2° to 10° in 0.25° steps: wherever the range test
+        // says no, every point of the ranges says no too.
+        let sea = Sea::default();
+        let deg = |i: i32| f64::from(i) * 0.25f64.to_radians();
+        let (mut refused, mut checked) = (0, 0);
+        for g0 in -8..40 {
+            for g1 in g0..(g0 + 6).min(40) {
+                for s0 in -8..40 {
+                    let s1 = s0 + 3;
+                    let (g, sun) = ((deg(g0), deg(g1)), (deg(s0), deg(s1)));
+                    if sea.may_glint_range(g, sun) {
+                        continue;
+                    }
+                    refused += 1;
+                    for k in 0..=4 {
+                        let x = g.0 + (g.1 - g.0) * f64::from(k) / 4.0;
+                        for j in 0..=4 {
+                            let e = sun.0 + (sun.1 - sun.0) * f64::from(j) / 4.0;
+                            checked += 1;
+                            assert!(!sea.may_glint(x, (e, e)), "{x} {e}");
+                            assert!(!sea.may_glint(x, (sun.0, e.max(sun.0))), "{x} {e}");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(refused > 100 && checked > 1000, "{refused} {checked}");
+    }
 
     #[test]
     fn fresnel_limits() {

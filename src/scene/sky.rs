@@ -344,10 +344,24 @@ impl SunDisc {
         }
     }
 
+    /// The disc centre's azimuth (rad, clockwise from north).
+    pub fn azimuth_rad(&self) -> f64 {
+        self.azimuth_rad
+    }
+
     /// Whether a direction at `elevation_rad` is within the disc's band of elevations.
     #[inline]
     pub fn may_meet(&self, elevation_rad: f64) -> bool {
         (elevation_rad - self.elevation_rad).abs() <= self.radius_rad
+    }
+
+    /// Whether some elevation in [`lo_rad`, `hi_rad`] may be within the disc's band: when this
+    /// is false, [`Self::may_meet`] is false for every elevation of the range (the band is
+    /// widened by far more than any rounding). NaN bounds are ignored (a NaN elevation never
+    /// meets the disc).
+    pub fn may_meet_range(&self, lo_rad: f64, hi_rad: f64) -> bool {
+        let pad = self.radius_rad + 1e-12;
+        hi_rad >= self.elevation_rad - pad && lo_rad <= self.elevation_rad + pad
     }
 
     /// [`Sun::disc`]: the haversine of the angular distance from the centre against that of the
@@ -386,6 +400,26 @@ impl SunDisc {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_disc_range_test_holds_wherever_an_elevation_in_the_range_meets_the_band() {
+        let disc = SunDisc::new(&Sun {
+            elevation_rad: -0.02,
+            azimuth_rad: 0.0,
+            angular_diameter_rad: 0.533f64.to_radians(),
+            limb_darkening: 0.6,
+            intensity: 1.0,
+        });
+        for i in -200..200 {
+            let lo = f64::from(i) * 2e-4;
+            for width in [0.0, 1e-5, 3e-3] {
+                let hi = lo + width;
+                let any = (0..=20).any(|k| disc.may_meet(lo + width * f64::from(k) / 20.0));
+                assert!(!any || disc.may_meet_range(lo, hi), "{lo} {hi}");
+            }
+        }
+        assert!(disc.may_meet_range(-0.03, 0.0) && !disc.may_meet_range(0.0, 0.1));
+    }
 
     #[test]
     fn air_mass_matches_kasten_young() {

@@ -34,6 +34,7 @@ pub use ray::{
 pub use straight::{UniformIndex, straight_ray};
 pub use system::Ground;
 
+use crate::profile::FineZone;
 use system::{FieldSystem, PlanarSystem};
 
 /// A refractive-index field in 3-D: n and ∇n at a point (Earth-centred coordinates, metres).
@@ -56,6 +57,11 @@ pub trait IndexField: Send + Sync {
     /// Levels where only d²n/dh² jumps, with the size of the jump (see
     /// [`StratifiedIndex::minor_breaks`]). Default: none.
     fn minor_breaks(&self) -> &[MinorBreak] {
+        &[]
+    }
+    /// Height bands above the ground where steps are kept short (see
+    /// [`StratifiedIndex::fine_zones`]). Default: none.
+    fn fine_zones(&self) -> &[FineZone] {
         &[]
     }
 }
@@ -93,6 +99,13 @@ pub trait StratifiedIndex: Send + Sync {
     fn minor_breaks(&self) -> &[MinorBreak] {
         &[]
     }
+    /// Height bands (m above the surface) where the field changes on a vertical scale shorter
+    /// than the tracer's height cap per step and no break marks it; a step that could reach one
+    /// changes height by at most its `max_rise_m` (see
+    /// [`AirColumn::fine_zones_m`](crate::profile::AirColumn::fine_zones_m)). Default: none.
+    fn fine_zones(&self) -> &[FineZone] {
+        &[]
+    }
 }
 
 impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
@@ -110,6 +123,9 @@ impl<S: StratifiedIndex + ?Sized> StratifiedIndex for &S {
     }
     fn minor_breaks(&self) -> &[MinorBreak] {
         (**self).minor_breaks()
+    }
+    fn fine_zones(&self) -> &[FineZone] {
+        (**self).fine_zones()
     }
 }
 
@@ -176,6 +192,9 @@ impl<S: StratifiedIndex> IndexField for Spherical<S> {
     fn minor_breaks(&self) -> &[MinorBreak] {
         self.index.minor_breaks()
     }
+    fn fine_zones(&self) -> &[FineZone] {
+        self.index.fine_zones()
+    }
 }
 
 /// A 3-D field with its breaks settled once for one tracer setting (the minor breaks that matter
@@ -211,6 +230,9 @@ impl<F: IndexField> IndexField for Settled<F> {
     }
     fn breaks_m(&self) -> &[f64] {
         &self.breaks_m
+    }
+    fn fine_zones(&self) -> &[FineZone] {
+        self.field.fine_zones()
     }
 }
 

@@ -30,6 +30,7 @@ use super::breaks::{Bracket, Exit};
 use super::climb_out::climb_out;
 use super::dopri::{Controller, Dense, Step};
 use super::system::{Observables, RaySystem};
+use crate::profile::FineZone;
 
 /// Settings of the tracer. All lengths in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -528,8 +529,11 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         steps += 1;
         // Step caps: longest step, height change per step, remaining path length.
         let sin_psi = obs.elevation_rad.sin().abs();
-        let vertical_limit =
-            cfg.vertical_step_base_m + cfg.vertical_step_per_height * obs.height_m.max(0.0);
+        let vertical_limit = FineZone::limit_rise_m(
+            sys.fine_zones(),
+            obs.height_m,
+            cfg.vertical_step_base_m + cfg.vertical_step_per_height * obs.height_m.max(0.0),
+        );
         if sin_psi * cfg.max_step_m > vertical_limit {
             h = h.min(vertical_limit / sin_psi);
         }

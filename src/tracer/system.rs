@@ -19,6 +19,7 @@
 use glam::{DVec2, DVec3};
 
 use super::{IndexField, StratifiedIndex};
+use crate::profile::FineZone;
 
 /// What the event logic needs to know about a state.
 #[derive(Debug, Clone, Copy)]
@@ -53,6 +54,9 @@ pub(crate) trait RaySystem<const N: usize> {
     fn invariant_scale(&self, y: &[f64; N]) -> f64;
     /// Heights (m above the ground, ascending) where the field is not smooth.
     fn breaks(&self) -> &[f64];
+    /// Height bands (m above the ground) where steps are kept short (see
+    /// [`StratifiedIndex::fine_zones`](super::StratifiedIndex::fine_zones)).
+    fn fine_zones(&self) -> &[FineZone];
     /// The index and dn/dh at `height_m` above the ground, for a closed-form climb out of a spherically
     /// symmetric field (`climb_out`); `None` where the system has no radial profile (flat
     /// ground). For a 3-D field it is sampled above the observer, so it only means something
@@ -156,6 +160,9 @@ impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
     }
     fn breaks(&self) -> &[f64] {
         self.breaks
+    }
+    fn fine_zones(&self) -> &[FineZone] {
+        self.field.fine_zones()
     }
     fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
         Some(self.field.index_and_derivative(height_m))
@@ -298,6 +305,9 @@ impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
     }
     fn breaks(&self) -> &[f64] {
         self.breaks
+    }
+    fn fine_zones(&self) -> &[FineZone] {
+        self.field.fine_zones()
     }
     fn index_at(&self, height_m: f64) -> Option<(f64, f64)> {
         match self.ground {

@@ -600,6 +600,41 @@ fn tolerance_head(first: &str, config: &StressConfig) -> String {
     format!("{head}\n{rule}\n")
 }
 
+/// Two neighbouring tolerances of one atmosphere whose worst error grows as the tolerance shrinks
+/// (see [`growing_rows`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GrowingRow {
+    /// The atmosphere.
+    pub atmosphere: String,
+    /// The looser tolerance (m) and its worst error (m).
+    pub loose: (f64, f64),
+    /// The tighter tolerance (m) and its worst error (m).
+    pub tight: (f64, f64),
+}
+
+/// Each pair of neighbouring tolerances of an atmosphere whose worst error grows by more than
+/// twice the self-reference's tolerance as the tolerance shrinks. Each measured error is off the
+/// true error by at most the self-reference's own error, which its tolerance bounds, so a smaller
+/// growth says nothing about the tracer.
+pub fn growing_rows(results: &[StressResult], config: &StressConfig) -> Vec<GrowingRow> {
+    let allowance_m = 2.0 * config.reference_tolerance_m;
+    let mut out = Vec::new();
+    for r in results {
+        for pair in r.rows.windows(2) {
+            if let (Some(loose), Some(tight)) = (pair[0].max_error_m, pair[1].max_error_m)
+                && tight > loose + allowance_m
+            {
+                out.push(GrowingRow {
+                    atmosphere: r.name.clone(),
+                    loose: (pair[0].tolerance_m, loose),
+                    tight: (pair[1].tolerance_m, tight),
+                });
+            }
+        }
+    }
+    out
+}
+
 /// `STRESS.md`: the settings, the plot, and per atmosphere and tolerance the worst error against
 /// the self-reference, the worst Bouguer drift, and the rays' terminations. `plot_rel` is the
 /// plot's path relative to the file.
@@ -679,7 +714,36 @@ fn error_table(results: &[StressResult], config: &StressConfig) -> String {
         s.push_str(&format!(" *{ratio:.2}* |"));
     }
     s.push_str("\n\n");
+    s.push_str(&growing_rows_markdown(results, config));
     s.push_str(&worst_rays_table(results, config));
+    s
+}
+
+/// The rows of [`growing_rows`], or a line saying there are none.
+fn growing_rows_markdown(results: &[StressResult], config: &StressConfig) -> String {
+    let allowance = 2.0 * config.reference_tolerance_m;
+    let rows = growing_rows(results, config);
+    if rows.is_empty() {
+        return format!(
+            "Every row falls (or stays) as the tolerance shrinks, to within {allowance:e} m \
+             (twice the self-reference's tolerance).\n\n"
+        );
+    }
+    let mut s = format!(
+        "Rows whose worst error grows as the tolerance shrinks by more than {allowance:e} m \
+             (twice the self-reference's tolerance):\n\n"
+    );
+    for row in rows {
+        s.push_str(&format!(
+            "* {}: {} m at {} m → {} m at {} m\n",
+            row.atmosphere,
+            fmt_m(row.loose.1),
+            fmt_tol(row.loose.0),
+            fmt_m(row.tight.1),
+            fmt_tol(row.tight.0)
+        ));
+    }
+    s.push('\n');
     s
 }
 

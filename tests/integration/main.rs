@@ -29,6 +29,7 @@ mod sequence;
 mod sequence_sweeps;
 mod spectral;
 mod stress;
+mod sun_sweep;
 mod survey;
 mod terrain;
 mod terrain_exact;

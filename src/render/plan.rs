@@ -1,0 +1,940 @@
+//! Stage 5b (render) — the frame plan. In: a [`Scene`], a [`RayTracer`], [`RenderOptions`], and
+//! optionally the plan of the same scene under another sun (a sun sweep's base frame). Out: a
+//! [`FramePlan`] — the elevation fan, the tables and the [`Shader`] of one frame — that shades
+//! any row of the film on its own: [`render_scene`](super::render_scene) shades every row, a sun
+//! sweep (`super::sweep`) only the rows its sun can change.
+//!
+//! **What a plan shares with its base.** The sky, sea and transmittance tables and the terrain
+//! view do not depend on the sun or on the fan; the sea fan and the facet table depend on the
+//! fan only through its steepest grazing angle, the air paths only through its elevations. A
+//! plan built on a base takes each of them from the base when those inputs are the same, bit
+//! for bit, instead of building it again: the same values, so the frame is the one a plan built
+//! alone gives. The fan (refined around the frame's own sun, from rays a shared ray cache
+//! remembers), the sun's disc, its transmittance along the rays and its glitter or mirror image
+//! on the sea are the frame's own.
+//!
+//! **Which rows the sun can change** ([`FramePlan::copies_base_row`]): a row's pixels are a
+//! function of the fan's rays that its samples' elevations fall between, of the tables, and of
+//! the sun only where a sample's interpolated ray may meet the sun's disc or show its glitter
+//! or mirror image on the sea (every other test that a row's shading makes is of the tables and
+//! the fan). So a row whose elevations read the same fan rays as the base's, in a plan whose
+//! tables are the base's, and that may read the sun in neither frame, shades to the base's
+//! pixels. Whether a row may read the sun is bounded per fan interval: an interpolated end lies
+//! between the two rays' ends (same kind), or is one of them.
+
+use std::io::IsTerminal;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use indicatif::{ParallelProgressIterator, ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+use super::air_paths::AirPaths;
+use super::elevation_fan::{ElevationFan, FanSpec};
+use super::ray_model::{FanEnd, RayTracer};
+use super::reflection::{self, FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
+use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
+use super::texture_box::TextureColumns;
+use super::sun::SunTransmittance;
+use super::terrain::{TerrainFrame, TerrainView};
+use super::{
+    FLAT_ROW_FRACTION, FlatRow, RenderError, RenderOptions, RenderStats, RowScratch, TracedSample,
+    azimuth_span, card_columns_in_row, check_tracer_tolerance, elevation_range, flat_bands,
+    row_may_meet_terrain, shade_fan_sample, shade_flat_row, shade_traced_sample, sun_band_rad,
+    traced_grid,
+};
+use crate::scene::camera::CameraFrame;
+use crate::scene::sky::SunDisc;
+use crate::scene::{Scene, Texture, samples_per_pixel_root};
+
+/// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
+const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
+
+/// Everything one frame's rows are shaded from.
+pub(super) struct FramePlan<'a> {
+    frame: CameraFrame,
+    width: u32,
+    height: u32,
+    /// Samples per pixel along each axis.
+    n: u32,
+    /// The elevation fan (`None` in exact mode).
+    fan: Option<ElevationFan>,
+    shader: Shader<'a>,
+    /// Samples at or above this elevation see only sky ([`ElevationFan::clear_sky_from`]).
+    clear_sky_from: f64,
+    /// A row whose elevations span less than this is shaded at one elevation per band.
+    flat_row_limit_rad: f64,
+    tracer: &'a dyn RayTracer,
+    camera_height_m: f64,
+    need_sky_direction: bool,
+    /// The sea's sun-independent tables, kept for plans built on this one.
+    sea: SeaTables,
+    /// Counters (all but the non-finite samples, counted while shading).
+    stats: RenderStats,
+    /// Whether every input of shading but the sun and the fan is the base's (module docs);
+    /// true for a plan built alone.
+    shares_base: bool,
+}
+
+/// The sea's tables that do not depend on the sun, and the steepest grazing angle of the fan
+/// they were built for.
+#[derive(Clone)]
+struct SeaTables {
+    /// Bits of the fan's steepest grazing angle (`None`: no fan ray met the sea, or exact mode).
+    key: Option<u64>,
+    /// The sky by the elevation of a reflected ray, over [0, π/2].
+    reflected_sky: Arc<AngleTable>,
+    /// The sea's radiance by grazing angle.
+    sea_table: Arc<AngleTable>,
+    /// The sea fan and the facets (`None`: the sea shows no reflections).
+    reflection: Option<(Option<Arc<SeaFan>>, Arc<Facets>)>,
+}
+
+/// The cards in view (by azimuth), nearest first, and the distances the tracer must report.
+struct ViewCards<'a> {
+    cards: Vec<ViewCard<'a>>,
+    distances_m: Vec<f64>,
+    /// Highest card top at each distance (m).
+    max_top_m: Vec<f64>,
+}
+
+impl<'a> ViewCards<'a> {
+    fn new(scene: &'a Scene, span: Option<(f64, f64)>, pixel_rad: f64) -> Self {
+        let cam = &scene.camera;
+        let radius = scene.earth_radius_m;
+        let mut order: Vec<usize> = (0..scene.cards.len()).collect();
+        order.sort_by(|&a, &b| {
+            scene.cards[a]
+                .distance_m
+                .total_cmp(&scene.cards[b].distance_m)
+        });
+        let mut out = ViewCards {
+            cards: Vec::new(),
+            distances_m: Vec::new(),
+            max_top_m: Vec::new(),
+        };
+        // A rough sea mirrors the cards' textures averaged over heights (once per image).
+        let blurred = scene.sea.reflections && scene.sea.wave_slope_rad > 0.0;
+        let mut columns = Vec::new();
+        for i in order {
+            let c = &scene.cards[i];
+            let ground_radius = radius * (c.distance_m / radius).sin();
+            let half_width_rad = if ground_radius > 0.5 * c.width_m {
+                (0.5 * c.width_m / ground_radius).min(std::f64::consts::PI)
+            } else {
+                std::f64::consts::PI
+            };
+            if let Some((lo, hi)) = span {
+                let off = wrap_pi(c.azimuth_rad - cam.heading_rad);
+                let pad = half_width_rad + 2.0 * pixel_rad;
+                if off + pad < lo || off - pad > hi {
+                    continue;
+                }
+            }
+            let top_m = c.base_m + c.height_m;
+            if out.distances_m.last() != Some(&c.distance_m) {
+                out.distances_m.push(c.distance_m);
+                out.max_top_m.push(top_m);
+            }
+            let k = out.distances_m.len() - 1;
+            out.max_top_m[k] = out.max_top_m[k].max(top_m);
+            out.cards.push(ViewCard {
+                distance_index: k,
+                distance_m: c.distance_m,
+                offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),
+                half_width_rad,
+                base_m: c.base_m,
+                top_m,
+                height_m: c.height_m,
+                texture: &c.texture,
+                columns: blurred.then(|| texture_columns(&mut columns, &c.texture)),
+                reflected_haze: None,
+            });
+            if blurred && let Some(extinction) = scene.sky.extinction() {
+                let card = out.cards.last_mut().expect("just pushed");
+                card.reflected_haze = Some(ReflectedHaze::new(&extinction, radius, card));
+            }
+        }
+        out
+    }
+}
+
+/// The root n of the samples per pixel (n × n), after checking the options.
+fn checked_samples_root(scene: &Scene, options: &RenderOptions) -> Result<u32, RenderError> {
+    let spp = options
+        .samples_per_pixel
+        .unwrap_or(scene.camera.samples_per_pixel);
+    let n = samples_per_pixel_root(spp).ok_or(RenderError::SamplesPerPixel(spp))?;
+    if !(options.tolerance_px.is_finite() && options.tolerance_px > 0.0) {
+        return Err(RenderError::Tolerance(options.tolerance_px));
+    }
+    check_tracer_tolerance(options.tolerance_m)?;
+    Ok(n)
+}
+
+/// The terrain in view of `scene`, if it has terrain.
+fn terrain_view<'a>(
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    options: &RenderOptions,
+    span: Option<(f64, f64)>,
+    elevations: (f64, f64),
+) -> Option<Arc<TerrainView<'a>>> {
+    let cam = &scene.camera;
+    scene.terrain.as_ref().and_then(|t| {
+        let frame = TerrainFrame {
+            camera_height_m: cam.height_m,
+            heading_rad: cam.heading_rad,
+            earth_radius_m: scene.earth_radius_m,
+            azimuth_span_rad: span,
+            elevation_range_rad: elevations,
+            pixel_rad: cam.min_pixel_angle_rad(),
+            tolerance_px: options.tolerance_px,
+            max_depth: options.max_refine_depth,
+            brightness: scene.sky.brightness,
+            scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
+        };
+        let mut view = TerrainView::new(t, tracer, frame, options.exact)?;
+        if scene.sea.reflections && scene.sea.wave_slope_rad > 0.0 {
+            view.prepare_reflections();
+        }
+        Some(Arc::new(view))
+    })
+}
+
+/// The lowest elevation from which samples see only sky: the fan's (none with a sun), above
+/// every elevation that may meet the terrain.
+fn clear_sky_from(
+    scene: &Scene,
+    fan: &ElevationFan,
+    max_top_m: &[f64],
+    terrain: Option<&TerrainView<'_>>,
+) -> f64 {
+    let mut from = if scene.sun.is_none() {
+        fan.clear_sky_from(max_top_m)
+    } else {
+        f64::INFINITY
+    };
+    if let Some(t) = terrain
+        && t.may_hit_rad.0 <= t.may_hit_rad.1
+    {
+        from = from.max(t.may_hit_rad.1.next_up());
+    }
+    from
+}
+
+/// What [`SeaTables::build`] needs of the frame.
+struct SeaReflectionInputs<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    fan: Option<&'a ElevationFan>,
+    elevations: (f64, f64),
+    pixel_rad: f64,
+    camera_height_m: f64,
+    /// The card distances in view (m).
+    distances_m: &'a [f64],
+    /// The farthest ground distance of the terrain in view (m), if any.
+    farthest_terrain_m: Option<f64>,
+}
+
+impl SeaTables {
+    /// The fan-dependent tables for `inp` (the sea table spans grazing angles from 0, where a
+    /// NaN grazing angle is shaded, to the steepest the frame can show: with a fan, the
+    /// steepest fan ray, as interpolation stays between neighbours; per-sample tracing, 90°),
+    /// with `reflected_sky` (the sky by elevation over [0, π/2]).
+    fn build(inp: &SeaReflectionInputs<'_>, reflected_sky: Arc<AngleTable>) -> Self {
+        let key = inp.fan.and_then(ElevationFan::max_grazing_rad);
+        let sea_hi = key.map_or(std::f64::consts::FRAC_PI_2, |g| {
+            g.min(std::f64::consts::FRAC_PI_2)
+        });
+        let sea = inp.scene.sea;
+        let sky = Arc::clone(&reflected_sky);
+        let sea_table = AngleTable::new(0.0, sea_hi, |g| sea.radiance_reflecting(g, |e| sky.at(e)));
+        let reflection = sea_fan_and_facets(inp, &reflected_sky);
+        SeaTables {
+            key: key.map(f64::to_bits),
+            reflected_sky,
+            sea_table: Arc::new(sea_table),
+            reflection,
+        }
+    }
+}
+
+/// The steepest grazing angle in the frame: the fan's, or in exact mode that of the frame's
+/// lowest ray (Bouguer's invariant n(h)(R + h) cos e fixes cos g = n_c (R + h_c) cos α /
+/// (n_0 R): the steepest launch meets the sea steepest).
+fn max_grazing_rad(inp: &SeaReflectionInputs<'_>) -> Option<f64> {
+    match inp.fan {
+        Some(fan) => fan.max_grazing_rad(),
+        None => {
+            let ray = inp.tracer.trace(
+                inp.camera_height_m,
+                inp.elevations.0,
+                inp.distances_m,
+                false,
+            );
+            match ray.end {
+                FanEnd::Ground { grazing_rad, .. } if grazing_rad.is_finite() => Some(grazing_rad),
+                _ => None,
+            }
+        }
+    }
+}
+
+/// The sea fan (when a card or terrain is in view, over the reflected elevations the frame's
+/// grazing angles and the wave facets reach, or for a mirror sea's sun image) and the facets
+/// (a rough sea's shares weight `reflected_sky`, the sky by elevation over [0, π/2]). `None`
+/// when the scene turns reflections off or the frame shows no sea.
+fn sea_fan_and_facets(
+    inp: &SeaReflectionInputs<'_>,
+    reflected_sky: &AngleTable,
+) -> Option<(Option<Arc<SeaFan>>, Arc<Facets>)> {
+    let scene = inp.scene;
+    let sea = scene.sea;
+    if !sea.reflections {
+        return None;
+    }
+    let max_grazing = max_grazing_rad(inp)?;
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    let sigma_along = sea.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2;
+    let e_hi = (max_grazing + 8.0 * sigma_along)
+        .min(half_pi)
+        .max(inp.pixel_rad);
+    let mirror = sea.wave_slope_rad == 0.0;
+    // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
+    // elevation, so interpolation is exact for them); an eighth of the rms facet slope σ′
+    // otherwise (a rough sea's images are integrated over reflected elevations spread by ±8σ′,
+    // with heights linear between the fan's rays).
+    let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
+    // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
+    let need_sky = mirror && scene.sun.is_some();
+    let max_range_m = match (inp.distances_m.last().copied(), inp.farthest_terrain_m) {
+        (Some(a), Some(b)) => Some(a.max(b)),
+        (a, b) => a.or(b),
+    }
+    .or_else(|| need_sky.then_some(MIN_SEA_FAN_RANGE_M));
+    // The air along reflected rays to the terrain is summed in the fan (cards take the chord).
+    let density = inp
+        .farthest_terrain_m
+        .and(scene.sky.extinction())
+        .map(|e| (e.scale_heights_m(), scene.earth_radius_m));
+    let fan = max_range_m
+        .and_then(|d| SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density))
+        .map(Arc::new);
+    let facets = if mirror {
+        Facets::Mirror(FacetTable::new(&sea, max_grazing))
+    } else if fan.is_some() {
+        Facets::Rough(SlopeTable::new(&sea, max_grazing, reflected_sky))
+    } else {
+        Facets::None
+    };
+    Some((fan, Arc::new(facets)))
+}
+
+/// The column integrals of `texture`, built once per image: `built` holds those built so far.
+fn texture_columns(
+    built: &mut Vec<(*const Texture, Arc<TextureColumns>)>,
+    texture: &Arc<Texture>,
+) -> Arc<TextureColumns> {
+    let key = Arc::as_ptr(texture);
+    if let Some((_, c)) = built.iter().find(|(k, _)| *k == key) {
+        return c.clone();
+    }
+    let c = Arc::new(TextureColumns::new(texture));
+    built.push((key, c.clone()));
+    c
+}
+
+/// The sun's glitter on a rough sea: its light at the sea comes along its own curved ray from
+/// the sea surface (a ray skimming a surface duct crosses far more air than any air-mass
+/// formula of its elevation gives); none when the sun is below the sea's apparent horizon.
+fn glint(scene: &Scene, tracer: &dyn RayTracer) -> Option<Glint> {
+    let sky = scene.sky;
+    scene
+        .sun
+        .filter(|_| scene.sea.wave_slope_rad != 0.0)
+        .map(|sun| {
+            let launch = reflection::sea_level_sun_launch_rad(tracer, sun.elevation_rad);
+            let extinction = sky.sun_extinction();
+            let t = launch
+                .and_then(|a| tracer.density_paths_m(0.0, a, extinction.scale_heights_m()))
+                .map_or([0.0; 3], |paths| {
+                    extinction.path_optical_depth(paths).map(|tau| (-tau).exp())
+                });
+            let refraction_rad = launch.map_or(0.0, |a| a - sun.elevation_rad);
+            let r = 0.5 * sun.angular_diameter_rad;
+            let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
+            Glint {
+                sun,
+                refraction_rad,
+                irradiance: t.map(|t| sun.intensity * solid_angle * t),
+                radiance_cap: t.map(|t| sun.intensity * t),
+            }
+        })
+}
+
+/// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter
+/// or mirror image.
+fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> Option<Reflection> {
+    let (fan, facets) = tables.reflection.clone()?;
+    let mirror = scene.sea.wave_slope_rad == 0.0;
+    Some(Reflection {
+        sea: scene.sea,
+        sky: scene.sky,
+        earth_radius_m: scene.earth_radius_m,
+        fan,
+        sky_table: Arc::clone(&tables.reflected_sky),
+        facets,
+        glint: glint(scene, tracer),
+        mirror_sun: scene
+            .sun
+            .filter(|_| mirror)
+            .map(|sun| (sun, SunDisc::new(&sun))),
+    })
+}
+
+/// What a plan is built from: the scene, its tracer and options, and the frame's geometry.
+struct PlanInputs<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    options: RenderOptions,
+    elevations: (f64, f64),
+    pixel_rad: f64,
+}
+
+impl<'a> PlanInputs<'a> {
+    /// The spec of the frame's elevation fan, for the cards in `view`.
+    fn fan_spec(&self, view: &ViewCards<'_>) -> FanSpec {
+        let cam = &self.scene.camera;
+        FanSpec {
+            camera_height_m: cam.height_m,
+            distances_m: view.distances_m.clone(),
+            max_top_m: view.max_top_m.clone(),
+            need_sky_direction: self.scene.sun.is_some(),
+            sun_band_rad: self.scene.sun.map(|s| sun_band_rad(&s, self.pixel_rad)),
+            elevation_range_rad: self.elevations,
+            // The smallest pixel of the frame (its corners, for a wide angle), so the fan's
+            // sub-pixel bound holds everywhere, not only at the centre.
+            pixel_rad: cam.min_pixel_angle_rad(),
+            tolerance_px: self.options.tolerance_px,
+            max_depth: self.options.max_refine_depth,
+        }
+    }
+
+    /// The fan (none in exact mode) and the sky table: the base's table, or built while the
+    /// fan is traced (it needs no fan).
+    fn fan_and_sky(
+        &self,
+        spec: &FanSpec,
+        base: Option<&FramePlan<'a>>,
+    ) -> (Option<ElevationFan>, Arc<AngleTable>) {
+        let build_fan = || (!self.options.exact).then(|| ElevationFan::build(self.tracer, spec));
+        match base {
+            Some(b) => (build_fan(), Arc::clone(&b.shader.sky_table)),
+            None => {
+                let (sky, (lo, hi)) = (self.scene.sky, self.elevations);
+                // The optical depths once per frame, not once per table entry (same values).
+                let depths = sky.optical_depths();
+                rayon::join(build_fan, || {
+                    Arc::new(AngleTable::new(lo, hi, |e| {
+                        sky.radiance_with_depths(e, depths)
+                    }))
+                })
+            }
+        }
+    }
+
+    /// The sea's tables for `inp`: the base's when its fan's steepest grazing angle is this
+    /// fan's, else built (and then the tables are not the base's: the second value).
+    fn sea_tables(
+        &self,
+        inp: &SeaReflectionInputs<'_>,
+        base: Option<&FramePlan<'a>>,
+    ) -> (SeaTables, bool) {
+        let key = inp
+            .fan
+            .and_then(ElevationFan::max_grazing_rad)
+            .map(f64::to_bits);
+        if let Some(b) = base.filter(|b| b.sea.key == key) {
+            return (b.sea.clone(), true);
+        }
+        let reflected_sky = match base {
+            Some(b) => Arc::clone(&b.sea.reflected_sky),
+            None => {
+                let sky = self.scene.sky;
+                let depths = sky.optical_depths();
+                Arc::new(AngleTable::new(0.0, std::f64::consts::FRAC_PI_2, |e| {
+                    sky.radiance_with_depths(e, depths)
+                }))
+            }
+        };
+        (SeaTables::build(inp, reflected_sky), base.is_none())
+    }
+
+    /// The aerial perspective, its rays' paths integrated at `alphas` (the fan's elevations)
+    /// or taken from the base when its fan has the same elevations; with whether the paths
+    /// are present exactly when the base's are.
+    fn aerial(
+        &self,
+        view: &ViewCards<'_>,
+        alphas: &[f64],
+        base: Option<&FramePlan<'a>>,
+    ) -> (Option<AerialShading>, bool) {
+        let Some(extinction) = self.scene.sky.extinction() else {
+            return (None, true);
+        };
+        let base_paths = base.map(|b| b.shader.aerial.as_ref().and_then(|a| a.paths.clone()));
+        let same_rays = base.and_then(|b| b.fan.as_ref()).is_some_and(|f| {
+            let bits = |a: &f64| a.to_bits();
+            f.elevations_rad()
+                .iter()
+                .map(bits)
+                .eq(alphas.iter().map(bits))
+        });
+        let cam = &self.scene.camera;
+        let paths = match base_paths.clone() {
+            Some(paths) if same_rays => paths,
+            _ => AirPaths::build(
+                self.tracer,
+                cam.height_m,
+                &view.distances_m,
+                extinction.scale_heights_m(),
+                alphas,
+            )
+            .map(Arc::new),
+        };
+        let shares = base_paths.is_none_or(|b| b.is_some() == paths.is_some());
+        let aerial = AerialShading {
+            extinction,
+            camera_height_m: cam.height_m,
+            earth_radius_m: self.scene.earth_radius_m,
+            distances_m: view.distances_m.clone(),
+            paths,
+        };
+        (Some(aerial), shares)
+    }
+}
+
+impl<'a> FramePlan<'a> {
+    /// Plan the frame of `scene` through `tracer`. With `base` (a plan of the same scene under
+    /// another sun, through the same tracer and options) the sun-independent tables are taken
+    /// from it where their inputs are the same (module docs); the plan is the same either way.
+    pub(super) fn new(
+        scene: &'a Scene,
+        tracer: &'a dyn RayTracer,
+        options: &RenderOptions,
+        base: Option<&FramePlan<'a>>,
+    ) -> Result<Self, RenderError> {
+        let n = checked_samples_root(scene, options)?;
+        let base = base.filter(|_| !options.exact);
+        let cam = &scene.camera;
+        let frame = cam.frame();
+        let pixel_rad = 1.0 / frame.focal_px;
+        let (width, height) = (cam.width, cam.height);
+        let span = azimuth_span(&frame, width, height, cam.heading_rad);
+        let view = ViewCards::new(scene, span, pixel_rad);
+        let inputs = PlanInputs {
+            scene,
+            tracer,
+            options: options.clone(),
+            elevations: elevation_range(&frame, width, height, pixel_rad),
+            pixel_rad,
+        };
+        let terrain = match base {
+            Some(b) => b.shader.terrain.clone(),
+            None => terrain_view(scene, tracer, options, span, inputs.elevations),
+        };
+        let (fan, sky_table) = inputs.fan_and_sky(&inputs.fan_spec(&view), base);
+        let clear_sky_from = fan.as_ref().map_or(f64::INFINITY, |f| {
+            clear_sky_from(scene, f, &view.max_top_m, terrain.as_deref())
+        });
+        let sea_inputs = SeaReflectionInputs {
+            scene,
+            tracer,
+            fan: fan.as_ref(),
+            elevations: inputs.elevations,
+            pixel_rad,
+            camera_height_m: cam.height_m,
+            distances_m: &view.distances_m,
+            farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
+        };
+        let (sea, same_sea) = inputs.sea_tables(&sea_inputs, base);
+        // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact
+        // mode.
+        let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
+        let traced = match &fan {
+            Some(fan) if needs_paths => fan.rays_and_ends(),
+            None if needs_paths => traced_grid(tracer, cam.height_m, inputs.elevations, pixel_rad),
+            _ => Vec::new(),
+        };
+        let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
+        let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
+        let shares_base = base.is_none_or(|b| {
+            b.clear_sky_from.to_bits() == clear_sky_from.to_bits() && same_sea && same_aerial
+        });
+        let mut stats = RenderStats {
+            cards_in_view: view.cards.len(),
+            fan_rays: fan.as_ref().map_or(0, ElevationFan::len),
+            fan_depth: fan.as_ref().map_or(0, |f| f.max_depth_reached),
+            air_path_rays: aerial
+                .as_ref()
+                .and_then(|a| a.paths.as_ref())
+                .map_or(0, |p| p.len()),
+            ..RenderStats::default()
+        };
+        let shader = inputs.shader(ShaderParts {
+            view,
+            terrain,
+            sky_table,
+            sea: &sea,
+            aerial,
+            traced: &traced,
+            base,
+        });
+        stats.sea_fan_rays = shader
+            .reflection
+            .as_ref()
+            .and_then(|r| r.fan.as_ref())
+            .map_or(0, |f| f.len());
+        stats.sun_rays = shader.sun_path.as_ref().map_or(0, SunTransmittance::len);
+        Ok(FramePlan {
+            frame,
+            width,
+            height,
+            n,
+            fan,
+            shader,
+            clear_sky_from,
+            flat_row_limit_rad: FLAT_ROW_FRACTION
+                * options.tolerance_px
+                * cam.min_pixel_angle_rad(),
+            tracer,
+            camera_height_m: cam.height_m,
+            need_sky_direction: scene.sun.is_some(),
+            sea,
+            stats,
+            shares_base,
+        })
+    }
+}
+
+/// The parts of a frame's [`Shader`] built before it.
+struct ShaderParts<'a, 'b> {
+    view: ViewCards<'a>,
+    terrain: Option<Arc<TerrainView<'a>>>,
+    sky_table: Arc<AngleTable>,
+    sea: &'b SeaTables,
+    aerial: Option<AerialShading>,
+    /// The rays the sun's transmittance is integrated along, with their ends.
+    traced: &'b [(f64, FanEnd)],
+    base: Option<&'b FramePlan<'a>>,
+}
+
+impl<'a> PlanInputs<'a> {
+    /// The frame's shader from its `parts`, with the sun's own: its disc, its transmittance
+    /// along the rays, and its glitter or mirror image on the sea.
+    fn shader(&self, parts: ShaderParts<'a, '_>) -> Shader<'a> {
+        let (scene, tracer) = (self.scene, self.tracer);
+        let (sky, cam) = (scene.sky, &scene.camera);
+        let sun_path = scene.sun.and_then(|sun| {
+            let band = sun_band_rad(&sun, self.pixel_rad);
+            SunTransmittance::build(
+                tracer,
+                cam.height_m,
+                &sky.sun_extinction(),
+                band,
+                parts.traced,
+            )
+        });
+        let (lo, hi) = self.elevations;
+        let sun_transmittance = scene.sun.map(|_| {
+            parts
+                .base
+                .and_then(|b| b.shader.sun_transmittance.clone())
+                .unwrap_or_else(|| Arc::new(AngleTable::new(lo, hi, |e| sky.transmittance(e))))
+        });
+        Shader {
+            distances_m: parts.view.distances_m,
+            reflection: sea_reflection(scene, tracer, parts.sea),
+            terrain: parts.terrain,
+            cards: parts.view.cards,
+            sky_table: parts.sky_table,
+            sea_table: Arc::clone(&parts.sea.sea_table),
+            sun: scene.sun.as_ref().map(SunDisc::new),
+            sun_transmittance,
+            sun_path,
+            heading_rad: cam.heading_rad,
+            // A lost (trapped) ray travels in the lowest air: show the horizon sky.
+            fallback: sky.radiance(0.0),
+            aerial: parts.aerial,
+        }
+    }
+}
+
+impl FramePlan<'_> {
+    /// Film width and height (pixels).
+    pub(super) fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// The frame's counters, with `non_finite` samples.
+    pub(super) fn stats(&self, non_finite: u64) -> RenderStats {
+        RenderStats {
+            non_finite_samples: non_finite,
+            sample_rays: if self.fan.is_none() {
+                u64::from(self.width) * u64::from(self.height) * u64::from(self.n * self.n)
+            } else {
+                0
+            },
+            ..self.stats
+        }
+    }
+
+    /// Buffers for shading rows of this frame (one per thread).
+    pub(super) fn scratch(&self) -> RowScratch {
+        let n_dist = self.shader.distances_m.len();
+        RowScratch::new(self.width as usize * (self.n * self.n) as usize, n_dist)
+    }
+
+    /// Every row of the film, in parallel (a progress bar unless `quiet` or stderr is not a
+    /// terminal): the pixels, and the number of samples whose shading was not finite.
+    pub(super) fn shade_all(&self, quiet: bool) -> (Vec<[f32; 4]>, u64) {
+        let bar = if quiet || !std::io::stderr().is_terminal() {
+            ProgressBar::hidden()
+        } else {
+            let bar = ProgressBar::new(u64::from(self.height));
+            if let Ok(style) = ProgressStyle::with_template(
+                "{spinner} rendering [{bar:40}] {pos}/{len} rows ({eta})",
+            ) {
+                bar.set_style(style);
+            }
+            bar
+        };
+        let non_finite = AtomicU64::new(0);
+        let mut pixels = vec![[0.0f32; 4]; self.width as usize * self.height as usize];
+        pixels
+            .par_chunks_mut(self.width as usize)
+            .enumerate()
+            .progress_with(bar.clone())
+            .for_each_init(
+                || self.scratch(),
+                |scratch, (y, row)| {
+                    let bad = self.shade_row(y as u32, row, scratch);
+                    non_finite.fetch_add(bad, Ordering::Relaxed);
+                },
+            );
+        bar.finish_and_clear();
+        (pixels, non_finite.into_inner())
+    }
+
+    /// Shade row `y` into `row` (its `width` pixels): flat bands where it can
+    /// ([`shade_flat_row`]), else sample by sample. Returns the number of samples whose shading
+    /// was not finite (replaced by the fallback colour).
+    pub(super) fn shade_row(&self, y: u32, row: &mut [[f32; 4]], scratch: &mut RowScratch) -> u64 {
+        let non_finite = AtomicU64::new(0);
+        let (frame, shader, width, n) = (&self.frame, &self.shader, self.width, self.n);
+        if let Some(fan) = &self.fan
+            && n == 1
+            && shader
+                .terrain
+                .as_ref()
+                .is_none_or(|t| !row_may_meet_terrain(t, frame, y, width))
+            && shade_flat_row(
+                &FlatRow {
+                    frame,
+                    fan,
+                    shader,
+                    clear_sky_from: self.clear_sky_from,
+                    limit_rad: self.flat_row_limit_rad,
+                    y,
+                },
+                row,
+                scratch,
+                &non_finite,
+            )
+        {
+            return non_finite.into_inner();
+        }
+        scratch.directions(frame, y, width, n);
+        let RowScratch {
+            dirs,
+            heights,
+            card_columns,
+            ..
+        } = scratch;
+        // Which pixels' rays may meet a card: all of them when tracing per sample; with a fan,
+        // those in the column range of a card that the row's rays can reach.
+        card_columns.clear();
+        match &self.fan {
+            None => card_columns.push((0, width as usize)),
+            Some(fan) => {
+                let (lo, hi) = dirs
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+                        (a.min(d.elevation_rad), b.max(d.elevation_rad))
+                    });
+                card_columns.extend(
+                    shader.cards.iter().filter_map(|card| {
+                        card_columns_in_row(card, fan, (lo, hi), frame, y, width)
+                    }),
+                );
+            }
+        }
+        let traced_sample = TracedSample {
+            tracer: self.tracer,
+            camera_height_m: self.camera_height_m,
+            distances_m: &shader.distances_m,
+            need_sky_direction: self.need_sky_direction,
+        };
+        let samples = (n * n) as usize;
+        let inv_samples = 1.0 / samples as f64;
+        for (x, px) in row.iter_mut().enumerate() {
+            let may_meet_card = card_columns.iter().any(|&(a, b)| (a..b).contains(&x));
+            let mut acc = [0.0f64; 3];
+            for dir in &dirs[x * samples..(x + 1) * samples] {
+                let alpha = dir.elevation_rad;
+                let c = match &self.fan {
+                    Some(_) if alpha >= self.clear_sky_from => shader.sky_table.at(alpha),
+                    Some(fan) => shade_fan_sample(shader, fan, dir, may_meet_card, heights),
+                    None => shade_traced_sample(shader, &traced_sample, dir),
+                };
+                let c = if c.iter().all(|v| v.is_finite()) {
+                    c
+                } else {
+                    non_finite.fetch_add(1, Ordering::Relaxed);
+                    shader.fallback
+                };
+                for i in 0..3 {
+                    acc[i] += c[i];
+                }
+            }
+            *px = [
+                (acc[0] * inv_samples) as f32,
+                (acc[1] * inv_samples) as f32,
+                (acc[2] * inv_samples) as f32,
+                1.0,
+            ];
+        }
+        non_finite.into_inner()
+    }
+}
+
+/// Which intervals of a plan's fan hold rays that may read the sun ([`FramePlan::sun_reads`]).
+pub(super) struct SunReads {
+    /// Intervals below each interval index that may read the sun (cumulative count).
+    prefix: Vec<u32>,
+}
+
+impl SunReads {
+    /// Whether a lookup in `fan` (the plan's) of an elevation in `elevations` (lo, hi) may
+    /// read the sun.
+    fn any(&self, fan: &ElevationFan, (lo, hi): (f64, f64)) -> bool {
+        let (i, j) = (fan.interval(lo), fan.interval(hi));
+        let (i, j) = (i.min(j), i.max(j));
+        let last = self.prefix.len() - 1;
+        self.prefix[(j + 1).min(last)] > self.prefix[i.min(last)]
+    }
+}
+
+impl FramePlan<'_> {
+    /// The lowest and highest elevation (rad) at which shading row `y` looks anything up: its
+    /// samples' and its flat bands' (−∞ and +∞ when one is not finite). The same for every
+    /// frame of one camera and sample count.
+    pub(super) fn row_elevations(&self, y: u32, scratch: &mut RowScratch) -> (f64, f64) {
+        scratch.directions(&self.frame, y, self.width, self.n);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut add = |e: f64| {
+            if e.is_finite() {
+                (lo, hi) = (lo.min(e), hi.max(e));
+            } else {
+                (lo, hi) = (f64::NEG_INFINITY, f64::INFINITY);
+            }
+        };
+        scratch.dirs.iter().for_each(|d| add(d.elevation_rad));
+        if self.n == 1
+            && let Some(bands) = flat_bands(&self.frame, y, self.width, self.flat_row_limit_rad)
+        {
+            bands.iter().for_each(|&(_, alpha)| add(alpha));
+        }
+        (lo, hi)
+    }
+
+    /// For each fan interval, whether a ray interpolated in it may read the sun: meet the
+    /// disc's band ([`Shader::may_meet_sun`]) or show the sun on the sea
+    /// ([`Shader::may_meet_glint`]). `None` without a fan (exact mode).
+    pub(super) fn sun_reads(&self) -> Option<SunReads> {
+        let fan = self.fan.as_ref()?;
+        let last = fan.len() - 1;
+        let mut prefix = vec![0];
+        let mut count = 0;
+        for i in 0..last.max(1) {
+            let (a, b) = (fan.ray_end(i), fan.ray_end((i + 1).min(last)));
+            count += u32::from(self.ends_may_read_sun(a, b));
+            prefix.push(count);
+        }
+        Some(SunReads { prefix })
+    }
+
+    /// Whether a ray interpolated between ends `a` and `b` may read the sun: one of the two
+    /// ends when they differ in kind, else an end between them.
+    fn ends_may_read_sun(&self, a: FanEnd, b: FanEnd) -> bool {
+        let sky = |lo: f64, hi: f64| {
+            self.shader
+                .sun
+                .as_ref()
+                .is_some_and(|s| s.may_meet_range(lo, hi))
+        };
+        let sea = |g: (f64, f64), d: (f64, f64)| {
+            self.shader
+                .reflection
+                .as_ref()
+                .is_some_and(|r| r.may_show_sun_range(g, d))
+        };
+        let end = |e: FanEnd| match e {
+            FanEnd::Sky { elevation_rad: x } => sky(x, x),
+            FanEnd::Ground {
+                distance_m: d,
+                grazing_rad: g,
+            } => sea((g, g), (d, d)),
+            FanEnd::Trapped | FanEnd::Lost => false,
+        };
+        match (a, b) {
+            (FanEnd::Sky { elevation_rad: x }, FanEnd::Sky { elevation_rad: y }) => {
+                sky(x.min(y), x.max(y))
+            }
+            (
+                FanEnd::Ground {
+                    distance_m: d0,
+                    grazing_rad: g0,
+                },
+                FanEnd::Ground {
+                    distance_m: d1,
+                    grazing_rad: g1,
+                },
+            ) => sea((g0.min(g1), g0.max(g1)), (d0.min(d1), d0.max(d1))),
+            (a, b) => end(a) || end(b),
+        }
+    }
+
+    /// Whether row `y` of this plan, whose lookups span `elevations`
+    /// ([`Self::row_elevations`]), shades to the pixels of row `y` of `base` (the plan this one
+    /// was built on), with `reads` and `base_reads` their [`Self::sun_reads`]: the tables are
+    /// the base's, the row reads the same fan rays in both, and may read the sun in neither
+    /// (module docs).
+    pub(super) fn copies_base_row(
+        &self,
+        reads: &SunReads,
+        base: &FramePlan<'_>,
+        base_reads: &SunReads,
+        elevations: (f64, f64),
+    ) -> bool {
+        let (Some(fan), Some(base_fan)) = (&self.fan, &base.fan) else {
+            return false;
+        };
+        self.shares_base
+            && (self.width, self.height, self.n) == (base.width, base.height, base.n)
+            && !reads.any(fan, elevations)
+            && !base_reads.any(base_fan, elevations)
+            && fan.same_rays_over(base_fan, elevations.0, elevations.1)
+    }
+}
