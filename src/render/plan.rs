@@ -32,8 +32,9 @@ use rayon::prelude::*;
 use super::air_paths::AirPaths;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
-use super::reflection::{self, FacetTable, Glint, Reflection, SeaFan};
-use super::shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
+use super::reflection::{self, FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
+use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
+use super::texture_box::TextureColumns;
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
 use super::{
@@ -44,7 +45,7 @@ use super::{
 };
 use crate::scene::camera::CameraFrame;
 use crate::scene::sky::SunDisc;
-use crate::scene::{Scene, samples_per_pixel_root};
+use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
 /// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
 const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
@@ -85,8 +86,8 @@ struct SeaTables {
     reflected_sky: Arc<AngleTable>,
     /// The sea's radiance by grazing angle.
     sea_table: Arc<AngleTable>,
-    /// The sea fan and the facet table (`None`: the sea shows no reflections).
-    reflection: Option<(Option<Arc<SeaFan>>, Arc<FacetTable>)>,
+    /// The sea fan and the facets (`None`: the sea shows no reflections).
+    reflection: Option<(Option<Arc<SeaFan>>, Arc<Facets>)>,
 }
 
 /// The cards in view (by azimuth), nearest first, and the distances the tracer must report.
@@ -112,6 +113,9 @@ impl<'a> ViewCards<'a> {
             distances_m: Vec::new(),
             max_top_m: Vec::new(),
         };
+        // A rough sea mirrors the cards' textures averaged over heights (once per image).
+        let blurred = scene.sea.reflections && scene.sea.wave_slope_rad > 0.0;
+        let mut columns = Vec::new();
         for i in order {
             let c = &scene.cards[i];
             let ground_radius = radius * (c.distance_m / radius).sin();
@@ -143,7 +147,13 @@ impl<'a> ViewCards<'a> {
                 top_m,
                 height_m: c.height_m,
                 texture: &c.texture,
+                columns: blurred.then(|| texture_columns(&mut columns, &c.texture)),
+                reflected_haze: None,
             });
+            if blurred && let Some(extinction) = scene.sky.extinction() {
+                let card = out.cards.last_mut().expect("just pushed");
+                card.reflected_haze = Some(ReflectedHaze::new(&extinction, radius, card));
+            }
         }
         out
     }
@@ -184,7 +194,11 @@ fn terrain_view<'a>(
             brightness: scene.sky.brightness,
             scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
         };
-        TerrainView::new(t, tracer, frame, options.exact).map(Arc::new)
+        let mut view = TerrainView::new(t, tracer, frame, options.exact)?;
+        if scene.sea.reflections && scene.sea.wave_slope_rad > 0.0 {
+            view.prepare_reflections();
+        }
+        Some(Arc::new(view))
     })
 }
 
@@ -236,11 +250,12 @@ impl SeaTables {
         let sea = inp.scene.sea;
         let sky = Arc::clone(&reflected_sky);
         let sea_table = AngleTable::new(0.0, sea_hi, |g| sea.radiance_reflecting(g, |e| sky.at(e)));
+        let reflection = sea_fan_and_facets(inp, &reflected_sky);
         SeaTables {
             key: key.map(f64::to_bits),
             reflected_sky,
             sea_table: Arc::new(sea_table),
-            reflection: sea_fan_and_facets(inp),
+            reflection,
         }
     }
 }
@@ -267,11 +282,13 @@ fn max_grazing_rad(inp: &SeaReflectionInputs<'_>) -> Option<f64> {
 }
 
 /// The sea fan (when a card or terrain is in view, over the reflected elevations the frame's
-/// grazing angles and the wave facets reach, or for a mirror sea's sun image) and the facet
-/// table. `None` when the scene turns reflections off or the frame shows no sea.
+/// grazing angles and the wave facets reach, or for a mirror sea's sun image) and the facets
+/// (a rough sea's shares weight `reflected_sky`, the sky by elevation over [0, π/2]). `None`
+/// when the scene turns reflections off or the frame shows no sea.
 fn sea_fan_and_facets(
     inp: &SeaReflectionInputs<'_>,
-) -> Option<(Option<Arc<SeaFan>>, Arc<FacetTable>)> {
+    reflected_sky: &AngleTable,
+) -> Option<(Option<Arc<SeaFan>>, Arc<Facets>)> {
     let scene = inp.scene;
     let sea = scene.sea;
     if !sea.reflections {
@@ -285,8 +302,9 @@ fn sea_fan_and_facets(
         .max(inp.pixel_rad);
     let mirror = sea.wave_slope_rad == 0.0;
     // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
-    // elevation, so interpolation is exact for them); an eighth of the facet slope spread
-    // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
+    // elevation, so interpolation is exact for them); an eighth of the rms facet slope σ′
+    // otherwise (a rough sea's images are integrated over reflected elevations spread by ±8σ′,
+    // with heights linear between the fan's rays).
     let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
     // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
     let need_sky = mirror && scene.sun.is_some();
@@ -303,7 +321,28 @@ fn sea_fan_and_facets(
     let fan = max_range_m
         .and_then(|d| SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density))
         .map(Arc::new);
-    Some((fan, Arc::new(FacetTable::new(&sea, max_grazing))))
+    let facets = if mirror {
+        Facets::Mirror(FacetTable::new(&sea, max_grazing))
+    } else if fan.is_some() {
+        Facets::Rough(SlopeTable::new(&sea, max_grazing, reflected_sky))
+    } else {
+        Facets::None
+    };
+    Some((fan, Arc::new(facets)))
+}
+
+/// The column integrals of `texture`, built once per image: `built` holds those built so far.
+fn texture_columns(
+    built: &mut Vec<(*const Texture, Arc<TextureColumns>)>,
+    texture: &Arc<Texture>,
+) -> Arc<TextureColumns> {
+    let key = Arc::as_ptr(texture);
+    if let Some((_, c)) = built.iter().find(|(k, _)| *k == key) {
+        return c.clone();
+    }
+    let c = Arc::new(TextureColumns::new(texture));
+    built.push((key, c.clone()));
+    c
 }
 
 /// The sun's glitter on a rough sea: its light at the sea comes along its own curved ray from
