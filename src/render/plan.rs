@@ -34,9 +34,9 @@ use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
 use super::reflection::{self, FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
 use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
-use super::texture_box::TextureColumns;
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
+use super::texture_box::TextureColumns;
 use super::{
     FLAT_ROW_FRACTION, FlatRow, RenderError, RenderOptions, RenderStats, RowScratch, TracedSample,
     azimuth_span, card_columns_in_row, check_tracer_tolerance, elevation_range, flat_bands,
