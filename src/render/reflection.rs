@@ -1667,8 +1667,9 @@ mod tests {
     }
 }
 
+/// The search for the sea-level launch towards the sun.
 #[cfg(test)]
-mod tests {
+mod launch_tests {
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     use super::*;
