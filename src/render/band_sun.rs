@@ -179,13 +179,7 @@ fn fill_columns(
     if b <= a {
         return;
     }
-    let mut nodes: Vec<usize> = (a..b).step_by(STRIDE).collect();
-    nodes.push(b - 1);
-    if let Some(c) = centre.filter(|c| (a..b).contains(c)) {
-        nodes.extend([c.saturating_sub(1).max(a), c, (c + 1).min(b - 1)]);
-    }
-    nodes.sort_unstable();
-    nodes.dedup();
+    let nodes = nodes((a, b), STRIDE, centre);
     for &x in &nodes {
         out[x] = value(x);
     }
@@ -203,6 +197,19 @@ fn fill_columns(
             open.extend([(i, m), (m, j)]);
         }
     }
+}
+
+/// The node columns of [`a`, `b`) (not empty): every `stride`th column, the last, and `centre`
+/// with its neighbours when it lies in the run; ascending.
+fn nodes((a, b): (usize, usize), stride: usize, centre: Option<usize>) -> Vec<usize> {
+    let mut nodes: Vec<usize> = (a..b).step_by(stride).collect();
+    nodes.push(b - 1);
+    if let Some(c) = centre.filter(|c| (a..b).contains(c)) {
+        nodes.extend([c.saturating_sub(1).max(a), c, (c + 1).min(b - 1)]);
+    }
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
 }
 
 /// Whether linear interpolation between columns `i` and `j` of `out` predicts column `m`
@@ -241,13 +248,7 @@ impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
         if b <= a {
             return;
         }
-        let mut nodes: Vec<usize> = (a..b).step_by(SMOOTH_STRIDE).collect();
-        nodes.push(b - 1);
-        if let Some(c) = centre.filter(|c| (a..b).contains(c)) {
-            nodes.extend([c.saturating_sub(1).max(a), c, (c + 1).min(b - 1)]);
-        }
-        nodes.sort_unstable();
-        nodes.dedup();
+        let nodes = nodes((a, b), SMOOTH_STRIDE, centre);
         // The exact factor of each column of [a, b) evaluated so far (NaN: not yet; a NaN
         // factor is kept as 0, and its radiance as the exact shading gives it).
         let mut k = vec![f64::NAN; b - a];
