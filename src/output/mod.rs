@@ -37,25 +37,55 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 /// renamed into place, in the order given. A failure while writing changes no file under a
 /// final name and leaves no temporary file. Parent folders are created.
 pub fn write_all_atomic(files: &[(&Path, &[u8])], remove: &[PathBuf]) -> Result<(), WriteError> {
-    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
-    let discard = |staged: &[(PathBuf, &Path)]| {
-        for (tmp, _) in staged {
-            let _ = std::fs::remove_file(tmp);
-        }
-    };
-    for &(path, bytes) in files {
-        match stage(path, bytes) {
-            Ok(tmp) => staged.push((tmp, path)),
-            Err(e) => {
-                discard(&staged);
-                return Err(e);
-            }
+    let staged = files
+        .iter()
+        .map(|&(path, bytes)| StagedFile::write(path, bytes))
+        .collect::<Result<Vec<_>, _>>()?;
+    commit_staged(staged, remove)
+}
+
+/// A file written under a temporary name beside its final one and flushed to disk, not yet
+/// renamed into place ([`commit_staged`]). Dropped without being committed, it removes its
+/// temporary file. Staging the files of a set as each becomes ready (several at once) and
+/// committing them together keeps [`write_all_atomic`]'s all-or-nothing rule.
+#[derive(Debug)]
+pub struct StagedFile {
+    tmp: PathBuf,
+    path: PathBuf,
+    renamed: bool,
+}
+
+impl StagedFile {
+    /// Write `bytes` to a temporary file beside `path` (parent folders created) and flush it.
+    pub fn write(path: &Path, bytes: &[u8]) -> Result<Self, WriteError> {
+        Ok(StagedFile {
+            tmp: stage(path, bytes)?,
+            path: path.to_path_buf(),
+            renamed: false,
+        })
+    }
+
+    /// The final name.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.renamed {
+            let _ = std::fs::remove_file(&self.tmp);
         }
     }
+}
+
+/// Delete the files in `remove` (missing ones are fine), then rename the staged files into
+/// place in the order given. On a failure no further file is renamed and the temporary files
+/// not yet renamed are removed.
+pub fn commit_staged(mut staged: Vec<StagedFile>, remove: &[PathBuf]) -> Result<(), WriteError> {
     for path in remove {
         match std::fs::remove_file(path) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                discard(&staged);
                 return Err(WriteError {
                     path: path.clone(),
                     source: e,
@@ -64,14 +94,12 @@ pub fn write_all_atomic(files: &[(&Path, &[u8])], remove: &[PathBuf]) -> Result<
             _ => {}
         }
     }
-    for (k, (tmp, path)) in staged.iter().enumerate() {
-        if let Err(source) = std::fs::rename(tmp, path) {
-            discard(&staged[k..]);
-            return Err(WriteError {
-                path: path.to_path_buf(),
-                source,
-            });
-        }
+    for file in &mut staged {
+        std::fs::rename(&file.tmp, &file.path).map_err(|source| WriteError {
+            path: file.path.clone(),
+            source,
+        })?;
+        file.renamed = true;
     }
     Ok(())
 }
