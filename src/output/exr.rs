@@ -135,37 +135,49 @@ fn raw_block(film: &Film, channels: &[usize], y0: usize, lines: usize) -> Vec<u8
     raw
 }
 
-/// Per-thread buffers of the block encoder: the split and predicted bytes and zlib's output.
-#[derive(Default)]
-struct BlockBuffers {
+/// Blocks compressed one after another by one task (one encoder's buffers and zlib state):
+/// enough to share them, few enough to keep both cores busy to the end.
+const BLOCKS_PER_TASK: usize = 4;
+
+/// One task's block encoder: the split and predicted bytes, zlib's output and its state, all
+/// reused from block to block (a reset stream compresses exactly as a new one).
+struct BlockEncoder {
     split: Vec<u8>,
     predicted: Vec<u8>,
     zlib: Vec<u8>,
+    deflate: zlib_rs::Deflate,
 }
 
-/// The stored bytes of one ZIP block: zlib (RFC 1950, [`ZIP_LEVEL`]) of the predicted bytes, or
-/// the raw bytes when that is not smaller.
-fn zip_block(
-    film: &Film,
-    channels: &[usize],
-    y0: usize,
-    lines: usize,
-    buffers: &mut BlockBuffers,
-) -> Vec<u8> {
-    let BlockBuffers {
-        split,
-        predicted,
-        zlib,
-    } = buffers;
-    predicted_block(film, channels, y0, lines, split, predicted);
-    // Room for a stream as long as the input: one that does not fit is not wanted either.
-    if zlib.len() < predicted.len() {
-        zlib.resize(predicted.len(), 0);
+impl BlockEncoder {
+    fn new() -> Self {
+        BlockEncoder {
+            split: Vec::new(),
+            predicted: Vec::new(),
+            zlib: Vec::new(),
+            deflate: zlib_rs::Deflate::new(ZIP_LEVEL, true, 15),
+        }
     }
-    let config = zlib_rs::DeflateConfig::new(ZIP_LEVEL);
-    match zlib_rs::compress_slice(&mut zlib[..predicted.len()], predicted, config) {
-        (stream, zlib_rs::ReturnCode::Ok) if stream.len() < predicted.len() => stream.to_vec(),
-        _ => raw_block(film, channels, y0, lines),
+
+    /// The stored bytes of one ZIP block: zlib (RFC 1950, [`ZIP_LEVEL`]) of the predicted
+    /// bytes, or the raw bytes when that is not smaller.
+    fn zip_block(&mut self, film: &Film, channels: &[usize], y0: usize, lines: usize) -> Vec<u8> {
+        let n = lines * film.width as usize * channels.len() * 4;
+        predicted_block(film, channels, y0, lines, &mut self.split, &mut self.predicted);
+        // Room for a stream as long as the input: one that does not fit is not wanted either.
+        if self.zlib.len() < n {
+            self.zlib.resize(n, 0);
+        }
+        self.deflate.reset();
+        let status = self.deflate.compress(
+            &self.predicted,
+            &mut self.zlib[..n],
+            zlib_rs::DeflateFlush::Finish,
+        );
+        let written = self.deflate.total_out() as usize;
+        match status {
+            Ok(zlib_rs::Status::StreamEnd) if written < n => self.zlib[..written].to_vec(),
+            _ => raw_block(film, channels, y0, lines),
+        }
     }
 }
 
@@ -233,11 +245,14 @@ pub fn encode_exr(film: &Film, meta: &ExrMetadata) -> Result<Vec<u8>, ExrError> 
     // Every block compressed independently, in parallel; written in order below.
     let starts: Vec<usize> = (0..h).step_by(lines_per_block).collect();
     let blocks: Vec<Vec<u8>> = starts
-        .par_iter()
-        .map_init(
-            BlockBuffers::default,
-            |buffers, &y0| zip_block(film, &channels, y0, lines_per_block.min(h - y0), buffers),
-        )
+        .par_chunks(BLOCKS_PER_TASK)
+        .flat_map_iter(|group| {
+            let mut encoder = BlockEncoder::new();
+            group
+                .iter()
+                .map(|&y0| encoder.zip_block(film, &channels, y0, lines_per_block.min(h - y0)))
+                .collect::<Vec<_>>()
+        })
         .collect();
     let mut out = Cursor::new(Vec::new());
     exr::block::write(&mut out, headers.clone(), true, |_meta, writer| {
@@ -354,12 +369,12 @@ mod tests {
             })
         });
         let order = [3, 2, 1, 0];
-        let mut buffers = BlockBuffers::default();
-        let stored = zip_block(&f, &order, 0, 4, &mut buffers);
+        let mut encoder = BlockEncoder::new();
+        let stored = encoder.zip_block(&f, &order, 0, 4);
         assert_eq!(stored, raw_block(&f, &order, 0, 4));
         // A flat block does shrink.
         let flat = film(16, 4, |_, _| [0.5, 0.5, 0.5, 1.0]);
-        let stored = zip_block(&flat, &order, 0, 4, &mut buffers);
+        let stored = encoder.zip_block(&flat, &order, 0, 4);
         assert!(stored.len() < 16 * 4 * 16 / 4, "{}", stored.len());
     }
 
