@@ -162,7 +162,14 @@ impl BlockEncoder {
     /// bytes, or the raw bytes when that is not smaller.
     fn zip_block(&mut self, film: &Film, channels: &[usize], y0: usize, lines: usize) -> Vec<u8> {
         let n = lines * film.width as usize * channels.len() * 4;
-        predicted_block(film, channels, y0, lines, &mut self.split, &mut self.predicted);
+        predicted_block(
+            film,
+            channels,
+            y0,
+            lines,
+            &mut self.split,
+            &mut self.predicted,
+        );
         // Room for a stream as long as the input: one that does not fit is not wanted either.
         if self.zlib.len() < n {
             self.zlib.resize(n, 0);

@@ -41,19 +41,21 @@ pub(crate) fn integrate_ln_p(
     max_step_m: f64,
     tv: &dyn Fn(f64, f64) -> f64,
 ) -> f64 {
-    rk4_ln_p(h_from, ln_p_from, h_to, max_step_m, &|h, lnp| {
-        -G_OVER_R / tv(h, lnp.exp())
-    })
+    let slope = |h: f64, lnp: f64| -G_OVER_R / tv(h, lnp.exp());
+    rk4_ln_p(h_from, ln_p_from, h_to, max_step_m, &slope, false)
 }
 
 /// [`integrate_ln_p`] given the slope d(ln P)/dh as a function of (h, ln P) directly (dry air
-/// needs no pressure, so no `exp` per evaluation; the same values bit for bit).
+/// needs no pressure, so no `exp` per evaluation; the same values bit for bit). With
+/// `pressure_free` (the slope does not depend on ln P) the two mid-step stages, which then
+/// evaluate it at the same height, share one evaluation.
 fn rk4_ln_p(
     h_from: f64,
     ln_p_from: f64,
     h_to: f64,
     max_step_m: f64,
     f: &dyn Fn(f64, f64) -> f64,
+    pressure_free: bool,
 ) -> f64 {
     let span = h_to - h_from;
     if span == 0.0 || !span.is_finite() {
@@ -66,7 +68,11 @@ fn rk4_ln_p(
         let h = h_from + dh * i as f64;
         let k1 = f(h, lnp);
         let k2 = f(h + 0.5 * dh, lnp + 0.5 * dh * k1);
-        let k3 = f(h + 0.5 * dh, lnp + 0.5 * dh * k2);
+        let k3 = if pressure_free {
+            k2
+        } else {
+            f(h + 0.5 * dh, lnp + 0.5 * dh * k2)
+        };
         let k4 = f(h + dh, lnp + dh * k3);
         lnp += dh / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
     }
@@ -174,9 +180,14 @@ impl HydrostaticTable {
         grid: &[(f64, f64)],
         tv: &dyn Fn(f64, f64) -> f64,
     ) -> Self {
-        Self::integrate_slope(h0, p0, h_end, grid, &|h, lnp| {
-            -G_OVER_R / tv(h, lnp.exp())
-        })
+        Self::integrate_slope(
+            h0,
+            p0,
+            h_end,
+            grid,
+            &|h, lnp| -G_OVER_R / tv(h, lnp.exp()),
+            false,
+        )
     }
 
     /// [`integrate`](Self::integrate) for dry air, whose virtual temperature is the temperature
@@ -189,22 +200,23 @@ impl HydrostaticTable {
         grid: &[(f64, f64)],
         t: &dyn Fn(f64) -> f64,
     ) -> Self {
-        Self::integrate_slope(h0, p0, h_end, grid, &|h, _| -G_OVER_R / t(h))
+        Self::integrate_slope(h0, p0, h_end, grid, &|h, _| -G_OVER_R / t(h), true)
     }
 
     /// [`integrate`](Self::integrate) with the slope d(ln P)/dh given as a function of
-    /// (h, ln P).
+    /// (h, ln P) (`pressure_free`: of h alone; see [`rk4_ln_p`]).
     fn integrate_slope(
         h0: f64,
         p0: f64,
         h_end: f64,
         grid: &[(f64, f64)],
         slope: &dyn Fn(f64, f64) -> f64,
+        pressure_free: bool,
     ) -> Self {
         let table = Self::unintegrated(h0, p0, h_end, grid, None);
         let mut ln_p = table.ln_p0;
         for (k, cell) in table.chunks.iter().enumerate() {
-            let chunk = table.build(k, ln_p, slope);
+            let chunk = table.build(k, ln_p, slope, pressure_free);
             ln_p = chunk.last_ln_p;
             let _ = cell.set(chunk);
         }
@@ -241,8 +253,15 @@ impl HydrostaticTable {
         }
     }
 
-    /// Chunk `k` from ln P `start` at its first node; `slope(h, ln P)` is d(ln P)/dh.
-    fn build(&self, k: usize, start: f64, slope: &dyn Fn(f64, f64) -> f64) -> Chunk {
+    /// Chunk `k` from ln P `start` at its first node; `slope(h, ln P)` is d(ln P)/dh
+    /// (`pressure_free`: it does not depend on ln P).
+    fn build(
+        &self,
+        k: usize,
+        start: f64,
+        slope: &dyn Fn(f64, f64) -> f64,
+        pressure_free: bool,
+    ) -> Chunk {
         let all = self.nodes.knots_m();
         let heights = &all[k * CHUNK_NODES..=((k + 1) * CHUNK_NODES).min(all.len() - 1)];
         let mut ln_p = Vec::with_capacity(heights.len());
@@ -252,7 +271,7 @@ impl HydrostaticTable {
             if i > 0 {
                 let prev = heights[i - 1];
                 // Two RK4 sub-steps per node interval.
-                current = rk4_ln_p(prev, current, hh, 0.5 * (hh - prev), slope);
+                current = rk4_ln_p(prev, current, hh, 0.5 * (hh - prev), slope, pressure_free);
             }
             ln_p.push(current);
             slopes.push(slope(hh, current));
@@ -275,7 +294,7 @@ impl HydrostaticTable {
         };
         self.chunks[k].get_or_init(|| {
             let tv = self.tv.as_deref().expect("an eager table has every chunk");
-            self.build(k, start, &|h, lnp| -G_OVER_R / tv(h, lnp.exp()))
+            self.build(k, start, &|h, lnp| -G_OVER_R / tv(h, lnp.exp()), false)
         })
     }
 
