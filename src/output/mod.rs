@@ -253,6 +253,41 @@ mod tests {
     }
 
     #[test]
+    fn staged_files_appear_only_when_committed_and_leave_nothing_when_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.png"), dir.path().join("b.exr"));
+        std::fs::write(&a, b"old").unwrap();
+        let names = || {
+            let mut v: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        // Staged, not committed: the final names are untouched; dropped: no temporary left.
+        let staged = [
+            StagedFile::write(&a, b"new").unwrap(),
+            StagedFile::write(&b, b"b").unwrap(),
+        ];
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert!(!b.exists());
+        assert_eq!(names().len(), 3, "{:?}", names());
+        drop(staged);
+        assert_eq!(names(), ["a.png"]);
+        // Committed: both in place, nothing else.
+        let staged = vec![
+            StagedFile::write(&a, b"new").unwrap(),
+            StagedFile::write(&b, b"b").unwrap(),
+        ];
+        assert_eq!(staged[1].path(), b.as_path());
+        commit_staged(staged, &[]).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), b"new");
+        assert_eq!(std::fs::read(&b).unwrap(), b"b");
+        assert_eq!(names(), ["a.png", "b.exr"]);
+    }
+
+    #[test]
     fn reports_the_path_on_failure() {
         let dir = tempfile::tempdir().unwrap();
         let blocker = dir.path().join("file");
