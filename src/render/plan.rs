@@ -374,8 +374,8 @@ fn glint(scene: &Scene, tracer: &dyn RayTracer) -> Option<Glint> {
 }
 
 /// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter
-/// or mirror image.
-fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> Option<Reflection> {
+/// (`glint`, found beforehand) or mirror image.
+fn sea_reflection(scene: &Scene, tables: &SeaTables, glint: Option<Glint>) -> Option<Reflection> {
     let (fan, facets) = tables.reflection.clone()?;
     let mirror = scene.sea.wave_slope_rad == 0.0;
     Some(Reflection {
@@ -385,7 +385,7 @@ fn sea_reflection(scene: &Scene, tracer: &dyn RayTracer, tables: &SeaTables) -> 
         fan,
         sky_table: Arc::clone(&tables.reflected_sky),
         facets,
-        glint: glint(scene, tracer),
+        glint,
         mirror_sun: scene
             .sun
             .filter(|_| mirror)
@@ -544,7 +544,12 @@ impl<'a> FramePlan<'a> {
             Some(b) => b.shader.terrain.clone(),
             None => terrain_view(scene, tracer, options, span, inputs.elevations),
         };
-        let (fan, sky_table) = inputs.fan_and_sky(&inputs.fan_spec(&view), base);
+        // The sun's glitter needs its own sea-level ray (a serial bisection), not the fan:
+        // found while the fan is traced.
+        let ((fan, sky_table), glint) = rayon::join(
+            || inputs.fan_and_sky(&inputs.fan_spec(&view), base),
+            || glint(scene, tracer).filter(|_| scene.sea.reflections),
+        );
         let clear_sky_from = fan.as_ref().map_or(f64::INFINITY, |f| {
             clear_sky_from(scene, f, &view.max_top_m, terrain.as_deref())
         });
@@ -587,6 +592,7 @@ impl<'a> FramePlan<'a> {
             terrain,
             sky_table,
             sea: &sea,
+            glint,
             aerial,
             traced: &traced,
             base,
@@ -624,6 +630,8 @@ struct ShaderParts<'a, 'b> {
     terrain: Option<Arc<TerrainView<'a>>>,
     sky_table: Arc<AngleTable>,
     sea: &'b SeaTables,
+    /// The sun's glitter on a rough sea ([`glint`]), when the scene has sea reflections.
+    glint: Option<Glint>,
     aerial: Option<AerialShading>,
     /// The rays the sun's transmittance is integrated along, with their ends.
     traced: &'b [(f64, FanEnd)],
@@ -655,7 +663,7 @@ impl<'a> PlanInputs<'a> {
         });
         Shader {
             distances_m: parts.view.distances_m,
-            reflection: sea_reflection(scene, tracer, parts.sea),
+            reflection: sea_reflection(scene, parts.sea, parts.glint),
             terrain: parts.terrain,
             cards: parts.view.cards,
             sky_table: parts.sky_table,
