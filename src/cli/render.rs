@@ -7,9 +7,10 @@ use std::time::Instant;
 
 use anyhow::Context;
 use ghostship::jobs::render::{RenderSettings, parse_size};
-use ghostship::jobs::{AtmosphereCache, Product, RenderRequest};
+use ghostship::jobs::{AtmosphereCache, RenderRequest};
 use ghostship::output::film::{ImageFormat, encode_film};
 use ghostship::output::png::DEFAULT_EXPOSURE;
+use ghostship::output::{StagedFile, commit_staged};
 use ghostship::render::{RenderOptions, check_tracer_tolerance};
 use ghostship::scene::Scene;
 use rayon::prelude::*;
@@ -94,7 +95,14 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
             dir.join(format!("{stem}.exr")),
         ]
     } else {
-        args.outputs.clone()
+        // A file named twice is written once.
+        let mut unique: Vec<PathBuf> = Vec::with_capacity(args.outputs.len());
+        for path in &args.outputs {
+            if !unique.contains(path) {
+                unique.push(path.clone());
+            }
+        }
+        unique
     };
     let request = RenderRequest::new(
         scene,
@@ -125,16 +133,23 @@ pub fn run(args: RenderArgs, quiet: bool) -> anyhow::Result<()> {
         .film(args.size, atmosphere.as_deref(), quiet)
         .with_context(|| format!("cannot render {}", args.scene.display()))?;
     let render_s = start.elapsed().as_secs_f64();
-    // PNG and EXR are encoded in parallel.
-    let files = outputs
+    // Each output is encoded and written to its temporary file (flushed to disk) in parallel,
+    // as soon as it is ready — the PNG's disk flush overlaps the EXR's encoding — and all are
+    // renamed into place together once every one is written (none if any fails).
+    let staged = outputs
         .par_iter()
         .map(|path| {
             let format = ImageFormat::from_path(path).unwrap_or(ImageFormat::Png);
             let bytes = encode_film(&film, format, &meta, args.exposure)?;
-            Ok((path.clone(), Product::new(format.extension(), bytes)))
+            Ok(StagedFile::write(path, &bytes)?)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    super::write_files(&files, quiet)?;
+    commit_staged(staged, &[])?;
+    if !quiet {
+        for path in &outputs {
+            eprintln!("wrote {}", path.display());
+        }
+    }
     if !quiet {
         eprintln!(
             "{}x{} in {:.0} ms ({} fan rays{}{}{})",

@@ -5,9 +5,10 @@
 //!
 //! The `exr` crate writes the header and the offset table; the blocks are prepared and
 //! compressed here, in parallel on rayon's pool, straight from the film: OpenEXR's ZIP predictor
-//! (bytes split into even and odd halves, then byte differences + 128) and zlib at
-//! [`ZIP_LEVEL`] (the crate's fixed level 4 compresses 4–5× slower; level 1's files of the paper
-//! frames are 15–64 % larger). A block that does not shrink is stored raw, as the format asks.
+//! (bytes split into even and odd halves, then byte differences + 128, written in one pass per
+//! half) and zlib-rs at [`ZIP_LEVEL`], its fastest level (why this level and this zlib, with
+//! the measurements: docs/exr_compression.md). A block that does not shrink is stored raw, as
+//! the format asks.
 //!
 //! Provenance: `software` = `"ghostship VERSION"`, `comments` = the scene hash, and ONE extra
 //! attribute `ghostship` (a string vector of `key=value` lines: program version, scene sha256,
@@ -76,12 +77,15 @@ impl ExrMetadata {
     }
 }
 
-/// zlib level of the ZIP blocks (miniz_oxide's fast greedy level).
-pub const ZIP_LEVEL: u8 = 1;
+/// zlib level of the ZIP blocks (zlib-rs's fastest level: `deflate_quick`, one hash probe and
+/// the fixed Huffman code).
+pub const ZIP_LEVEL: i32 = 1;
 
-/// The uncompressed bytes of one scan-line block (lines `y0..y0 + lines`), already split into
+/// The uncompressed bytes of one scan-line block (lines `y0..y0 + lines`), split into
 /// OpenEXR's even/odd halves (`sep`), and the predicted bytes (`out`) that zlib compresses.
-/// `channels[k]` is the film channel (0 R, 1 G, 2 B, 3 A) of the header's k-th channel.
+/// `channels[k]` is the film channel (0 R, 1 G, 2 B, 3 A) of the header's k-th channel. Every
+/// byte of both buffers is written, so they are only resized (zeroed) when the block size
+/// changes.
 fn predicted_block(
     film: &Film,
     channels: &[usize],
@@ -92,8 +96,12 @@ fn predicted_block(
 ) {
     let w = film.width as usize;
     let n = lines * w * channels.len() * 4;
-    sep.clear();
-    sep.resize(n, 0);
+    for buffer in [&mut *sep, &mut *out] {
+        if buffer.len() != n {
+            buffer.clear();
+            buffer.resize(n, 0);
+        }
+    }
     // Raw little-endian f32 samples b0 b1 b2 b3 per sample, line by line, channel by channel;
     // the even-indexed bytes (b0, b2) go to the first half, the odd ones (b1, b3) to the second.
     let (first, second) = sep.split_at_mut(n / 2);
@@ -107,8 +115,6 @@ fn predicted_block(
             }
         }
     }
-    out.clear();
-    out.resize(n, 0);
     out[0] = sep[0];
     for (o, pair) in out[1..].iter_mut().zip(sep.windows(2)) {
         *o = pair[1].wrapping_sub(pair[0]).wrapping_add(128);
@@ -129,22 +135,56 @@ fn raw_block(film: &Film, channels: &[usize], y0: usize, lines: usize) -> Vec<u8
     raw
 }
 
-/// The stored bytes of one ZIP block: zlib of the predicted bytes, or the raw bytes when that
-/// is not smaller.
-fn zip_block(
-    film: &Film,
-    channels: &[usize],
-    y0: usize,
-    lines: usize,
-    sep: &mut Vec<u8>,
-    out: &mut Vec<u8>,
-) -> Vec<u8> {
-    predicted_block(film, channels, y0, lines, sep, out);
-    let zipped = miniz_oxide::deflate::compress_to_vec_zlib(out, ZIP_LEVEL);
-    if zipped.len() < out.len() {
-        zipped
-    } else {
-        raw_block(film, channels, y0, lines)
+/// Blocks compressed one after another by one task (one encoder's buffers and zlib state):
+/// enough to share them, few enough to keep both cores busy to the end.
+const BLOCKS_PER_TASK: usize = 4;
+
+/// One task's block encoder: the split and predicted bytes, zlib's output and its state, all
+/// reused from block to block (a reset stream compresses exactly as a new one).
+struct BlockEncoder {
+    split: Vec<u8>,
+    predicted: Vec<u8>,
+    zlib: Vec<u8>,
+    deflate: zlib_rs::Deflate,
+}
+
+impl BlockEncoder {
+    fn new() -> Self {
+        BlockEncoder {
+            split: Vec::new(),
+            predicted: Vec::new(),
+            zlib: Vec::new(),
+            deflate: zlib_rs::Deflate::new(ZIP_LEVEL, true, 15),
+        }
+    }
+
+    /// The stored bytes of one ZIP block: zlib (RFC 1950, [`ZIP_LEVEL`]) of the predicted
+    /// bytes, or the raw bytes when that is not smaller.
+    fn zip_block(&mut self, film: &Film, channels: &[usize], y0: usize, lines: usize) -> Vec<u8> {
+        let n = lines * film.width as usize * channels.len() * 4;
+        predicted_block(
+            film,
+            channels,
+            y0,
+            lines,
+            &mut self.split,
+            &mut self.predicted,
+        );
+        // Room for a stream as long as the input: one that does not fit is not wanted either.
+        if self.zlib.len() < n {
+            self.zlib.resize(n, 0);
+        }
+        self.deflate.reset();
+        let status = self.deflate.compress(
+            &self.predicted,
+            &mut self.zlib[..n],
+            zlib_rs::DeflateFlush::Finish,
+        );
+        let written = self.deflate.total_out() as usize;
+        match status {
+            Ok(zlib_rs::Status::StreamEnd) if written < n => self.zlib[..written].to_vec(),
+            _ => raw_block(film, channels, y0, lines),
+        }
     }
 }
 
@@ -212,11 +252,14 @@ pub fn encode_exr(film: &Film, meta: &ExrMetadata) -> Result<Vec<u8>, ExrError> 
     // Every block compressed independently, in parallel; written in order below.
     let starts: Vec<usize> = (0..h).step_by(lines_per_block).collect();
     let blocks: Vec<Vec<u8>> = starts
-        .par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new()),
-            |(sep, out), &y0| zip_block(film, &channels, y0, lines_per_block.min(h - y0), sep, out),
-        )
+        .par_chunks(BLOCKS_PER_TASK)
+        .flat_map_iter(|group| {
+            let mut encoder = BlockEncoder::new();
+            group
+                .iter()
+                .map(|&y0| encoder.zip_block(film, &channels, y0, lines_per_block.min(h - y0)))
+                .collect::<Vec<_>>()
+        })
         .collect();
     let mut out = Cursor::new(Vec::new());
     exr::block::write(&mut out, headers.clone(), true, |_meta, writer| {
@@ -333,12 +376,12 @@ mod tests {
             })
         });
         let order = [3, 2, 1, 0];
-        let (mut sep, mut out) = (Vec::new(), Vec::new());
-        let stored = zip_block(&f, &order, 0, 4, &mut sep, &mut out);
+        let mut encoder = BlockEncoder::new();
+        let stored = encoder.zip_block(&f, &order, 0, 4);
         assert_eq!(stored, raw_block(&f, &order, 0, 4));
         // A flat block does shrink.
         let flat = film(16, 4, |_, _| [0.5, 0.5, 0.5, 1.0]);
-        let stored = zip_block(&flat, &order, 0, 4, &mut sep, &mut out);
+        let stored = encoder.zip_block(&flat, &order, 0, 4);
         assert!(stored.len() < 16 * 4 * 16 / 4, "{}", stored.len());
     }
 

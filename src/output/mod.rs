@@ -37,25 +37,55 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 /// renamed into place, in the order given. A failure while writing changes no file under a
 /// final name and leaves no temporary file. Parent folders are created.
 pub fn write_all_atomic(files: &[(&Path, &[u8])], remove: &[PathBuf]) -> Result<(), WriteError> {
-    let mut staged: Vec<(PathBuf, &Path)> = Vec::with_capacity(files.len());
-    let discard = |staged: &[(PathBuf, &Path)]| {
-        for (tmp, _) in staged {
-            let _ = std::fs::remove_file(tmp);
-        }
-    };
-    for &(path, bytes) in files {
-        match stage(path, bytes) {
-            Ok(tmp) => staged.push((tmp, path)),
-            Err(e) => {
-                discard(&staged);
-                return Err(e);
-            }
+    let staged = files
+        .iter()
+        .map(|&(path, bytes)| StagedFile::write(path, bytes))
+        .collect::<Result<Vec<_>, _>>()?;
+    commit_staged(staged, remove)
+}
+
+/// A file written under a temporary name beside its final one and flushed to disk, not yet
+/// renamed into place ([`commit_staged`]). Dropped without being committed, it removes its
+/// temporary file. Staging the files of a set as each becomes ready (several at once) and
+/// committing them together keeps [`write_all_atomic`]'s all-or-nothing rule.
+#[derive(Debug)]
+pub struct StagedFile {
+    tmp: PathBuf,
+    path: PathBuf,
+    renamed: bool,
+}
+
+impl StagedFile {
+    /// Write `bytes` to a temporary file beside `path` (parent folders created) and flush it.
+    pub fn write(path: &Path, bytes: &[u8]) -> Result<Self, WriteError> {
+        Ok(StagedFile {
+            tmp: stage(path, bytes)?,
+            path: path.to_path_buf(),
+            renamed: false,
+        })
+    }
+
+    /// The final name.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.renamed {
+            let _ = std::fs::remove_file(&self.tmp);
         }
     }
+}
+
+/// Delete the files in `remove` (missing ones are fine), then rename the staged files into
+/// place in the order given. On a failure no further file is renamed and the temporary files
+/// not yet renamed are removed.
+pub fn commit_staged(mut staged: Vec<StagedFile>, remove: &[PathBuf]) -> Result<(), WriteError> {
     for path in remove {
         match std::fs::remove_file(path) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                discard(&staged);
                 return Err(WriteError {
                     path: path.clone(),
                     source: e,
@@ -64,14 +94,12 @@ pub fn write_all_atomic(files: &[(&Path, &[u8])], remove: &[PathBuf]) -> Result<
             _ => {}
         }
     }
-    for (k, (tmp, path)) in staged.iter().enumerate() {
-        if let Err(source) = std::fs::rename(tmp, path) {
-            discard(&staged[k..]);
-            return Err(WriteError {
-                path: path.to_path_buf(),
-                source,
-            });
-        }
+    for file in &mut staged {
+        std::fs::rename(&file.tmp, &file.path).map_err(|source| WriteError {
+            path: file.path.clone(),
+            source,
+        })?;
+        file.renamed = true;
     }
     Ok(())
 }
@@ -222,6 +250,41 @@ mod tests {
         let removed = remove_dead_temp_files(dir.path()).unwrap();
         assert_eq!(removed, vec![legacy.clone(), dead.clone()]);
         assert!(alive.exists() && other_host.exists() && plain.exists());
+    }
+
+    #[test]
+    fn staged_files_appear_only_when_committed_and_leave_nothing_when_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.png"), dir.path().join("b.exr"));
+        std::fs::write(&a, b"old").unwrap();
+        let names = || {
+            let mut v: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        // Staged, not committed: the final names are untouched; dropped: no temporary left.
+        let staged = [
+            StagedFile::write(&a, b"new").unwrap(),
+            StagedFile::write(&b, b"b").unwrap(),
+        ];
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert!(!b.exists());
+        assert_eq!(names().len(), 3, "{:?}", names());
+        drop(staged);
+        assert_eq!(names(), ["a.png"]);
+        // Committed: both in place, nothing else.
+        let staged = vec![
+            StagedFile::write(&a, b"new").unwrap(),
+            StagedFile::write(&b, b"b").unwrap(),
+        ];
+        assert_eq!(staged[1].path(), b.as_path());
+        commit_staged(staged, &[]).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), b"new");
+        assert_eq!(std::fs::read(&b).unwrap(), b"b");
+        assert_eq!(names(), ["a.png", "b.exr"]);
     }
 
     #[test]

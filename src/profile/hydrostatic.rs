@@ -41,19 +41,38 @@ pub(crate) fn integrate_ln_p(
     max_step_m: f64,
     tv: &dyn Fn(f64, f64) -> f64,
 ) -> f64 {
+    let slope = |h: f64, lnp: f64| -G_OVER_R / tv(h, lnp.exp());
+    rk4_ln_p(h_from, ln_p_from, h_to, max_step_m, &slope, false)
+}
+
+/// [`integrate_ln_p`] given the slope d(ln P)/dh as a function of (h, ln P) directly (dry air
+/// needs no pressure, so no `exp` per evaluation; the same values bit for bit). With
+/// `pressure_free` (the slope does not depend on ln P) the two mid-step stages, which then
+/// evaluate it at the same height, share one evaluation.
+fn rk4_ln_p(
+    h_from: f64,
+    ln_p_from: f64,
+    h_to: f64,
+    max_step_m: f64,
+    f: &dyn Fn(f64, f64) -> f64,
+    pressure_free: bool,
+) -> f64 {
     let span = h_to - h_from;
     if span == 0.0 || !span.is_finite() {
         return ln_p_from;
     }
     let steps = (span.abs() / max_step_m).ceil().max(1.0) as usize;
     let dh = span / steps as f64;
-    let f = |h: f64, lnp: f64| -G_OVER_R / tv(h, lnp.exp());
     let mut lnp = ln_p_from;
     for i in 0..steps {
         let h = h_from + dh * i as f64;
         let k1 = f(h, lnp);
         let k2 = f(h + 0.5 * dh, lnp + 0.5 * dh * k1);
-        let k3 = f(h + 0.5 * dh, lnp + 0.5 * dh * k2);
+        let k3 = if pressure_free {
+            k2
+        } else {
+            f(h + 0.5 * dh, lnp + 0.5 * dh * k2)
+        };
         let k4 = f(h + dh, lnp + dh * k3);
         lnp += dh / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
     }
@@ -161,10 +180,43 @@ impl HydrostaticTable {
         grid: &[(f64, f64)],
         tv: &dyn Fn(f64, f64) -> f64,
     ) -> Self {
+        Self::integrate_slope(
+            h0,
+            p0,
+            h_end,
+            grid,
+            &|h, lnp| -G_OVER_R / tv(h, lnp.exp()),
+            false,
+        )
+    }
+
+    /// [`integrate`](Self::integrate) for dry air, whose virtual temperature is the temperature
+    /// `t(h)` whatever the pressure: the same table bit for bit as `integrate` with
+    /// `|h, _| t(h)`, without an `exp` per evaluation.
+    pub(crate) fn integrate_dry(
+        h0: f64,
+        p0: f64,
+        h_end: f64,
+        grid: &[(f64, f64)],
+        t: &dyn Fn(f64) -> f64,
+    ) -> Self {
+        Self::integrate_slope(h0, p0, h_end, grid, &|h, _| -G_OVER_R / t(h), true)
+    }
+
+    /// [`integrate`](Self::integrate) with the slope d(ln P)/dh given as a function of
+    /// (h, ln P) (`pressure_free`: of h alone; see [`rk4_ln_p`]).
+    fn integrate_slope(
+        h0: f64,
+        p0: f64,
+        h_end: f64,
+        grid: &[(f64, f64)],
+        slope: &dyn Fn(f64, f64) -> f64,
+        pressure_free: bool,
+    ) -> Self {
         let table = Self::unintegrated(h0, p0, h_end, grid, None);
         let mut ln_p = table.ln_p0;
         for (k, cell) in table.chunks.iter().enumerate() {
-            let chunk = table.build(k, ln_p, tv);
+            let chunk = table.build(k, ln_p, slope, pressure_free);
             ln_p = chunk.last_ln_p;
             let _ = cell.set(chunk);
         }
@@ -201,8 +253,15 @@ impl HydrostaticTable {
         }
     }
 
-    /// Chunk `k` from ln P `start` at its first node.
-    fn build(&self, k: usize, start: f64, tv: &dyn Fn(f64, f64) -> f64) -> Chunk {
+    /// Chunk `k` from ln P `start` at its first node; `slope(h, ln P)` is d(ln P)/dh
+    /// (`pressure_free`: it does not depend on ln P).
+    fn build(
+        &self,
+        k: usize,
+        start: f64,
+        slope: &dyn Fn(f64, f64) -> f64,
+        pressure_free: bool,
+    ) -> Chunk {
         let all = self.nodes.knots_m();
         let heights = &all[k * CHUNK_NODES..=((k + 1) * CHUNK_NODES).min(all.len() - 1)];
         let mut ln_p = Vec::with_capacity(heights.len());
@@ -212,10 +271,10 @@ impl HydrostaticTable {
             if i > 0 {
                 let prev = heights[i - 1];
                 // Two RK4 sub-steps per node interval.
-                current = integrate_ln_p(prev, current, hh, 0.5 * (hh - prev), tv);
+                current = rk4_ln_p(prev, current, hh, 0.5 * (hh - prev), slope, pressure_free);
             }
             ln_p.push(current);
-            slopes.push(-G_OVER_R / tv(hh, current.exp()));
+            slopes.push(slope(hh, current));
         }
         Chunk {
             curve: MonotoneCubic::with_slopes(heights, &ln_p, &slopes),
@@ -235,7 +294,7 @@ impl HydrostaticTable {
         };
         self.chunks[k].get_or_init(|| {
             let tv = self.tv.as_deref().expect("an eager table has every chunk");
-            self.build(k, start, tv)
+            self.build(k, start, &|h, lnp| -G_OVER_R / tv(h, lnp.exp()), false)
         })
     }
 
@@ -253,6 +312,37 @@ impl HydrostaticTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_dry_table_is_the_moist_table_at_zero_humidity_bit_for_bit() {
+        // A temperature with a sharp step layer (tanh) over a lapse rate; the moist form at
+        // e = 0 (T_v = T / (1 − 0)) against the dry form, which never needs the pressure.
+        let t = |h: f64| 270.0 - 0.0065 * h + 3.0 * (1.0 + ((h - 120.0) / 4.0).tanh());
+        let grid = [(2_000.0, 0.25), (f64::INFINITY, 10.0)];
+        let moist = HydrostaticTable::integrate(3.0, 101_000.0, 20_000.0, &grid, &|h, p| {
+            virtual_temperature_k(t(h), 0.0, p)
+        });
+        let dry = HydrostaticTable::integrate_dry(3.0, 101_000.0, 20_000.0, &grid, &t);
+        let mut h = 0.0;
+        while h < 20_500.0 {
+            let (a, b) = (moist.ln_p_and_slope(h), dry.ln_p_and_slope(h));
+            assert_eq!(a.0.to_bits(), b.0.to_bits(), "ln P at {h}");
+            assert_eq!(a.1.to_bits(), b.1.to_bits(), "slope at {h}");
+            h += 0.37;
+        }
+    }
+
+    #[test]
+    fn tanh_is_exactly_one_beyond_22() {
+        // The synthetic layers skip tanh there (synthetic.rs); the same values only if so.
+        let mut x = 22.0f64;
+        while x < 1e7 {
+            assert_eq!(x.tanh(), 1.0, "{x}");
+            assert_eq!((-x).tanh(), -1.0, "{x}");
+            x = x * 1.001 + 1e-3;
+        }
+        assert_eq!(22.0f64.next_up().tanh(), 1.0);
+    }
 
     #[test]
     fn isothermal_atmosphere_is_exponential() {

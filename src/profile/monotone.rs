@@ -176,10 +176,16 @@ impl KnotIndex {
         } else {
             0.0
         };
+        // The edges rise with b, so the count of knots at or below them only grows: one walk
+        // (`partition_point` per edge, for ascending knots).
+        let mut at_or_below = 0usize;
         let mut below: Vec<u32> = (0..count)
             .map(|b| {
                 let edge_m = origin_m + b as f64 / buckets_per_m.max(f64::MIN_POSITIVE);
-                knots_m.partition_point(|&t| t <= edge_m) as u32
+                while at_or_below < n && knots_m[at_or_below] <= edge_m {
+                    at_or_below += 1;
+                }
+                at_or_below as u32
             })
             .collect();
         below.push(n as u32);

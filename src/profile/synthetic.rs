@@ -92,7 +92,9 @@ impl SyntheticLayer {
                 delta_t_k,
             } => {
                 let scale = thickness_m / 4.0;
-                let th = ((h - centre_m) / scale).tanh();
+                let x = (h - centre_m) / scale;
+                // tanh is ±1 exactly beyond |x| = 22 (1 − tanh 22 ≈ 1.6e-19 rounds away).
+                let th = if x.abs() > 22.0 { x.signum() } else { x.tanh() };
                 (
                     delta_t_k * 0.5 * (1.0 + th),
                     delta_t_k * 0.5 * (1.0 - th * th) / scale,
@@ -372,18 +374,20 @@ impl SyntheticAtmosphere {
             h += if h < fine_top { 0.5 } else { 50.0 };
         }
 
-        let tv = |h: f64, p: f64| {
-            let (t, _) = atmosphere.temperature(h);
-            let e = relative_humidity * saturation_vapour_pressure_pa(t);
-            virtual_temperature_k(t, e, p)
+        let grid = [(fine_top, 0.25), (f64::INFINITY, 10.0)];
+        let p0 = atmosphere.surface_pressure_pa;
+        let table = if relative_humidity > 0.0 {
+            let tv = |h: f64, p: f64| {
+                let (t, _) = atmosphere.temperature(h);
+                let e = relative_humidity * saturation_vapour_pressure_pa(t);
+                virtual_temperature_k(t, e, p)
+            };
+            HydrostaticTable::integrate(surface_height_m, p0, MODEL_TOP_M, &grid, &tv)
+        } else {
+            // Dry: T_v = T exactly (e = 0), no pressure needed.
+            let t = |h: f64| atmosphere.temperature(h).0;
+            HydrostaticTable::integrate_dry(surface_height_m, p0, MODEL_TOP_M, &grid, &t)
         };
-        let table = HydrostaticTable::integrate(
-            surface_height_m,
-            atmosphere.surface_pressure_pa,
-            MODEL_TOP_M,
-            &[(fine_top, 0.25), (f64::INFINITY, 10.0)],
-            &tv,
-        );
         atmosphere.pressure = table;
         Ok(atmosphere)
     }

@@ -23,7 +23,8 @@
 //! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
 //! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat
 //! band whose sea mirrors a card shades that card's columns pixel by pixel (with the sun's part,
-//! exact, when the band may show it).
+//! exact, when the band may show it; on a rough sea, the parts of the slopes that mirror
+//! something are found once per band and set of mirrored cards).
 //!
 //! **Frame plans** (`plan`): everything a frame's rows are shaded from (fan, tables, shader) is
 //! built first, then each row is shaded on its own; a sun sweep (`sweep`) shades only the rows
@@ -52,6 +53,7 @@ mod sun;
 pub mod sweep;
 pub mod sweep_plot;
 pub mod terrain;
+mod texture_box;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -511,6 +513,8 @@ fn shade_bands(
         }
     };
     let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
+    // A rough sea's parts of the slopes, found once per band and set of mirrored cards.
+    let mut parts = reflection::PartsCache::default();
     let fills: Vec<[f32; 4]> = bands
         .iter()
         .map(|b| {
@@ -539,7 +543,8 @@ fn shade_bands(
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
             let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
             let background = if band.reflects || band.sun {
-                ctx.shader.background(&dir, band.fan_end)
+                ctx.shader
+                    .band_background(&dir, band.fan_end, k, &mut parts)
             } else {
                 band.background
             };

@@ -35,11 +35,14 @@ pub(super) enum RayAlong<'a> {
         terrain: Option<(&'a [Option<f64>], FanEnd)>,
     },
     /// A ray the sea reflects at ground distance `from_m`, leaving it at `elevation_rad`: its
-    /// heights from the sea fan at ranges beyond `from_m`.
+    /// heights from the sea fan at ranges beyond `from_m`. It stands for the rays leaving
+    /// between the elevations `span_rad` (equal for one ray; on a rough sea, a part of a
+    /// sample's slopes that meets the same objects): a card shows its mean over them.
     Reflected {
         fan: &'a SeaFan,
         elevation_rad: f64,
         from_m: f64,
+        span_rad: (f64, f64),
     },
 }
 

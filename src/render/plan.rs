@@ -32,11 +32,12 @@ use rayon::prelude::*;
 use super::air_paths::AirPaths;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
-use super::reflection::{FacetTable, Glint, Reflection, SeaFan};
+use super::reflection::{FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
 use super::sea_sun::SeaSunTable;
-use super::shade::{AerialShading, AngleTable, Shader, ViewCard, wrap_pi};
+use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
+use super::texture_box::TextureColumns;
 use super::{
     FLAT_ROW_FRACTION, FlatRow, RenderError, RenderOptions, RenderStats, RowScratch, TracedSample,
     azimuth_span, card_columns_in_row, check_tracer_tolerance, elevation_range, flat_bands,
@@ -45,7 +46,7 @@ use super::{
 };
 use crate::scene::camera::CameraFrame;
 use crate::scene::sky::SunDisc;
-use crate::scene::{Scene, samples_per_pixel_root};
+use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
 /// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
 const MIN_SEA_FAN_RANGE_M: f64 = 1.0;
@@ -86,8 +87,8 @@ struct SeaTables {
     reflected_sky: Arc<AngleTable>,
     /// The sea's radiance by grazing angle.
     sea_table: Arc<AngleTable>,
-    /// The sea fan and the facet table (`None`: the sea shows no reflections).
-    reflection: Option<(Option<Arc<SeaFan>>, Arc<FacetTable>)>,
+    /// The sea fan and the facets (`None`: the sea shows no reflections).
+    reflection: Option<(Option<Arc<SeaFan>>, Arc<Facets>)>,
 }
 
 /// The cards in view (by azimuth), nearest first, and the distances the tracer must report.
@@ -113,6 +114,9 @@ impl<'a> ViewCards<'a> {
             distances_m: Vec::new(),
             max_top_m: Vec::new(),
         };
+        // A rough sea mirrors the cards' textures averaged over heights (once per image).
+        let blurred = scene.sea.reflections && scene.sea.wave_slope_rad > 0.0;
+        let mut columns = Vec::new();
         for i in order {
             let c = &scene.cards[i];
             let ground_radius = radius * (c.distance_m / radius).sin();
@@ -144,7 +148,13 @@ impl<'a> ViewCards<'a> {
                 top_m,
                 height_m: c.height_m,
                 texture: &c.texture,
+                columns: blurred.then(|| texture_columns(&mut columns, &c.texture)),
+                reflected_haze: None,
             });
+            if blurred && let Some(extinction) = scene.sky.extinction() {
+                let card = out.cards.last_mut().expect("just pushed");
+                card.reflected_haze = Some(ReflectedHaze::new(&extinction, radius, card));
+            }
         }
         out
     }
@@ -185,7 +195,11 @@ fn terrain_view<'a>(
             brightness: scene.sky.brightness,
             scale_heights_m: scene.sky.extinction().map(|e| e.scale_heights_m()),
         };
-        TerrainView::new(t, tracer, frame, options.exact).map(Arc::new)
+        let mut view = TerrainView::new(t, tracer, frame, options.exact)?;
+        if scene.sea.reflections && scene.sea.wave_slope_rad > 0.0 {
+            view.prepare_reflections();
+        }
+        Some(Arc::new(view))
     })
 }
 
@@ -237,11 +251,12 @@ impl SeaTables {
         let sea = inp.scene.sea;
         let sky = Arc::clone(&reflected_sky);
         let sea_table = AngleTable::new(0.0, sea_hi, |g| sea.radiance_reflecting(g, |e| sky.at(e)));
+        let reflection = sea_fan_and_facets(inp, &reflected_sky);
         SeaTables {
             key: key.map(f64::to_bits),
             reflected_sky,
             sea_table: Arc::new(sea_table),
-            reflection: sea_fan_and_facets(inp),
+            reflection,
         }
     }
 }
@@ -268,11 +283,13 @@ fn max_grazing_rad(inp: &SeaReflectionInputs<'_>) -> Option<f64> {
 }
 
 /// The sea fan (when a card or terrain is in view, over the reflected elevations the frame's
-/// grazing angles and the wave facets reach, or for a mirror sea's sun image) and the facet
-/// table. `None` when the scene turns reflections off or the frame shows no sea.
+/// grazing angles and the wave facets reach, or for a mirror sea's sun image) and the facets
+/// (a rough sea's shares weight `reflected_sky`, the sky by elevation over [0, π/2]). `None`
+/// when the scene turns reflections off or the frame shows no sea.
 fn sea_fan_and_facets(
     inp: &SeaReflectionInputs<'_>,
-) -> Option<(Option<Arc<SeaFan>>, Arc<FacetTable>)> {
+    reflected_sky: &AngleTable,
+) -> Option<(Option<Arc<SeaFan>>, Arc<Facets>)> {
     let scene = inp.scene;
     let sea = scene.sea;
     if !sea.reflections {
@@ -286,8 +303,9 @@ fn sea_fan_and_facets(
         .max(inp.pixel_rad);
     let mirror = sea.wave_slope_rad == 0.0;
     // Elevation spacing: half a pixel for a mirror (straight rays' heights are linear in the
-    // elevation, so interpolation is exact for them); an eighth of the facet slope spread
-    // otherwise (the 8 facet classes are σ′ apart, and blur the image over ±4σ′).
+    // elevation, so interpolation is exact for them); an eighth of the rms facet slope σ′
+    // otherwise (a rough sea's images are integrated over reflected elevations spread by ±8σ′,
+    // with heights linear between the fan's rays).
     let step_rad = (0.5 * inp.pixel_rad).max(0.125 * sigma_along);
     // Without cards, a mirror sea still needs the fan's sky directions for the sun's image.
     let need_sky = mirror && scene.sun.is_some();
@@ -304,7 +322,28 @@ fn sea_fan_and_facets(
     let fan = max_range_m
         .and_then(|d| SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density))
         .map(Arc::new);
-    Some((fan, Arc::new(FacetTable::new(&sea, max_grazing))))
+    let facets = if mirror {
+        Facets::Mirror(FacetTable::new(&sea, max_grazing))
+    } else if fan.is_some() {
+        Facets::Rough(SlopeTable::new(&sea, max_grazing, reflected_sky))
+    } else {
+        Facets::None
+    };
+    Some((fan, Arc::new(facets)))
+}
+
+/// The column integrals of `texture`, built once per image: `built` holds those built so far.
+fn texture_columns(
+    built: &mut Vec<(*const Texture, Arc<TextureColumns>)>,
+    texture: &Arc<Texture>,
+) -> Arc<TextureColumns> {
+    let key = Arc::as_ptr(texture);
+    if let Some((_, c)) = built.iter().find(|(k, _)| *k == key) {
+        return c.clone();
+    }
+    let c = Arc::new(TextureColumns::new(texture));
+    built.push((key, c.clone()));
+    c
 }
 
 /// The sun's glitter on a rough sea: its light at a sea point comes along its own curved ray
@@ -337,13 +376,8 @@ fn glint(scene: &Scene, tracer: &dyn RayTracer, traced: &[(f64, FanEnd)]) -> Opt
 }
 
 /// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter
-/// or mirror image.
-fn sea_reflection(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    tables: &SeaTables,
-    traced: &[(f64, FanEnd)],
-) -> Option<Reflection> {
+/// (`glint`, found beforehand) or mirror image.
+fn sea_reflection(scene: &Scene, tables: &SeaTables, glint: Option<Glint>) -> Option<Reflection> {
     let (fan, facets) = tables.reflection.clone()?;
     let mirror = scene.sea.wave_slope_rad == 0.0;
     Some(Reflection {
@@ -353,7 +387,7 @@ fn sea_reflection(
         fan,
         sky_table: Arc::clone(&tables.reflected_sky),
         facets,
-        glint: glint(scene, tracer, traced),
+        glint,
         mirror_sun: scene
             .sun
             .filter(|_| mirror)
@@ -526,7 +560,6 @@ impl<'a> FramePlan<'a> {
             distances_m: &view.distances_m,
             farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
         };
-        let (sea, same_sea) = inputs.sea_tables(&sea_inputs, base);
         // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact
         // mode.
         let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
@@ -535,6 +568,18 @@ impl<'a> FramePlan<'a> {
             None if needs_paths => traced_grid(tracer, cam.height_m, inputs.elevations, pixel_rad),
             _ => Vec::new(),
         };
+        // The sun's glitter needs its own rays from the sea (over the tilts of the traced rays'
+        // sea points), not the sea's tables: found while they are built.
+        let ((sea, same_sea), glint) = rayon::join(
+            || inputs.sea_tables(&sea_inputs, base),
+            || {
+                scene
+                    .sea
+                    .reflections
+                    .then(|| glint(scene, tracer, &traced))
+                    .flatten()
+            },
+        );
         let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
         let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
         let shares_base = base.is_none_or(|b| {
@@ -555,6 +600,7 @@ impl<'a> FramePlan<'a> {
             terrain,
             sky_table,
             sea: &sea,
+            glint,
             aerial,
             traced: &traced,
             base,
@@ -592,6 +638,8 @@ struct ShaderParts<'a, 'b> {
     terrain: Option<Arc<TerrainView<'a>>>,
     sky_table: Arc<AngleTable>,
     sea: &'b SeaTables,
+    /// The sun's glitter on a rough sea ([`glint`]), when the scene has sea reflections.
+    glint: Option<Glint>,
     aerial: Option<AerialShading>,
     /// The rays the sun's transmittance is integrated along, with their ends.
     traced: &'b [(f64, FanEnd)],
@@ -623,7 +671,7 @@ impl<'a> PlanInputs<'a> {
         });
         Shader {
             distances_m: parts.view.distances_m,
-            reflection: sea_reflection(scene, tracer, parts.sea, parts.traced),
+            reflection: sea_reflection(scene, parts.sea, parts.glint),
             terrain: parts.terrain,
             cards: parts.view.cards,
             sky_table: parts.sky_table,

@@ -126,6 +126,16 @@ impl SeaSunTable {
         (e, [0, 1, 2].map(|c| depth(a[c], b[c])))
     }
 
+    /// The apparent elevation of [`Self::at`] alone.
+    pub(super) fn apparent_rad(&self, true_rad: f64) -> f64 {
+        self.at(true_rad).0
+    }
+
+    /// The optical depth of [`Self::at`] alone.
+    pub(super) fn depth(&self, true_rad: f64) -> [f64; 3] {
+        self.at(true_rad).1
+    }
+
     /// Bounds (lo, hi) on the apparent elevation of every true elevation in `true_rad` (lo, hi).
     pub(super) fn apparent_range(&self, true_rad: (f64, f64)) -> (f64, f64) {
         if !self.monotonic {

@@ -12,8 +12,10 @@ use rayon::prelude::*;
 use super::air_paths::{AirPaths, Meets};
 use super::objects::{Composed, Meet, OPAQUE, Object, RayAlong, SampleRay, SceneObject, compose};
 use super::ray_model::FanEnd;
+use super::reflection::{Facets, MIN_NODE_SHARE, PartsCache, Spans};
 use super::sun::SunTransmittance;
 use super::terrain::TerrainView;
+use super::texture_box::TextureColumns;
 use crate::scene::Texture;
 use crate::scene::camera::ViewDirection;
 use crate::scene::sky::{Extinction, SunDisc};
@@ -82,6 +84,59 @@ pub(super) struct ViewCard<'a> {
     pub(super) top_m: f64,
     pub(super) height_m: f64,
     pub(super) texture: &'a Texture,
+    /// The texture's column integrals, for its mean over the heights a part of a rough sea's
+    /// slopes mirrors (`None`: samples only).
+    pub(super) columns: Option<Arc<TextureColumns>>,
+    /// The haze between the card and a rough sea (with aerial perspective; `None`: none, or
+    /// a calm sea, whose one reflected ray takes its own chord to the height it meets).
+    pub(super) reflected_haze: Option<ReflectedHaze>,
+}
+
+/// The air between a card and the sea that mirrors it on a rough sea: the transmittance per
+/// channel of the chord from the sea surface to the card's middle height, by range from the
+/// reflection point (tabulated, linear between entries). A part of a pixel's slopes stands for
+/// reflected rays across much of the card's height; the chord's optical depth changes with the
+/// height it ends at by about the height over twice the aerosol scale height, a few per cent
+/// of a faint blurred image.
+pub(super) struct ReflectedHaze {
+    inv_step: f64,
+    values: Vec<[f64; 3]>,
+}
+
+impl ReflectedHaze {
+    /// Entries over the ranges [0, the card's distance].
+    const ENTRIES: usize = 256;
+
+    pub(super) fn new(extinction: &Extinction, earth_radius_m: f64, card: &ViewCard<'_>) -> Self {
+        let step = card.distance_m.max(1.0) / (Self::ENTRIES - 1) as f64;
+        let mid_m = 0.5 * (card.base_m + card.top_m);
+        Self {
+            inv_step: 1.0 / step,
+            values: (0..Self::ENTRIES)
+                .map(|i| {
+                    let tau =
+                        extinction.chord_optical_depth(earth_radius_m, 0.0, mid_m, i as f64 * step);
+                    tau.map(|t| if t.is_finite() { (-t).exp() } else { 0.0 })
+                })
+                .collect(),
+        }
+    }
+
+    /// The transmittance at range `range_m` (clamped to the table).
+    #[inline]
+    fn at(&self, range_m: f64) -> [f64; 3] {
+        let last = (self.values.len() - 1) as f64;
+        let p = (range_m * self.inv_step).clamp(0.0, last);
+        let p = if p.is_nan() { 0.0 } else { p };
+        let i = (p as usize).min(self.values.len() - 2);
+        let f = p - i as f64;
+        let (a, b) = (self.values[i], self.values[i + 1]);
+        let mut out = [0.0; 3];
+        for c in 0..3 {
+            out[c] = a[c] + (b[c] - a[c]) * f;
+        }
+        out
+    }
 }
 
 impl ViewCard<'_> {
@@ -105,6 +160,34 @@ impl ViewCard<'_> {
             }
         }
         Some(0.5 + 0.5 * offset / self.half_width_rad)
+    }
+}
+
+impl ViewCard<'_> {
+    /// The card's premultiplied texture where `ray` meets it at `meet`: the sample there, or
+    /// for a ray standing for a span of a rough sea's reflected rays, the mean over the heights
+    /// they meet (at the span's ends, as the sea fan interpolates them; the card's own edges
+    /// where a ray there has ended).
+    #[inline]
+    fn texel(&self, ray: &SampleRay<'_>, meet: &Meet) -> [f32; 4] {
+        let v = |h: f64| (self.top_m - h) / self.height_m;
+        match (ray.along, &self.columns) {
+            (
+                RayAlong::Reflected {
+                    fan,
+                    from_m,
+                    span_rad: (e0, e1),
+                    ..
+                },
+                Some(columns),
+            ) if e1 > e0 => {
+                let range_m = self.distance_m - from_m;
+                let end = |e: f64, edge: f64| fan.height(e, range_m).map_or(edge, v);
+                let (v0, v1) = (end(e0, 1.0), end(e1, 0.0));
+                columns.mean(self.texture, meet.u, v0, v1)
+            }
+            _ => self.texture.sample(meet.u, v(meet.height_m)),
+        }
     }
 }
 
@@ -140,6 +223,7 @@ impl SceneObject for ViewCard<'_> {
                 fan,
                 elevation_rad,
                 from_m,
+                ..
             } => {
                 // Beyond the reflection point and in the card's azimuth range first (cheap).
                 if self.distance_m <= from_m
@@ -167,11 +251,20 @@ impl SceneObject for ViewCard<'_> {
 
     #[inline]
     fn shade(&self, ray: &SampleRay<'_>, meet: &Meet, shader: &Shader<'_>) -> ([f64; 3], f64) {
-        let v = (self.top_m - meet.height_m) / self.height_m;
-        let t = self.texture.sample(meet.u, v);
+        let t = self.texel(ray, meet);
         let mut rgb = [t[0] as f64, t[1] as f64, t[2] as f64];
         let alpha = t[3] as f64;
         match (ray.along, &shader.aerial, &shader.reflection) {
+            (RayAlong::Reflected { from_m, .. }, Some(aerial), Some(_))
+                if let Some(haze) = &self.reflected_haze =>
+            {
+                // A part of a rough sea's slopes: the chord to the card's middle height.
+                let t = haze.at(self.distance_m - from_m);
+                let path = aerial.extinction.path_radiance;
+                for c in 0..3 {
+                    rgb[c] = rgb[c] * t[c] + alpha * path[c] * (1.0 - t[c]);
+                }
+            }
             (RayAlong::Reflected { from_m, .. }, Some(aerial), Some(refl)) => {
                 // From the card to the sea (the chord); the sea's own haze is added after.
                 let range_m = self.distance_m - from_m;
@@ -311,9 +404,9 @@ impl<'a> Shader<'a> {
         }
     }
 
-    /// Whether the sea a ray that ended with `end` may mirror the terrain (some facet class
-    /// that counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray below the
-    /// highest ground beyond the first land): then its colour depends on the azimuth.
+    /// Whether the sea a ray that ended with `end` may mirror the terrain (on a calm sea, the
+    /// reflected ray, on a rough one the lowest of the facets', passes below the highest ground
+    /// beyond the first land): then its colour depends on the azimuth.
     #[inline]
     pub(super) fn may_reflect_terrain(&self, end: FanEnd) -> bool {
         let (
@@ -330,15 +423,22 @@ impl<'a> Shader<'a> {
         let Some(fan) = &r.fan else {
             return false;
         };
-        r.facets.at(grazing_rad).iter().any(|node| {
-            node.weight * node.reflectance >= super::reflection::MIN_NODE_SHARE
-                && terrain.may_be_reflected(fan, node.reflected_elevation_rad, distance_m)
-        })
+        match &*r.facets {
+            Facets::Mirror(table) => table.at(grazing_rad).iter().any(|node| {
+                node.weight * node.reflectance >= MIN_NODE_SHARE
+                    && terrain.may_be_reflected(fan, node.reflected_elevation_rad, distance_m)
+            }),
+            Facets::Rough(table) => {
+                let span = table.span(grazing_rad);
+                terrain.may_be_reflected(fan, span.elevation(0.0), distance_m)
+            }
+            Facets::None => false,
+        }
     }
 
-    /// Whether the sea a ray that ended with `end` mirrors `card` (some facet class that
-    /// counts, [`super::reflection::MIN_NODE_SHARE`], sends its reflected ray within the card's
-    /// height range at its range): then the colour depends on the azimuth in its columns.
+    /// Whether the sea a ray that ended with `end` mirrors `card` (the reflected rays within the
+    /// card's height range at its range have a share that counts, [`MIN_NODE_SHARE`]): then
+    /// the colour depends on the azimuth in its columns.
     #[inline]
     pub(super) fn may_reflect_card(&self, end: FanEnd, card: &ViewCard<'_>) -> bool {
         let (
@@ -358,12 +458,20 @@ impl<'a> Shader<'a> {
         if range_m <= 0.0 {
             return false;
         }
-        r.facets.at(grazing_rad).iter().any(|node| {
-            node.weight * node.reflectance >= super::reflection::MIN_NODE_SHARE
-                && fan
-                    .height(node.reflected_elevation_rad, range_m)
-                    .is_some_and(|h| h >= card.base_m && h <= card.top_m)
-        })
+        match &*r.facets {
+            Facets::Mirror(table) => table.at(grazing_rad).iter().any(|node| {
+                node.weight * node.reflectance >= MIN_NODE_SHARE
+                    && fan
+                        .height(node.reflected_elevation_rad, range_m)
+                        .is_some_and(|h| h >= card.base_m && h <= card.top_m)
+            }),
+            Facets::Rough(table) => {
+                let span = table.span(grazing_rad);
+                let mut spans = Spans::new();
+                self.card_spans(fan, &span, card, distance_m, &mut spans) >= MIN_NODE_SHARE
+            }
+            Facets::None => false,
+        }
     }
 
     /// The cards a sample along `dir` meets (`heights` at the card distances), front to back,
@@ -475,6 +583,35 @@ impl<'a> Shader<'a> {
                 }
             }
             FanEnd::Trapped | FanEnd::Lost => self.fallback,
+        }
+    }
+
+    /// [`Self::background`] for a sample of flat band `band`, whose ray ended with `end`: the
+    /// same, the rough sea's parts found once per band ([`Self::band_reflections`]).
+    pub(super) fn band_background(
+        &self,
+        dir: &ViewDirection,
+        end: FanEnd,
+        band: usize,
+        cache: &mut PartsCache,
+    ) -> [f64; 3] {
+        let FanEnd::Ground {
+            grazing_rad,
+            distance_m,
+        } = end
+        else {
+            return self.background(dir, end);
+        };
+        let Some(extra) = self.band_reflections(dir, grazing_rad, distance_m, band, cache) else {
+            return self.background(dir, end);
+        };
+        let mut sea = self.sea_table.at(grazing_rad);
+        for c in 0..3 {
+            sea[c] += extra[c];
+        }
+        match &self.aerial {
+            Some(aerial) => aerial.seen(sea, 1.0, dir.elevation_rad, Meets::Sea, 0.0, distance_m),
+            None => sea,
         }
     }
 

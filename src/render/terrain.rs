@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::objects::{Meet, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, RayTracer};
-use super::reflection::SeaFan;
+use super::reflection::{SeaFan, SeaRay};
 use super::shade::Shader;
 use crate::scene::Terrain;
 use crate::scene::terrain::GreatCircle;
@@ -261,6 +261,40 @@ pub(super) struct TerrainView<'a> {
     ray_density: Vec<[f32; 2]>,
     /// Samples outside this elevation range (rad) meet no terrain.
     pub(super) may_hit_rad: (f64, f64),
+    /// [`Self::reflection_candidates`] of every profile, one after the other (empty until
+    /// [`Self::prepare_reflections`]).
+    candidates: Vec<u32>,
+    /// Where each profile's candidates start in `candidates` (and where the last ends).
+    candidate_start: Vec<usize>,
+}
+
+/// [`TerrainView::reflected_cover`]'s ray: the lowest reflected ray not yet known to meet the
+/// ground.
+struct LowestRay<'f> {
+    fan: &'f SeaFan,
+    from_m: f64,
+    e_hi: f64,
+    /// Its elevation (rad).
+    e: f64,
+    ray: SeaRay<'f>,
+    /// The highest elevation known to meet the ground.
+    top: Option<f64>,
+}
+
+impl LowestRay<'_> {
+    /// Raise the ray to clear the ground point at distance `d_m`, height `z_m` (−∞: none), if
+    /// it does not; `Some(false)` once it is at `e_hi`, `None` if it leaves the sea fan.
+    #[inline]
+    fn clear(&mut self, d_m: f64, z_m: f32) -> Option<bool> {
+        let (z, range) = (f64::from(z_m), d_m - self.from_m);
+        if z == f64::NEG_INFINITY || self.ray.height(range).is_none_or(|h| h > z) {
+            return Some(true);
+        }
+        self.e = self.fan.rise_above(self.e, range, z, self.e_hi);
+        self.top = Some(self.e);
+        self.ray = self.fan.ray(self.e)?;
+        Some(self.e < self.e_hi)
+    }
 }
 
 /// Lowest height of each block of grid distances for a ray (−∞ where one is missing).
@@ -349,6 +383,8 @@ impl<'a> TerrainView<'a> {
             ray_block_min: Vec::new(),
             ray_density: Vec::new(),
             may_hit_rad: frame.elevation_range_rad,
+            candidates: Vec::new(),
+            candidate_start: vec![0; n_profiles + 1],
             frame,
         };
         if !exact {
@@ -631,6 +667,130 @@ impl<'a> TerrainView<'a> {
         )
     }
 
+    /// The highest elevation in [`e_lo`, `e_hi`] (rad) at which a ray the sea reflects at
+    /// ground distance `from_m` (its heights from the sea fan `fan`) meets the ground along the
+    /// profile at azimuth offset `offset_rad`; `None` if the ray at `e_lo` meets none. Where
+    /// the sea fan's rays keep their order (a higher ray is higher at every range) every ray
+    /// below it meets the ground too. The lowest ray not yet known to clear the ground is
+    /// raised, at each ground point it does not clear, to the ray that just clears that point
+    /// ([`SeaFan::rise_above`], exact between the fan's rays), so the answer moves continuously
+    /// with `from_m`. Before the profile's first land only its [`Self::reflection_candidates`]
+    /// are looked at; from a sea point within the land's distances, every point beyond it
+    /// (blocks the ray stays above skipped).
+    pub(super) fn reflected_cover(
+        &self,
+        offset_rad: f64,
+        fan: &SeaFan,
+        from_m: f64,
+        (e_lo, e_hi): (f64, f64),
+    ) -> Option<f64> {
+        let d = &self.distances_m;
+        let n = d.len();
+        if from_m.is_nan() || from_m >= d[n - 1] {
+            return None;
+        }
+        let p = self.profile(offset_rad)?;
+        if fan.min_height_beyond(e_lo, d[0] - from_m) > f64::from(self.profile_max[p]) {
+            return None;
+        }
+        let z = &self.profiles[p * n..(p + 1) * n];
+        let mut low = LowestRay {
+            fan,
+            from_m,
+            e_hi,
+            e: e_lo,
+            ray: fan.ray(e_lo)?,
+            top: None,
+        };
+        let candidates = &self.candidates[self.candidate_start[p]..self.candidate_start[p + 1]];
+        match candidates.first() {
+            Some(&first) if d[first as usize] > from_m => {
+                for &j in candidates {
+                    let j = j as usize;
+                    if !low.clear(d[j], z[j])? {
+                        break;
+                    }
+                }
+            }
+            _ => {
+                let zmax = &self.block_max[p * self.n_blocks..(p + 1) * self.n_blocks];
+                let from = d.partition_point(|&x| x <= from_m);
+                'blocks: for (b, &block_top) in zmax.iter().enumerate().skip(from / BLOCK) {
+                    if fan.min_height_beyond(low.e, d[b * BLOCK] - from_m) as f32 > block_top {
+                        continue;
+                    }
+                    for j in (b * BLOCK).max(from)..=((b + 1) * BLOCK).min(n - 1) {
+                        if !low.clear(d[j], z[j])? {
+                            break 'blocks;
+                        }
+                    }
+                }
+            }
+        }
+        low.top
+    }
+
+    /// Per profile, the ground points that can bound what a reflected ray from the sea before
+    /// the profile's first land sees: the vertices of the upper convex hulls of (d, z − d²/2R′)
+    /// for R′ = 1, 4/3 and 2 Earth radii. A ray from the sea at distance d₀ that rises as
+    /// d²/2R′ over the sea meets ground point (d, z) when it leaves below an elevation that is
+    /// the slope from (d₀, −d₀²/2R′) to (d, z − d²/2R′) plus d₀/R′, so the highest such
+    /// elevation is reached at a hull vertex; the three radii cover rays bent less and more than
+    /// the standard atmosphere's. For other rays (a duct) a point between vertices may bound
+    /// the view a little higher: the cover is then a little low, still continuous. Ascending,
+    /// the first the profile's first land.
+    fn reflection_candidates(&self, p: usize) -> Vec<u32> {
+        let n = self.distances_m.len();
+        let z = &self.profiles[p * n..(p + 1) * n];
+        let land: Vec<usize> = (0..n).filter(|&j| z[j] > f32::NEG_INFINITY).collect();
+        let Some(&first) = land.first() else {
+            return Vec::new();
+        };
+        let radius = self.frame.earth_radius_m;
+        let mut out = vec![first as u32];
+        for scale in [1.0, 4.0 / 3.0, 2.0] {
+            let r = scale * radius;
+            let point = |j: usize| {
+                let d = self.distances_m[j];
+                (d, f64::from(z[j]) - d * d / (2.0 * r))
+            };
+            let mut hull: Vec<usize> = Vec::new();
+            for &j in &land {
+                let c = point(j);
+                while hull.len() >= 2 {
+                    let (a, b) = (point(hull[hull.len() - 2]), point(hull[hull.len() - 1]));
+                    // Drop b unless a → b → c turns clockwise (b above the chord a–c).
+                    if (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0) >= 0.0 {
+                        hull.pop();
+                    } else {
+                        break;
+                    }
+                }
+                hull.push(j);
+            }
+            out.extend(hull.iter().map(|&j| j as u32));
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
+    /// Prepare [`Self::reflected_cover`] (the candidates of every profile; a frame whose sea
+    /// mirrors the terrain blurred by waves needs them).
+    pub(super) fn prepare_reflections(&mut self) {
+        let lists: Vec<Vec<u32>> = (0..self.n_profiles)
+            .into_par_iter()
+            .map(|p| self.reflection_candidates(p))
+            .collect();
+        self.candidate_start = Vec::with_capacity(lists.len() + 1);
+        self.candidate_start.push(0);
+        self.candidates.clear();
+        for list in lists {
+            self.candidates.extend(list);
+            self.candidate_start.push(self.candidates.len());
+        }
+    }
+
     /// Whether a ray the sea reflects at ground distance `from_m`, leaving it at
     /// `elevation_rad`, may meet the ground anywhere in the frame (it comes below the highest
     /// ground beyond the first land).
@@ -820,6 +980,7 @@ impl SceneObject for TerrainView<'_> {
                 fan,
                 elevation_rad,
                 from_m,
+                ..
             } => self.hit_reflected(ray.azimuth_offset_rad(), fan, elevation_rad, from_m)?,
             RayAlong::Traced { terrain: None, .. } => return None,
         };
@@ -846,6 +1007,7 @@ impl SceneObject for TerrainView<'_> {
             fan,
             elevation_rad,
             from_m,
+            ..
         } = ray.along
         {
             if let Some(aerial) = &shader.aerial {

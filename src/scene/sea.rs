@@ -11,7 +11,10 @@
 //!   reflects the ray upwards at elevation g + 2s (clamped to ≥ 0: a ray sent back into the sea
 //!   is taken to skim it) with the Fresnel reflectance at its own grazing angle g + s. The sea is
 //!   `Σ wᵢ (Fᵢ Lᵢ + (1 − Fᵢ) L_water)` over a few such facet classes, Lᵢ being what the reflected
-//!   ray sees (sky, sun, cards). σ = 0 is a mirror: one class, the reflected ray at g.
+//!   ray sees (sky, sun, cards). σ = 0 is a mirror: one class, the reflected ray at g. For the
+//!   mirror images of cards and terrain, whose Lᵢ changes abruptly with the reflected elevation,
+//!   the renderer integrates the density itself ([`Sea::facet_density`]) over intervals of
+//!   slopes instead of sampling it at a few classes.
 //! * **Sun glitter** ([`Sea::glint_per_irradiance`], σ > 0): the sun is too small to be found by
 //!   a few reflected rays, so its reflection is the Cox–Munk glint radiance
 //!   `L = E ρ(ω) p(z_x, z_y) / (4 cos θ_v cos⁴ β)` (E: solar irradiance normal to the beam, β the
@@ -95,6 +98,13 @@ pub fn cox_munk_pdf(tan2_tilt: f64, mean_square_slope: f64) -> f64 {
     (-tan2_tilt / mean_square_slope).exp() / (std::f64::consts::PI * mean_square_slope)
 }
 
+/// The along-ray slopes [lo, hi] = [max(−g, −4σ′), 4σ′] (rad) of the facets a ray meeting the
+/// sea at grazing angle `grazing_rad` sees, for rms along-ray slope `sigma_along` (σ′): steeper
+/// facets than −g face away from the ray, and beyond ±4σ′ lies 6·10⁻⁵ of the slopes.
+pub fn facet_slope_range(grazing_rad: f64, sigma_along: f64) -> (f64, f64) {
+    ((-grazing_rad).max(-4.0 * sigma_along), 4.0 * sigma_along)
+}
+
 /// One class of wave facets seen by a ray meeting the sea ([`Sea::facet_nodes`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FacetNode {
@@ -171,18 +181,17 @@ impl Sea {
             };
             return nodes;
         }
-        let (lo, hi) = ((-g).max(-4.0 * sigma_along), 4.0 * sigma_along);
+        let (lo, hi) = facet_slope_range(g, sigma_along);
         let step = (hi - lo) / K as f64;
         let mut total = 0.0;
         for (i, node) in nodes.iter_mut().enumerate() {
             let s = lo + (i as f64 + 0.5) * step;
-            let facet_grazing = (g + s).clamp(0.0, half_pi);
-            let w = facet_grazing.sin() * (-0.5 * (s / sigma_along).powi(2)).exp();
+            let (w, reflectance) = self.facet_density(g, s, sigma_along);
             total += w;
             *node = FacetNode {
                 reflected_elevation_rad: (g + 2.0 * s).clamp(0.0, half_pi),
                 weight: w,
-                reflectance: fresnel_reflectance(facet_grazing, n),
+                reflectance,
             };
         }
         if total > 0.0 {
@@ -194,6 +203,22 @@ impl Sea {
             nodes[0].weight = 1.0;
         }
         nodes
+    }
+
+    /// The rms along-ray slope σ′ = tan(wave slope)/√2 of the facets (0 for a mirror sea).
+    pub fn along_ray_slope(&self) -> f64 {
+        self.wave_slope_rad.tan() * std::f64::consts::FRAC_1_SQRT_2
+    }
+
+    /// The facets of along-ray slope `s` (rad) a ray meeting the sea at `grazing_rad` (in
+    /// [0, π/2]) sees, for rms along-ray slope `sigma_along` ([`Sea::along_ray_slope`], > 0):
+    /// their unnormalised share of the visible surface, sin(g + s)·exp(−s²/2σ′²) (g + s clamped
+    /// to [0, π/2]), and their Fresnel reflectance. [`Sea::facet_nodes`] is the midpoint rule of
+    /// this density over [`facet_slope_range`]; the renderer integrates it over cells of slopes.
+    pub fn facet_density(&self, grazing_rad: f64, s: f64, sigma_along: f64) -> (f64, f64) {
+        let facet_grazing = (grazing_rad + s).clamp(0.0, std::f64::consts::FRAC_PI_2);
+        let w = facet_grazing.sin() * (-0.5 * (s / sigma_along).powi(2)).exp();
+        (w, fresnel_reflectance(facet_grazing, self.refractive_index))
     }
 
     /// Cox–Munk sun glint (see the module docs) per unit solar irradiance normal to the beam:

@@ -447,10 +447,91 @@ fn ducted_sun_glitter_lies_where_cox_munk_puts_it_for_each_sea_points_own_sun() 
                 );
             } else if x2 < 1.0 {
                 present += 1;
-                assert!(glitter > 0.05, "({x}, {y}): tan²β/σ² {x2:.2}: glitter {glitter}");
+                assert!(
+                    glitter > 0.05,
+                    "({x}, {y}): tan²β/σ² {x2:.2}: glitter {glitter}"
+                );
             }
         }
     }
     eprintln!("{absent} samples without glitter, {present} with");
     assert!(absent > 100 && present > 10, "{absent} {present}");
+}
+
+/// On a wind-roughened sea (rms slope 3°) the mirror image of a tall uniform card, under
+/// straight rays, is the slope distribution's blur of it, not copies of it at a few slopes: in
+/// every row of a column through it, what the card adds to the sea (the render with it minus
+/// the render without) equals the independent quadrature of `support::rough_sea` (20 000
+/// slopes, the card met where the straight reflected ray is within its height at its range) as
+/// `support::rough_sea::assert_profile_matches` bounds it, and so does the column's sum; the
+/// profile rises towards the horizon without an interior extremum. The 8 midpoint facet
+/// classes the renderer used before jumped by a class's whole share between rows instead (a
+/// row off by a tenth of the image's strongest value).
+#[test]
+fn a_rough_sea_blurs_a_cards_mirror_image_as_the_slope_distribution_does() {
+    use crate::support::rough_sea::{
+        assert_profile_matches, blurred_reflection, straight_height_m, straight_sea_hit,
+    };
+    let (distance_m, top_m, slope_deg) = (3_000.0, 300.0, 3.0f64);
+    let card = format!(
+        "[[cards]]\nimage = \"red.png\"\ndistance_m = {distance_m}\nwidth_m = 4000\n\
+         height_m = {top_m}\nbase_m = 0\n"
+    );
+    // −5.5° … −0.5°: sea in every row, the card (up to 5.7° above the horizon) out of view.
+    let camera = "pitch_deg = -3.0\nhfov_deg = 10.0\nwidth = 400\nheight = 200";
+    let sea = format!("wave_slope_deg = {slope_deg}");
+    let (_dir, with) = scene(camera, &sea, &card);
+    let (_dir2, without) = scene(camera, &sea, "");
+    let frame = with.camera.frame();
+    let sigma_along = slope_deg.to_radians().tan() / 2f64.sqrt();
+    for exact in [false, true] {
+        let (a, b) = (render(&with, exact), render(&without, exact));
+        let x = a.width / 2;
+        let mut rendered = Vec::new();
+        let mut expected = Vec::new();
+        for y in 0..a.height {
+            let alpha = frame
+                .view_direction(x as f64 + 0.5, y as f64 + 0.5)
+                .elevation_rad;
+            let (d, g) = straight_sea_hit(CAMERA_M, alpha, R).expect("every row is sea");
+            let card_over_sky = |e: f64| match straight_height_m(e, distance_m - d, R) {
+                Some(h) if (0.0..=top_m).contains(&h) => {
+                    let sky = with.sky.radiance(e);
+                    [1.0 - sky[0], -sky[1], -sky[2]]
+                }
+                _ => [0.0; 3],
+            };
+            let (p, q) = (a.pixel(x, y), b.pixel(x, y));
+            rendered.push([0, 1, 2].map(|c| f64::from(p[c]) - f64::from(q[c])));
+            expected.push(blurred_reflection(
+                g,
+                sigma_along,
+                with.sea.refractive_index,
+                20_000,
+                card_over_sky,
+            ));
+        }
+        // The green channel carries the image (a red card hides the whitish sky).
+        let strongest = expected.iter().map(|v| v[1].abs()).fold(0.0, f64::max);
+        assert!(
+            strongest > 0.05,
+            "exact={exact}: a faint image: {strongest}"
+        );
+        assert_profile_matches(&rendered, &expected, strongest, exact);
+        // Darkest (the card's image strongest) at the top row, fading monotonically downwards.
+        let green: Vec<f64> = rendered.iter().map(|v| v[1]).collect();
+        let extrema = green
+            .windows(3)
+            .filter(|w| (w[1] - w[0]) * (w[2] - w[1]) < -1e-12)
+            .count();
+        let reference_extrema = expected
+            .windows(3)
+            .filter(|w| (w[1][1] - w[0][1]) * (w[2][1] - w[1][1]) < -1e-12)
+            .count();
+        assert_eq!(reference_extrema, 0, "the reference profile is monotone");
+        assert_eq!(
+            extrema, 0,
+            "exact={exact}: {extrema} interior extrema: {green:?}"
+        );
+    }
 }

@@ -129,6 +129,20 @@ pub(crate) fn ridge_scene_with(
     camera: &str,
     extra: &str,
 ) -> Scene {
+    let camera = format!("{camera}\nhfov_deg = 0.5\nwidth = 400\nheight = 200");
+    ridge_scene_coloured(dir, distance_m, height_m, &camera, [1.0, 0.0, 0.0], extra)
+}
+
+/// [`ridge_scene_with`] with the whole `[camera]` table's body given and rock of colour
+/// `rock_rgb`.
+pub(crate) fn ridge_scene_coloured(
+    dir: &Path,
+    distance_m: f64,
+    height_m: f64,
+    camera: &str,
+    rock_rgb: [f64; 3],
+    extra: &str,
+) -> Scene {
     let rows = 150u32;
     let cols = 41u32;
     let first = distance_m - 200.0; // distance of the southernmost row
@@ -153,11 +167,11 @@ pub(crate) fn ridge_scene_with(
         heights_m: &heights,
     };
     write_geotiff(&dir.join("ridge.tif"), &grid, 2, true);
-    // Pure red rock lit from the zenith: a flat top shows [1, 0, 0].
+    // Rock lit from the zenith (pure red: a flat top shows [1, 0, 0]).
     let text = format!(
-        "[camera]\n{camera}\nhfov_deg = 0.5\nwidth = 400\nheight = 200\n\
+        "[camera]\n{camera}\n\
          [terrain]\ndem = \"ridge.tif\"\nobserver_lat_deg = {}\nobserver_lon_deg = {}\n\
-         rock_rgb = [1.0, 0.0, 0.0]\nsnow_line_m = 1e5\nice_slope_deg = 90\n\
+         rock_rgb = {rock_rgb:?}\nsnow_line_m = 1e5\nice_slope_deg = 90\n\
          light_elevation_deg = 90\n{extra}",
         OBSERVER.0, OBSERVER.1
     );
@@ -339,6 +353,66 @@ fn a_calm_sea_mirrors_a_ridge_where_the_sphere_geometry_puts_it() {
         below.is_empty(),
         "ridge rows below the waterline: {below:?}"
     );
+}
+
+/// On a wind-roughened sea (rms slope 3°) a black ridge's mirror image is the slope
+/// distribution's blur of it, under straight rays: in every sea row of the centre column, what
+/// the ridge takes from the sea (the render with it minus the render without) equals the
+/// independent quadrature of `support::rough_sea` (20 000 slopes, a reflected ray blocked where
+/// it passes at or below the ridge's near top edge) as `support::rough_sea::
+/// assert_profile_matches` bounds it, and so does the column's sum. The 8 midpoint facet
+/// classes the renderer used before showed the ridge as separate sharp copies instead.
+#[test]
+fn a_rough_sea_blurs_a_ridges_mirror_image_as_the_slope_distribution_does() {
+    use crate::support::rough_sea::{
+        assert_profile_matches, blurred_reflection, straight_height_m, straight_sea_hit,
+    };
+    let (d, h, h0, slope_deg) = (15_000.0, 60.0, 10.0, 3.0f64);
+    // −2° … 0°, the ridge (4 km wide, ±7.6°) across the frame; black rock.
+    let camera =
+        format!("height_m = {h0}\npitch_deg = -1.0\nhfov_deg = 4.0\nwidth = 400\nheight = 200");
+    let sea = format!("[atmosphere]\nstraight = true\n[sea]\nwave_slope_deg = {slope_deg}\n");
+    let dir = tempfile::tempdir().unwrap();
+    let with = ridge_scene_coloured(dir.path(), d, h, &camera, [0.0; 3], &sea);
+    let mut without = with.clone();
+    without.terrain = None;
+    let frame = with.camera.frame();
+    let sigma_along = slope_deg.to_radians().tan() / 2f64.sqrt();
+    let x = with.camera.width / 2;
+    let tracer = StraightRays::new(R).unwrap();
+    for exact in [false, true] {
+        let options = RenderOptions { exact, ..quiet() };
+        let a = render_scene(&with, &tracer, &options).unwrap();
+        let b = render_scene(&without, &tracer, &options).unwrap();
+        assert_eq!(a.stats.non_finite_samples, 0);
+        let mut rows = Vec::new();
+        for y in 0..a.height {
+            let alpha = frame
+                .view_direction(x as f64 + 0.5, y as f64 + 0.5)
+                .elevation_rad;
+            let Some((d0, g)) = straight_sea_hit(h0, alpha, R) else {
+                continue;
+            };
+            let blocked = |e: f64| match straight_height_m(e, d - d0, R) {
+                Some(top) if top <= h => with.sky.radiance(e).map(|v| -v),
+                _ => [0.0; 3],
+            };
+            let expected =
+                blurred_reflection(g, sigma_along, with.sea.refractive_index, 20_000, blocked);
+            let (p, q) = (a.pixel(x, y), b.pixel(x, y));
+            let rendered = [0, 1, 2].map(|c| f64::from(p[c]) - f64::from(q[c]));
+            rows.push((y, rendered, expected));
+        }
+        assert!(rows.len() > 150, "exact={exact}: {} sea rows", rows.len());
+        let strongest = rows.iter().map(|r| r.2[2].abs()).fold(0.0, f64::max);
+        assert!(
+            strongest > 0.02,
+            "exact={exact}: a faint image: {strongest}"
+        );
+        let expected: Vec<[f64; 3]> = rows.iter().map(|r| r.2).collect();
+        let rendered: Vec<[f64; 3]> = rows.iter().map(|r| r.1).collect();
+        assert_profile_matches(&rendered, &expected, strongest, exact);
+    }
 }
 
 #[test]

@@ -7,6 +7,7 @@
 //! * [`reference`] — an independent ray tracer (not the code under test) for accuracy checks.
 //! * [`fans`] — fitted stress soundings, fold slopes and reference heights with error estimates
 //!   for fans of rays checked against [`reference`].
+//! * [`rough_sea`] — an independent quadrature of a wind-roughened sea's blurred reflections.
 #![allow(dead_code)] // each test module uses a different subset
 
 pub mod cli;
@@ -15,6 +16,7 @@ pub mod dem;
 pub mod fans;
 pub mod films;
 pub mod reference;
+pub mod rough_sea;
 
 /// Bisects [lo, hi] `iterations` times for the boundary of a predicate that is false at `lo`
 /// and true at `hi` (both asserted), returning the last (false, true) bracket.
