@@ -868,7 +868,9 @@ pub(super) struct Reflection {
 /// The search is regula falsi with the Illinois modification (the final elevation is smooth in
 /// the launch elevation wherever rays leave), falling back to bisection where an end of the
 /// bracket does not leave or the bracket has not halved in two steps: a handful of rays where
-/// bisection alone took 32 (each frame of a sun sweep needs its own search).
+/// bisection alone took 32. The renderer inverts one set of rays from the sea instead
+/// ([`super::sea_sun`]); this search is the reference its tests check it against.
+#[cfg(test)]
 pub(super) fn sea_level_sun_launch_rad(
     tracer: &dyn RayTracer,
     sun_elevation_rad: f64,
@@ -927,10 +929,12 @@ pub(super) fn sea_level_sun_launch_rad(
 
 /// How closely [`sea_level_sun_launch_rad`] brackets the launch elevation (rad): a thousandth of
 /// an arcsecond, far below any pixel.
+#[cfg(test)]
 pub(super) const SEA_SUN_LAUNCH_TOLERANCE_RAD: f64 = 5e-9;
 
 /// The most rays [`sea_level_sun_launch_rad`] traces after its first two (bisection alone
 /// reaches its tolerance from 0.5 rad in 27).
+#[cfg(test)]
 const MAX_LAUNCH_STEPS: usize = 64;
 
 impl Reflection {
@@ -1083,13 +1087,19 @@ impl SeaSunAt {
     /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
     pub(super) fn at(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
         match *self {
-            SeaSunAt::Glint { .. } => match self.glint_factor(refl, azimuth_rad) {
-                Some(k) => {
-                    let t = self.glint_transmittance(refl, azimuth_rad);
-                    self.glint_radiance(refl, k, t)
+            SeaSunAt::Glint { geometry, tilt, .. } => {
+                let Some(g) = &refl.glint else {
+                    return [0.0; 3];
+                };
+                // As glint_factor and glint_transmittance, from one look-up of the sun.
+                let phi = g.sun.azimuth_rad - azimuth_rad;
+                let (e, depth) = g.at_sea.at(g.sun.elevation_rad + tilt * phi.cos());
+                let k = geometry.per_irradiance(e, phi);
+                if k <= 0.0 {
+                    return [0.0; 3];
                 }
-                None => [0.0; 3],
-            },
+                self.glint_radiance(refl, k, depth.map(|tau| (-tau).exp()))
+            }
             SeaSunAt::Mirror {
                 elevation_rad,
                 reflectance,
