@@ -10,9 +10,15 @@
 //! its mirror image and the glitter are centred on that azimuth) — and interpolated linearly
 //! between them. An interval between two nodes is split at its middle column until linear
 //! interpolation predicts the middle within [`TOLERANCE`] of the pixel's radiance there (the
-//! band's colour plus the addition, per channel, plus [`FLOOR`]) or the nodes are neighbours. So the sharp edges of the disc and of its mirror image
-//! are resolved to single columns (the test fails across them), and inside them, and across the
-//! glitter, the addition is within about that tolerance of the exact shading.
+//! band's colour plus the addition, per channel, plus [`FLOOR`]) or the nodes are neighbours.
+//! So the sharp edges of the disc and of its mirror image are resolved to single columns (the
+//! test fails across them), and inside them the addition is within about that tolerance of the
+//! exact shading.
+//!
+//! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
+//! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated
+//! instead by a quadratic in its logarithm (nodes [`SMOOTH_STRIDE`] apart; [`Smooth`]), with a
+//! test that bounds the error at every column of an accepted interval, not only at its middle.
 
 use super::ray_model::FanEnd;
 use super::reflection::SeaSunAt;
