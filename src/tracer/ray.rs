@@ -22,6 +22,7 @@
 //! vertical direction component) that crosses the level. Roots are refined with the Illinois
 //! variant of regula falsi to 1e-9 m along the ray.
 
+use std::cell::Cell;
 use std::fmt;
 
 use serde::Serialize;
@@ -467,10 +468,15 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     // Error per unit length: a step of h may err by tolerance·h/L (see the module docs).
     let tolerance_per_m = cfg.tolerance_m / error_length;
 
-    let mut f = |y: &[f64; N]| sys.derivative(y);
     let mut y = y0;
-    let mut k1 = f(&y);
     let mut obs = sys.observe(&y);
+    // The interval between breaks the ray is in (on a break: the side it heads to) and, as a
+    // `Layer`, the field every stage of a step sees: the interval's own, continued past its
+    // bounds. Whenever the bracket moves, the layer follows and the first stage is re-evaluated.
+    let mut bracket = Bracket::new(sys.breaks(), obs.height_m, sys.climb(&y) > 0.0);
+    let layer = Cell::new(bracket.layer());
+    let mut f = |y: &[f64; N]| sys.derivative(y, layer.get());
+    let mut k1 = f(&y);
     if !(finite(&y) && finite(&k1) && obs_finite(&obs)) {
         rec.termination = Some(Termination::NonFinite);
         rec.end = RayPoint {
@@ -479,12 +485,6 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         };
         rec.end_observer_elevation_rad = elevation0;
         return;
-    }
-    // An observer on a break (e.g. at the top of an inversion layer given as its level): the
-    // first stage comes from the side the ray heads to, as after a landing, or a descending ray
-    // would take its first stage from the wrong side of the jump and never pass the error test.
-    if on_break(sys.breaks(), obs.height_m) {
-        k1 = derivative_past_break(&mut f, &y, &k1, obs.elevation_rad);
     }
     let scale = sys.invariant_scale(&y);
     let invariant0 = obs.invariant;
@@ -518,9 +518,11 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     let mut h = cfg.initial_step_m.min(cfg.max_step_m);
     let mut controller = Controller::new();
     let mut steps = 0u32;
-    let mut bracket = Bracket::new(sys.breaks(), obs.height_m, sys.climb(&y) > 0.0);
     let mut aim: Option<Aim> = None;
-    let mut landed = false;
+    // The direction (up?) of the break the last accepted step landed on.
+    let mut landed: Option<bool> = None;
+    // Whether the step from here was already retaken in the interval its trial step left to.
+    let mut relayered = false;
     loop {
         if steps >= cfg.max_steps {
             finish(rec, Termination::MaxSteps, &obs, s, elevation0);
@@ -587,7 +589,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                         // when it finds the crossing at its start; its first stage is taken past
                         // it.
                         Polish::Landed => {
-                            landed = true;
+                            landed = Some(a.exit.up);
                             rec.breaks_landed += 1;
                         }
                     }
@@ -609,7 +611,27 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                 }
                 None if !bracket.is_empty() => {
                     let o1 = sys.observe(&step.y1);
-                    if let Some(a) = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg) {
+                    let before = bracket;
+                    let mut aimed = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg);
+                    if bracket.layer() != layer.get() {
+                        if !(err <= 1.0) {
+                            // A step too inaccurate to pass cannot tell which side of a
+                            // break the ray leaves to: it is shrunk below, in its interval.
+                            bracket = before;
+                            aimed = None;
+                        } else if !relayered {
+                            // The ray sat on a break and left it into the other interval than
+                            // the one its step was taken in: take it again in that one. (Once:
+                            // a ray sliding along a break, sent back across it from either
+                            // side, keeps the step it has.)
+                            relayered = true;
+                            layer.set(bracket.layer());
+                            k1 = f(&y);
+                            rec.rejected_steps += 1;
+                            continue;
+                        }
+                    }
+                    if let Some(a) = aimed {
                         rec.rejected_steps += 1;
                         let next_step_m = if err <= 1.0 {
                             controller.accept(h, err)
@@ -772,10 +794,17 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         }
         let action = hook.after_step(&cur, &next_point);
         y = y1;
-        k1 = if std::mem::take(&mut landed) {
-            derivative_past_break(&mut f, &y, &step.k7, obs.elevation_rad)
-        } else {
+        // Landed just short of a break: the next step is in the interval beyond it, and its
+        // first stage is that interval's field continued back to the landing point.
+        if let Some(up) = landed.take() {
+            bracket.cross(up);
+        }
+        relayered = false;
+        k1 = if bracket.layer() == layer.get() {
             step.k7
+        } else {
+            layer.set(bracket.layer());
+            f(&y)
         };
         s += h;
         obs = obs1;
@@ -852,36 +881,6 @@ const MIN_BUDGET_STEP_M: f64 = 1.0;
 /// its last stage, which enters the error estimate, then sees the field it integrated. Rounding
 /// of heights at Earth's radius is ~1e-9 m.
 const SHORT_OF_BREAK_M: f64 = 1e-8;
-
-/// The derivative to start from on a break: evaluated a little way ahead along the ray, on the
-/// side it is heading to. On the break itself the field's dn/dh is one-sided (the lookup picks a
-/// side by the rounding of the landed height), and a first stage from the wrong side of a jump
-/// would make the next step's error fall only like its length.
-fn derivative_past_break<const N: usize>(
-    f: &mut impl FnMut(&[f64; N]) -> [f64; N],
-    y: &[f64; N],
-    slope: &[f64; N],
-    elevation_rad: f64,
-) -> [f64; N] {
-    // Far enough along the ray to clear the gap of SHORT_OF_BREAK_M, at most 1 m.
-    let ahead_m = (3.0 * SHORT_OF_BREAK_M / elevation_rad.sin().abs()).clamp(1e-4, 1.0);
-    let mut ahead = *y;
-    for i in 0..N / 2 {
-        ahead[i] += ahead_m * slope[i];
-    }
-    f(&ahead)
-}
-
-/// Whether `height_m` is on one of the (ascending) `breaks` within [`LANDING_TOLERANCE_M`].
-fn on_break(breaks: &[f64], height_m: f64) -> bool {
-    let i = breaks.partition_point(|&b| b < height_m);
-    let near = |j: usize| {
-        breaks
-            .get(j)
-            .is_some_and(|&b| (b - height_m).abs() <= LANDING_TOLERANCE_M)
-    };
-    near(i) || (i > 0 && near(i - 1))
-}
 
 /// Shortest step (m of path) retaken to end on a break; a crossing closer to the start than this
 /// is a ray that already sits on the break (within rounding) and just changes interval.
