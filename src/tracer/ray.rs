@@ -631,14 +631,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                             continue;
                         }
                     }
-                    // A step that failed the error test aims only within the step it is
-                    // shrunk to: its own length says nothing about how far one may go.
-                    let shrunk_m = if err <= 1.0 {
-                        f64::INFINITY
-                    } else {
-                        controller.reject(h, err)
-                    };
-                    if let Some(a) = aimed.filter(|a| a.step_m <= shrunk_m) {
+                    if let Some(a) = aimed {
                         rec.rejected_steps += 1;
                         let next_step_m = if err <= 1.0 {
                             controller.accept(h, err)
