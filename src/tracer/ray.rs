@@ -540,6 +540,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             h = h.min(vertical_limit / sin_psi);
         }
         h = h.min(cfg.max_step_m);
+        h = h.min(layer_step_cap_m(&bracket, sin_psi, &k1[half..]));
         if let Some(a) = aim {
             h = a.step_m;
         }
@@ -837,6 +838,30 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         };
     }
 }
+
+/// Longest step (m) that keeps a ray in the interval between breaks `bracket` within
+/// [`LAYER_RISE_SHARE`] of the interval's thickness of height change: |sin ψ|·s plus the
+/// bending, ½·κ·s² with κ at most |∇n| (`gradient`, the second half of the state's derivative)
+/// plus the Earth's curvature. A step that crosses a thin interval in one go sees its field vary
+/// on the scale of the whole step, where the 5(4) error estimate no longer tracks the error;
+/// no cap where the interval is unbounded.
+fn layer_step_cap_m(bracket: &Bracket<'_>, sin_psi: f64, gradient: &[f64]) -> f64 {
+    let thickness_m = bracket.upper_m() - bracket.lower_m();
+    if !thickness_m.is_finite() {
+        return f64::INFINITY;
+    }
+    let rise_m = LAYER_RISE_SHARE * thickness_m;
+    let bend = gradient.iter().map(|g| g * g).sum::<f64>().sqrt() + EARTH_CURVATURE_PER_M;
+    // Positive root of ½·bend·s² + sin ψ·s = rise, in a form without cancellation.
+    2.0 * rise_m / (sin_psi + (sin_psi * sin_psi + 2.0 * bend * rise_m).sqrt())
+}
+
+/// Share of an interval's thickness one step may climb or descend (see [`layer_step_cap_m`]).
+const LAYER_RISE_SHARE: f64 = 0.25;
+
+/// An upper bound on the Earth's curvature (1/m) for [`layer_step_cap_m`]: a ray's height
+/// above a sphere of radius ≥ 6 000 km bends at most by this beside its own curvature.
+const EARTH_CURVATURE_PER_M: f64 = 1.0 / 6.0e6;
 
 /// The share of the error budget per metre (T/L, in radians of direction) that a closed-form
 /// climb out may spend on the ray's final direction.
