@@ -523,6 +523,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     let mut landed: Option<bool> = None;
     // Whether the step from here was already retaken in the interval its trial step left to.
     let mut relayered = false;
+    let rise_share = layer_rise_share(cfg.tolerance_m);
     loop {
         if steps >= cfg.max_steps {
             finish(rec, Termination::MaxSteps, &obs, s, elevation0);
@@ -540,7 +541,13 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             h = h.min(vertical_limit / sin_psi);
         }
         h = h.min(cfg.max_step_m);
-        h = h.min(layer_step_cap_m(&bracket, sin_psi, &k1[half..]));
+        h = h.min(layer_step_cap_m(
+            &bracket,
+            obs.height_m,
+            rise_share,
+            sin_psi,
+            &k1[half..],
+        ));
         if let Some(a) = aim {
             h = a.step_m;
         }
@@ -839,25 +846,45 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     }
 }
 
-/// Longest step (m) that keeps a ray in the interval between breaks `bracket` within
-/// [`LAYER_RISE_SHARE`] of the interval's thickness of height change: |sin ψ|·s plus the
-/// bending, ½·κ·s² with κ at most |∇n| (`gradient`, the second half of the state's derivative)
-/// plus the Earth's curvature. A step that crosses a thin interval in one go sees its field vary
-/// on the scale of the whole step, where the 5(4) error estimate no longer tracks the error;
-/// no cap where the interval is unbounded.
-fn layer_step_cap_m(bracket: &Bracket<'_>, sin_psi: f64, gradient: &[f64]) -> f64 {
-    let thickness_m = bracket.upper_m() - bracket.lower_m();
+/// Longest step (m) that keeps a ray at `height_m` in the interval between breaks `bracket`
+/// (above the ground) within `share` of the interval's thickness of height change: |sin ψ|·s
+/// plus the bending, ½·κ·s² with κ at most |∇n| (`gradient`, the second half of the state's
+/// derivative) plus the Earth's curvature. A step that crosses a thin interval in one go sees its
+/// field vary on the scale of the whole step, where the 5(4) error estimate no longer tracks the
+/// error; no cap where the interval is unbounded.
+fn layer_step_cap_m(
+    bracket: &Bracket<'_>,
+    height_m: f64,
+    share: f64,
+    sin_psi: f64,
+    gradient: &[f64],
+) -> f64 {
+    let lower_m = if height_m >= 0.0 {
+        bracket.lower_m().max(0.0)
+    } else {
+        bracket.lower_m()
+    };
+    let thickness_m = bracket.upper_m() - lower_m;
     if !thickness_m.is_finite() {
         return f64::INFINITY;
     }
-    let rise_m = LAYER_RISE_SHARE * thickness_m;
+    let rise_m = share * thickness_m;
     let bend = gradient.iter().map(|g| g * g).sum::<f64>().sqrt() + EARTH_CURVATURE_PER_M;
     // Positive root of ½·bend·s² + sin ψ·s = rise, in a form without cancellation.
     2.0 * rise_m / (sin_psi + (sin_psi * sin_psi + 2.0 * bend * rise_m).sqrt())
 }
 
-/// Share of an interval's thickness one step may climb or descend (see [`layer_step_cap_m`]).
-const LAYER_RISE_SHARE: f64 = 0.25;
+/// Share of an interval's thickness one step may climb or descend at tolerance `tolerance_m`
+/// (see [`layer_step_cap_m`]): a quarter at 1 cm and below, growing like the tolerance's sixth
+/// root above (a fifth-order step's error grows like the sixth power of its length), at most
+/// [`MAX_RISE_SHARE`].
+fn layer_rise_share(tolerance_m: f64) -> f64 {
+    (0.25 * (tolerance_m / 0.01).powf(1.0 / 6.0)).clamp(0.25, MAX_RISE_SHARE)
+}
+
+/// Largest share of its interval's thickness a step may climb or descend (reached near a 10 m
+/// tolerance): a step across a whole 0.5 m interval erred 750 times its estimate.
+const MAX_RISE_SHARE: f64 = 0.8;
 
 /// An upper bound on the Earth's curvature (1/m) for [`layer_step_cap_m`]: a ray's height
 /// above a sphere of radius ≥ 6 000 km bends at most by this beside its own curvature.
