@@ -116,7 +116,9 @@ impl Layer {
     #[inline]
     pub fn contains(self, height_m: f64) -> bool {
         let (lo, hi) = (self.lower_m + INSIDE_M, self.upper_m - INSIDE_M);
-        (height_m >= lo && height_m <= hi) || !(lo < hi) || height_m.is_nan()
+        (height_m >= lo && height_m <= hi)
+            || lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less)
+            || height_m.is_nan()
     }
 
     /// The height inside the interval nearest to `height_m`, at least [`INSIDE_M`] from its

@@ -622,7 +622,11 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                     let before = bracket;
                     let mut aimed = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg);
                     if bracket.layer() != layer.get() {
-                        if !(err <= 1.0) {
+                        // (A NaN error does not pass either.)
+                        if !matches!(
+                            err.partial_cmp(&1.0),
+                            Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+                        ) {
                             // A step too inaccurate to pass cannot tell which side of a
                             // break the ray leaves to: it is shrunk below, in its interval.
                             bracket = before;
