@@ -482,6 +482,16 @@ mod tests {
         };
         let mut out = vec![[f64::NAN; 3]; 400];
         fill_columns((0, 400), Some(centre), background, value, &mut out);
+        (worst_error(&out, exact, background), calls.get())
+    }
+
+    /// The worst error of the filled `out` against `exact`, in units of the tolerance on the
+    /// pixel's radiance.
+    fn worst_error(
+        out: &[[f64; 3]],
+        exact: impl Fn(usize) -> [f64; 3],
+        background: [f64; 3],
+    ) -> f64 {
         let mut worst = 0.0f64;
         for (x, got) in out.iter().enumerate() {
             let want = exact(x);
@@ -490,7 +500,7 @@ mod tests {
                 worst = worst.max((got[c] - want[c]).abs() / allowed);
             }
         }
-        (worst, calls.get())
+        worst
     }
 
     #[test]
@@ -542,15 +552,10 @@ mod tests {
         };
         let mut out = vec![[f64::NAN; 3]; 400];
         glitter.fill((0, 400), Some(centre), background, &mut out);
-        let mut worst = 0.0f64;
-        for (x, got) in out.iter().enumerate() {
-            let want = radiance(k(x));
-            for c in 0..3 {
-                let allowed = TOLERANCE * (background[c] + want[c]).abs() + FLOOR;
-                worst = worst.max((got[c] - want[c]).abs() / allowed);
-            }
-        }
-        (worst, calls.get())
+        (
+            worst_error(&out, |x| radiance(k(x)), background),
+            calls.get(),
+        )
     }
 
     #[test]
