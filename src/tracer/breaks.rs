@@ -80,6 +80,76 @@ pub(crate) fn settle(
     kept
 }
 
+/// The height interval between two neighbouring breaks that a step integrates in, with the
+/// field of that interval continued smoothly past its bounds. Every stage of a Runge–Kutta step
+/// then sees one smooth function: a stage whose height lies beyond a bound (the internal stages
+/// of a step that ends just short of a break overshoot it when the ray is steep, and a step that
+/// starts just short of a break it has landed on starts outside the interval it enters) gets the
+/// interval's own quadratic continuation from the bound — n, dn/dh and a one-sided difference
+/// of dn/dh there — not the neighbouring interval's values, which differ by the break's jump.
+/// The independent reference tracer of the tests treats its layers the same way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Layer {
+    /// Lower bound (m above the ground; −∞ below the lowest break).
+    pub lower_m: f64,
+    /// Upper bound (m; +∞ above the highest break).
+    pub upper_m: f64,
+}
+
+/// How far inside its interval the field is evaluated for a continuation (m): far above the
+/// rounding of the heights (~1e-11 m at 40 km), far below any effect on a ray.
+const INSIDE_M: f64 = 1e-9;
+
+/// Step (m) of the one-sided difference of dn/dh that gives a continuation its curvature (at
+/// most a quarter of the interval).
+const CURVATURE_PROBE_M: f64 = 1e-4;
+
+impl Layer {
+    /// No bounds: the field as it is everywhere.
+    pub const EVERYWHERE: Layer = Layer {
+        lower_m: f64::NEG_INFINITY,
+        upper_m: f64::INFINITY,
+    };
+
+    /// Whether `height_m` is inside the interval, at least [`INSIDE_M`] from its bounds, where
+    /// [`Self::index_at`] is the field itself.
+    #[inline]
+    pub fn contains(self, height_m: f64) -> bool {
+        let (lo, hi) = (self.lower_m + INSIDE_M, self.upper_m - INSIDE_M);
+        (height_m >= lo && height_m <= hi)
+            || lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less)
+            || height_m.is_nan()
+    }
+
+    /// The height inside the interval nearest to `height_m`, at least [`INSIDE_M`] from its
+    /// bounds (where the continuation starts).
+    pub fn nearest_inside(self, height_m: f64) -> f64 {
+        height_m.clamp(self.lower_m + INSIDE_M, self.upper_m - INSIDE_M)
+    }
+
+    /// n and dn/dh at `height_m` for a step in this interval: `index(height_m)` inside it, and
+    /// outside (or within [`INSIDE_M`] of a bound, where a lookup could pick either side) the
+    /// quadratic continuation of `index` from [`INSIDE_M`] inside the nearer bound. NaN in, NaN
+    /// out.
+    #[inline]
+    pub fn index_at(self, height_m: f64, index: impl Fn(f64) -> (f64, f64)) -> (f64, f64) {
+        if self.contains(height_m) {
+            return index(height_m);
+        }
+        let (lo, hi) = (self.lower_m + INSIDE_M, self.upper_m - INSIDE_M);
+        let edge = height_m.clamp(lo, hi);
+        let (n, slope) = index(edge);
+        let beyond = height_m - edge;
+        let probe = CURVATURE_PROBE_M.min(0.25 * (hi - lo)).copysign(beyond);
+        let (_, inner_slope) = index(edge - probe);
+        let curvature = (slope - inner_slope) / probe;
+        (
+            n + beyond * (slope + 0.5 * curvature * beyond),
+            slope + curvature * beyond,
+        )
+    }
+}
+
 /// A root finder: `locate(g, a, c)` returns a root of `g` on [a, c].
 pub(crate) type Locate<'a> = dyn FnMut(&mut dyn FnMut(f64) -> f64, f64, f64) -> f64 + 'a;
 
@@ -130,6 +200,14 @@ impl<'b> Bracket<'b> {
     /// Upper bound of the interval (m; +∞ above the highest break).
     pub fn upper_m(&self) -> f64 {
         self.breaks.get(self.k).copied().unwrap_or(f64::INFINITY)
+    }
+
+    /// The interval as a [`Layer`] (its field continued past its bounds).
+    pub fn layer(&self) -> Layer {
+        Layer {
+            lower_m: self.lower_m(),
+            upper_m: self.upper_m(),
+        }
     }
 
     /// Move to the neighbouring interval across the upper (`up`) or lower bound.

@@ -22,6 +22,7 @@
 //! vertical direction component) that crosses the level. Roots are refined with the Illinois
 //! variant of regula falsi to 1e-9 m along the ray.
 
+use std::cell::Cell;
 use std::fmt;
 
 use serde::Serialize;
@@ -467,10 +468,15 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     // Error per unit length: a step of h may err by tolerance·h/L (see the module docs).
     let tolerance_per_m = cfg.tolerance_m / error_length;
 
-    let mut f = |y: &[f64; N]| sys.derivative(y);
     let mut y = y0;
-    let mut k1 = f(&y);
     let mut obs = sys.observe(&y);
+    // The interval between breaks the ray is in (on a break: the side it heads to) and, as a
+    // `Layer`, the field every stage of a step sees: the interval's own, continued past its
+    // bounds. Whenever the bracket moves, the layer follows and the first stage is re-evaluated.
+    let mut bracket = Bracket::new(sys.breaks(), obs.height_m, sys.climb(&y) > 0.0);
+    let layer = Cell::new(bracket.layer());
+    let mut f = |y: &[f64; N]| sys.derivative(y, layer.get());
+    let mut k1 = f(&y);
     if !(finite(&y) && finite(&k1) && obs_finite(&obs)) {
         rec.termination = Some(Termination::NonFinite);
         rec.end = RayPoint {
@@ -479,12 +485,6 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         };
         rec.end_observer_elevation_rad = elevation0;
         return;
-    }
-    // An observer on a break (e.g. at the top of an inversion layer given as its level): the
-    // first stage comes from the side the ray heads to, as after a landing, or a descending ray
-    // would take its first stage from the wrong side of the jump and never pass the error test.
-    if on_break(sys.breaks(), obs.height_m) {
-        k1 = derivative_past_break(&mut f, &y, &k1, obs.elevation_rad);
     }
     let scale = sys.invariant_scale(&y);
     let invariant0 = obs.invariant;
@@ -518,9 +518,12 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
     let mut h = cfg.initial_step_m.min(cfg.max_step_m);
     let mut controller = Controller::new();
     let mut steps = 0u32;
-    let mut bracket = Bracket::new(sys.breaks(), obs.height_m, sys.climb(&y) > 0.0);
     let mut aim: Option<Aim> = None;
-    let mut landed = false;
+    // The direction (up?) of the break the last accepted step landed on.
+    let mut landed: Option<bool> = None;
+    // Whether the step from here was already retaken in the interval its trial step left to.
+    let mut relayered = false;
+    let rise_share = layer_rise_share(cfg.tolerance_m);
     loop {
         if steps >= cfg.max_steps {
             finish(rec, Termination::MaxSteps, &obs, s, elevation0);
@@ -538,6 +541,13 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
             h = h.min(vertical_limit / sin_psi);
         }
         h = h.min(cfg.max_step_m);
+        h = h.min(layer_step_cap_m(
+            &bracket,
+            obs.height_m,
+            rise_share,
+            sin_psi,
+            &k1[half..],
+        ));
         if let Some(a) = aim {
             h = a.step_m;
         }
@@ -587,7 +597,7 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                         // when it finds the crossing at its start; its first stage is taken past
                         // it.
                         Polish::Landed => {
-                            landed = true;
+                            landed = Some(a.exit.up);
                             rec.breaks_landed += 1;
                         }
                     }
@@ -609,7 +619,31 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
                 }
                 None if !bracket.is_empty() => {
                     let o1 = sys.observe(&step.y1);
-                    if let Some(a) = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg) {
+                    let before = bracket;
+                    let mut aimed = aim_at_break(sys, &mut bracket, &step, &obs, &o1, h, cfg);
+                    if bracket.layer() != layer.get() {
+                        // (A NaN error does not pass either.)
+                        if !matches!(
+                            err.partial_cmp(&1.0),
+                            Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+                        ) {
+                            // A step too inaccurate to pass cannot tell which side of a
+                            // break the ray leaves to: it is shrunk below, in its interval.
+                            bracket = before;
+                            aimed = None;
+                        } else if !relayered {
+                            // The ray sat on a break and left it into the other interval than
+                            // the one its step was taken in: take it again in that one. (Once:
+                            // a ray sliding along a break, sent back across it from either
+                            // side, keeps the step it has.)
+                            relayered = true;
+                            layer.set(bracket.layer());
+                            k1 = f(&y);
+                            rec.rejected_steps += 1;
+                            continue;
+                        }
+                    }
+                    if let Some(a) = aimed {
                         rec.rejected_steps += 1;
                         let next_step_m = if err <= 1.0 {
                             controller.accept(h, err)
@@ -772,10 +806,17 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         }
         let action = hook.after_step(&cur, &next_point);
         y = y1;
-        k1 = if std::mem::take(&mut landed) {
-            derivative_past_break(&mut f, &y, &step.k7, obs.elevation_rad)
-        } else {
+        // Landed just short of a break: the next step is in the interval beyond it, and its
+        // first stage is that interval's field continued back to the landing point.
+        if let Some(up) = landed.take() {
+            bracket.cross(up);
+        }
+        relayered = false;
+        k1 = if bracket.layer() == layer.get() {
             step.k7
+        } else {
+            layer.set(bracket.layer());
+            f(&y)
         };
         s += h;
         obs = obs1;
@@ -808,6 +849,50 @@ pub(crate) fn integrate<const N: usize, Sys: RaySystem<N>, H: RayHook + ?Sized>(
         };
     }
 }
+
+/// Longest step (m) that keeps a ray at `height_m` in the interval between breaks `bracket`
+/// (above the ground) within `share` of the interval's thickness of height change: |sin ψ|·s
+/// plus the bending, ½·κ·s² with κ at most |∇n| (`gradient`, the second half of the state's
+/// derivative) plus the Earth's curvature. A step that crosses a thin interval in one go sees its
+/// field vary on the scale of the whole step, where the 5(4) error estimate no longer tracks the
+/// error; no cap where the interval is unbounded.
+fn layer_step_cap_m(
+    bracket: &Bracket<'_>,
+    height_m: f64,
+    share: f64,
+    sin_psi: f64,
+    gradient: &[f64],
+) -> f64 {
+    let lower_m = if height_m >= 0.0 {
+        bracket.lower_m().max(0.0)
+    } else {
+        bracket.lower_m()
+    };
+    let thickness_m = bracket.upper_m() - lower_m;
+    if !thickness_m.is_finite() {
+        return f64::INFINITY;
+    }
+    let rise_m = share * thickness_m;
+    let bend = gradient.iter().map(|g| g * g).sum::<f64>().sqrt() + EARTH_CURVATURE_PER_M;
+    // Positive root of ½·bend·s² + sin ψ·s = rise, in a form without cancellation.
+    2.0 * rise_m / (sin_psi + (sin_psi * sin_psi + 2.0 * bend * rise_m).sqrt())
+}
+
+/// Share of an interval's thickness one step may climb or descend at tolerance `tolerance_m`
+/// (see [`layer_step_cap_m`]): a quarter at 1 cm and below, growing like the tolerance's sixth
+/// root above (a fifth-order step's error grows like the sixth power of its length), at most
+/// [`MAX_RISE_SHARE`].
+fn layer_rise_share(tolerance_m: f64) -> f64 {
+    (0.25 * (tolerance_m / 0.01).powf(1.0 / 6.0)).clamp(0.25, MAX_RISE_SHARE)
+}
+
+/// Largest share of its interval's thickness a step may climb or descend (reached near a 10 m
+/// tolerance): a step across a whole 0.5 m interval erred 750 times its estimate.
+const MAX_RISE_SHARE: f64 = 0.8;
+
+/// An upper bound on the Earth's curvature (1/m) for [`layer_step_cap_m`]: a ray's height
+/// above a sphere of radius ≥ 6 000 km bends at most by this beside its own curvature.
+const EARTH_CURVATURE_PER_M: f64 = 1.0 / 6.0e6;
 
 /// The share of the error budget per metre (T/L, in radians of direction) that a closed-form
 /// climb out may spend on the ray's final direction.
@@ -852,36 +937,6 @@ const MIN_BUDGET_STEP_M: f64 = 1.0;
 /// its last stage, which enters the error estimate, then sees the field it integrated. Rounding
 /// of heights at Earth's radius is ~1e-9 m.
 const SHORT_OF_BREAK_M: f64 = 1e-8;
-
-/// The derivative to start from on a break: evaluated a little way ahead along the ray, on the
-/// side it is heading to. On the break itself the field's dn/dh is one-sided (the lookup picks a
-/// side by the rounding of the landed height), and a first stage from the wrong side of a jump
-/// would make the next step's error fall only like its length.
-fn derivative_past_break<const N: usize>(
-    f: &mut impl FnMut(&[f64; N]) -> [f64; N],
-    y: &[f64; N],
-    slope: &[f64; N],
-    elevation_rad: f64,
-) -> [f64; N] {
-    // Far enough along the ray to clear the gap of SHORT_OF_BREAK_M, at most 1 m.
-    let ahead_m = (3.0 * SHORT_OF_BREAK_M / elevation_rad.sin().abs()).clamp(1e-4, 1.0);
-    let mut ahead = *y;
-    for i in 0..N / 2 {
-        ahead[i] += ahead_m * slope[i];
-    }
-    f(&ahead)
-}
-
-/// Whether `height_m` is on one of the (ascending) `breaks` within [`LANDING_TOLERANCE_M`].
-fn on_break(breaks: &[f64], height_m: f64) -> bool {
-    let i = breaks.partition_point(|&b| b < height_m);
-    let near = |j: usize| {
-        breaks
-            .get(j)
-            .is_some_and(|&b| (b - height_m).abs() <= LANDING_TOLERANCE_M)
-    };
-    near(i) || (i > 0 && near(i - 1))
-}
 
 /// Shortest step (m of path) retaken to end on a break; a crossing closer to the start than this
 /// is a ray that already sits on the break (within rounding) and just changes interval.

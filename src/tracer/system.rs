@@ -18,6 +18,7 @@
 
 use glam::{DVec2, DVec3};
 
+use super::breaks::Layer;
 use super::{IndexField, StratifiedIndex};
 use crate::profile::FineZone;
 
@@ -40,8 +41,9 @@ pub(crate) struct Observables {
 
 /// A ray equation with its geometry.
 pub(crate) trait RaySystem<const N: usize> {
-    /// d(state)/ds. Non-finite components signal a field that failed.
-    fn derivative(&self, y: &[f64; N]) -> [f64; N];
+    /// d(state)/ds for a step in the height interval `layer` (the field continued past its
+    /// bounds, see [`Layer`]). Non-finite components signal a field that failed.
+    fn derivative(&self, y: &[f64; N], layer: Layer) -> [f64; N];
     /// Height above the ground (cheap: used for every event test).
     fn height(&self, y: &[f64; N]) -> f64;
     /// Radial (upward) component of the direction T (any positive scale).
@@ -111,9 +113,9 @@ impl<S: StratifiedIndex + ?Sized> PlanarSystem<'_, S> {
 
 impl<S: StratifiedIndex + ?Sized> RaySystem<4> for PlanarSystem<'_, S> {
     #[inline]
-    fn derivative(&self, y: &[f64; 4]) -> [f64; 4] {
+    fn derivative(&self, y: &[f64; 4], layer: Layer) -> [f64; 4] {
         let (len, height) = self.radius_and_height(y);
-        let (n, dn) = self.field.index_and_derivative(height);
+        let (n, dn) = layer.index_at(height, |h| self.field.index_and_derivative(h));
         let scale = dn / len;
         let inv_n = 1.0 / n;
         [
@@ -226,14 +228,41 @@ impl<F: IndexField + ?Sized> FieldSystem<'_, F> {
     fn position(&self, y: &[f64; 6]) -> DVec3 {
         self.origin_m + Self::offset(y)
     }
+
+    /// n and ∇n at the point `offset` (at `height_m`) outside `layer`: the layer's continuation
+    /// ([`Layer::index_at`]) along the vertical through the point, the field sampled on that
+    /// vertical inside the layer; the horizontal part of ∇n is the sample's at the bound.
+    #[cold]
+    fn continued(&self, offset: DVec3, height_m: f64, layer: Layer) -> (f64, DVec3) {
+        let up = self.up(self.origin_m + offset);
+        let sample = |h: f64| {
+            self.field
+                .index_and_gradient_near(self.origin_m, offset + up * (h - height_m))
+        };
+        let (n, d) = layer.index_at(height_m, |h| {
+            let (n, g) = sample(h);
+            (n, g.dot(up))
+        });
+        let (_, edge_g) = sample(layer.nearest_inside(height_m));
+        (n, edge_g + up * (d - edge_g.dot(up)))
+    }
 }
 
 impl<F: IndexField + ?Sized> RaySystem<6> for FieldSystem<'_, F> {
     #[inline]
-    fn derivative(&self, y: &[f64; 6]) -> [f64; 6] {
-        let (n, g) = self
-            .field
-            .index_and_gradient_near(self.origin_m, Self::offset(y));
+    fn derivative(&self, y: &[f64; 6], layer: Layer) -> [f64; 6] {
+        let offset = Self::offset(y);
+        let (n, g) = self.field.index_and_gradient_near(self.origin_m, offset);
+        let (n, g) = if layer == Layer::EVERYWHERE {
+            (n, g)
+        } else {
+            let height = self.height(y);
+            if layer.contains(height) {
+                (n, g)
+            } else {
+                self.continued(offset, height, layer)
+            }
+        };
         let inv_n = 1.0 / n;
         [y[3] * inv_n, y[4] * inv_n, y[5] * inv_n, g.x, g.y, g.z]
     }

@@ -1031,3 +1031,147 @@ fn a_ray_turning_inside_a_thin_layer_aloft_meets_the_tolerance() {
         }
     }
 }
+
+/// One ray's error against the independent reference at each of `tolerances_m` (loosest
+/// first), at every stress distance: per distance, the error at each tolerance must be within
+/// it and at most the error at the next looser tolerance plus [`MONOTONE_ALLOWANCE_M`] (the
+/// reference's own accuracy; the reference must be converged to [`REFERENCE_TARGET_M`]).
+fn assert_error_falls_with_the_tolerance(
+    name: &str,
+    observer_m: f64,
+    elevation_deg: f64,
+    reference_steps: ReferenceSteps,
+    tolerances_m: &[f64],
+) {
+    let ray = (name, observer_m, elevation_deg);
+    assert_error_against_the_reference(ray, reference_steps, tolerances_m, true);
+}
+
+/// One ray `(atmosphere, observer m, elevation °)` against the independent reference at each of
+/// `tolerances_m` (loosest first), at every stress distance: within the tolerance, and with
+/// `falling`, at most the error at the next looser tolerance plus [`MONOTONE_ALLOWANCE_M`].
+fn assert_error_against_the_reference(
+    (name, observer_m, elevation_deg): (&str, f64, f64),
+    reference_steps: ReferenceSteps,
+    tolerances_m: &[f64],
+    falling: bool,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let stress = stress_suite().into_iter().find(|s| s.name == name).unwrap();
+    let profile = csv_profile(dir.path(), stress.name, &stress.csv_text);
+    let atm = RefractiveAtmosphere::new(Arc::new(profile.clone()), 550.0).unwrap();
+    let index = atmosphere_index(&atm, BreakSource::Profile(&profile));
+    let elevation_rad = elevation_deg.to_radians();
+    let refinement = Refinement {
+        steps: reference_steps,
+        target_m: REFERENCE_TARGET_M,
+        max_halvings: 2,
+    };
+    let reference = converged_reference(
+        &index,
+        R,
+        TOP_M,
+        observer_m,
+        elevation_rad,
+        &STRESS_DISTANCES_M,
+        refinement,
+    );
+    let mut looser: Vec<Option<f64>> = vec![None; STRESS_DISTANCES_M.len()];
+    for &tolerance_m in tolerances_m {
+        let rec = Tracer::new(&atm, config(tolerance_m))
+            .unwrap()
+            .trace(observer_m, elevation_rad, &STRESS_DISTANCES_M)
+            .unwrap();
+        for (k, &d) in STRESS_DISTANCES_M.iter().enumerate() {
+            let (reach, estimate_m) = reference[k];
+            let want = reach.height_m().expect("the reference ray gets there");
+            assert!(
+                estimate_m <= REFERENCE_TARGET_M,
+                "reference unsettled at {d} m: {estimate_m:e}"
+            );
+            let got = rec.heights_m[k].expect("the ray gets there");
+            let err = (got - want).abs();
+            let context = format!("{name} h0 {observer_m} m α {elevation_deg}° at {d} m");
+            assert!(
+                within(err, tolerance_m),
+                "{context}: |Δh| {err:.3e} m at tolerance {tolerance_m} m"
+            );
+            if let Some(previous) = looser[k].filter(|_| falling) {
+                assert!(
+                    within(err, previous + MONOTONE_ALLOWANCE_M),
+                    "{context}: |Δh| grows from {previous:.3e} m to {err:.3e} m at {tolerance_m} m"
+                );
+            }
+            looser[k] = Some(err);
+        }
+    }
+}
+
+/// The worst ray of `thin_jumps_30k` in STRESS.md at 1 mm (observer 2 m, 15°): it crosses the
+/// 0.1 m, 30 K jumps at 30 and 60 m within 230 m of ground. After a step had landed just short
+/// of a break, the next step's first stage was the field 1e-4 m further along the ray, 2.6e-5 m
+/// higher, where d²n/dh² ≈ 0.017 m⁻² inside the jump makes dn/dh differ by 4e-7 m⁻¹; the
+/// error estimate weighs the first stage 74 times less than the solution does, so at 1 cm and
+/// 1 mm an 8 cm step into the jump at 60 m passed with a 3e-9 rad kick. At 26 km the ray was
+/// 2.2e-4 / 9.5e-5 / 3.4e-5 / 7.7e-5 / 2.2e-7 m off at 1 m … 0.1 mm (it grew from 1 cm to
+/// 1 mm). Every stage now sees the field of the step's own interval, continued back to the
+/// landing point.
+#[test]
+fn a_steep_ray_across_the_thin_jumps_gets_more_accurate_as_the_tolerance_shrinks() {
+    let steps = ReferenceSteps {
+        max_ground_step_m: 50.0,
+        max_height_step_m: 0.1,
+        fine: Some(FineSteps {
+            below_m: LAYERS_TOP_M,
+            max_height_step_m: 0.025,
+        }),
+    };
+    let tolerances_m = [1.0, 0.1, 1e-2, 1e-3, 1e-4];
+    assert_error_falls_with_the_tolerance("thin_jumps_30k", 2.0, 15.0, steps, &tolerances_m);
+}
+
+/// A 50° ray from 2 km through `arctic_surface_inversion` crosses the US 1976 layer base at
+/// 32.16 km (dn/dh jumps by 1.4e-11 m⁻¹) just before 26 km of ground. The step landing just
+/// short of it is over a kilometre long, and its last internal stages, less accurate than its
+/// end, fell beyond the base and saw the layer above: 2.3e-9 rad at 1 mm, and at 26 km the
+/// ray was 2.8e-6 / 3.3e-6 / 2.7e-7 m off at 1 cm / 1 mm / 0.1 mm. Checked from 1 cm down:
+/// from 1 cm to 0.1 mm the steps between the levels at 10.75 and 11 km are as long as the
+/// 250 m level spacing allows at every tolerance and leave the same ≈ 2.8e-7 m at 26 km; at
+/// 0.1 m errors of opposite sign made below and above 10 km partly cancel (1.7e-7 m).
+#[test]
+fn a_steep_ray_across_the_32_km_base_gets_more_accurate_as_the_tolerance_shrinks() {
+    let steps = ReferenceSteps {
+        max_ground_step_m: 200.0,
+        max_height_step_m: 0.1,
+        fine: None,
+    };
+    let tolerances_m = [1e-2, 1e-3, 1e-4, 1e-5];
+    assert_error_falls_with_the_tolerance(
+        "arctic_surface_inversion",
+        2_000.0,
+        50.0,
+        steps,
+        &tolerances_m,
+    );
+}
+
+/// The hot road ray of STRESS.md (observer 2 m, −0.16°) dips to 0.5 m and climbs back through
+/// the 0.5 m interval between the levels at 1.5 and 2 m, the PCHIP cubic that joins the
+/// −4 K/m road layer to the lapse rate above. At 10 m … 0.1 m the step there was 202 m long,
+/// crossing the whole interval in one go: its field varied on the scale of the step, its 5(4)
+/// error estimate (3.7e-4 m) was ~750× below its error, and the ray was 0.22 m off at 26 km at
+/// every one of those tolerances. A step now climbs at most a share of its interval (0.79 at
+/// 10 m, 0.25 at 1 cm and below).
+#[test]
+fn a_ray_climbing_out_of_the_hot_road_layer_meets_the_tolerance() {
+    let steps = ReferenceSteps {
+        max_ground_step_m: 50.0,
+        max_height_step_m: 0.1,
+        fine: Some(FineSteps {
+            below_m: LAYERS_TOP_M,
+            max_height_step_m: 0.025,
+        }),
+    };
+    let tolerances_m = [10.0, 1.0, 0.1, 1e-2, 1e-3, 1e-4];
+    assert_error_against_the_reference(("hot_road", 2.0, -0.16), steps, &tolerances_m, false);
+}
