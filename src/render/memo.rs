@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use super::ray_model::{FanRay, RayTracer};
+use super::ray_model::{FanEnd, FanRay, RayTracer};
 use crate::tracer::RayDensityPaths;
 
 /// The arguments of one call, by their bits.
@@ -125,6 +125,17 @@ impl RayTracer for MemoRays<'_> {
             self.inner
                 .density_paths_m(camera_height_m, elevation_rad, scale_heights_m)
         })
+    }
+
+    fn trace_to_sky_with_density_paths(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        scale_heights_m: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        // Not remembered: the sea's sun table that asks is itself shared between frames.
+        self.inner
+            .trace_to_sky_with_density_paths(camera_height_m, elevation_rad, scale_heights_m)
     }
 
     fn density_paths_along(

@@ -831,13 +831,29 @@ pub(super) struct Glint {
     pub(super) sun: Sun,
     /// The sun seen from the sea surface by its true elevation above a sea point's horizontal:
     /// its apparent elevation there and the optical depth of its own curved ray from there.
-    pub(super) at_sea: SeaSunTable,
+    pub(super) at_sea: Arc<SeaSunTable>,
+    /// Bounds on cos φ over the frame, φ a film point's azimuth from the sun's: a sea point at
+    /// ground distance d stands the sun d/R · cos φ higher than the camera's horizontal does.
+    pub(super) cos_azimuth: (f64, f64),
     /// Solar irradiance normal to the beam outside the atmosphere, per channel (film units ×
     /// sr); at the sea it is attenuated by the table's optical depth.
     pub(super) irradiance: [f64; 3],
     /// The sun's disc-centre radiance outside the atmosphere (the glint's cap before ρ and the
     /// attenuation).
     pub(super) radiance_cap: [f64; 3],
+}
+
+impl Glint {
+    /// Bounds (lo, hi) on the sun's true elevation above the horizontal of sea points whose
+    /// verticals tilt by `near_rad` … `far_rad` (ground distance / R) towards any azimuth of
+    /// the frame.
+    fn true_range(&self, near_rad: f64, far_rad: f64) -> (f64, f64) {
+        let s = self.sun.elevation_rad;
+        let (c0, c1) = self.cos_azimuth;
+        let lo = (near_rad * c0).min(far_rad * c0);
+        let hi = (near_rad * c1).max(far_rad * c1);
+        (s + lo, s + hi)
+    }
 }
 
 /// Everything the sea's reflections need, per frame.
@@ -944,9 +960,10 @@ impl Reflection {
     pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
         let tilt = distance_m / self.earth_radius_m;
         if let Some(g) = &self.glint {
-            let s = g.sun.elevation_rad;
-            let e = g.at_sea.apparent_range((s - tilt.abs(), s + tilt.abs()));
-            return self.sea.may_glint(grazing_rad, e);
+            return g
+                .at_sea
+                .apparent_range(g.true_range(tilt.abs(), tilt.abs()))
+                .is_some_and(|e| self.sea.may_glint(grazing_rad, e));
         }
         match (&self.mirror_sun, &self.fan) {
             (Some((sun, _)), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
@@ -967,16 +984,19 @@ impl Reflection {
         distance_m: (f64, f64),
     ) -> bool {
         if let Some(g) = &self.glint {
-            // The farthest hit tilts the sun most (padded for the rounding of interpolated
-            // distances); a NaN distance bounds nothing.
-            let far = distance_m.0.abs().max(distance_m.1.abs());
-            let tilt = far / self.earth_radius_m * (1.0 + 1e-9) + 1e-12;
-            if !tilt.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
+            // The nearest and farthest hits tilt the sun least and most (padded for the
+            // rounding of interpolated distances); a NaN distance bounds nothing.
+            let (d0, d1) = (distance_m.0.abs(), distance_m.1.abs());
+            let r = self.earth_radius_m;
+            let near = (d0.min(d1) / r * (1.0 - 1e-9) - 1e-12).max(0.0);
+            let far = d0.max(d1) / r * (1.0 + 1e-9) + 1e-12;
+            if !far.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
                 return true;
             }
-            let s = g.sun.elevation_rad;
-            let e = g.at_sea.apparent_range((s - tilt, s + tilt));
-            return self.sea.may_glint_range(grazing_rad, e);
+            return g
+                .at_sea
+                .apparent_range(g.true_range(near, far))
+                .is_some_and(|e| self.sea.may_glint_range(grazing_rad, e));
         }
         self.mirror_sun.is_some() && self.fan.is_some()
     }

@@ -41,8 +41,9 @@ const DARK_DEPTH: f64 = 50.0;
 /// Narrowest launch interval (rad) halved: the renderer's launch search's tolerance.
 const MIN_WIDTH_RAD: f64 = 5e-9;
 
-/// Launch intervals traced before refinement.
-const INITIAL_INTERVALS: usize = 8;
+/// The lowest launch above level traced before refinement (rad); the first launches double
+/// from it up to [`MAX_LAUNCH_RAD`].
+const FIRST_LAUNCH_RAD: f64 = 1e-3;
 
 /// Highest launch elevation traced (rad); above its ray's true elevation the refraction is taken
 /// as that ray's.
@@ -50,10 +51,6 @@ const MAX_LAUNCH_RAD: f64 = 1.5;
 
 /// Most rays in a table (refinement stops there).
 const MAX_RAYS: usize = 4096;
-
-/// True elevations beyond the frame's tilts that the table spans (rad), for samples between
-/// the traced rays.
-const PAD_RAD: f64 = 2e-3;
 
 /// One ray from the sea surface.
 #[derive(Debug, Clone, Copy)]
@@ -67,12 +64,14 @@ struct SeaRay {
 
 impl SeaRay {
     fn trace(tracer: &dyn RayTracer, extinction: &Extinction, launch_rad: f64) -> Self {
-        let true_rad = match tracer.trace(0.0, launch_rad, &[], true).end {
+        let (end, paths) =
+            tracer.trace_to_sky_with_density_paths(0.0, launch_rad, extinction.scale_heights_m());
+        let true_rad = match end {
             FanEnd::Sky { elevation_rad } if elevation_rad.is_finite() => Some(elevation_rad),
             _ => None,
         };
-        let depth = true_rad
-            .and_then(|_| tracer.density_paths_m(0.0, launch_rad, extinction.scale_heights_m()))
+        let depth = paths
+            .filter(|_| true_rad.is_some())
             .map_or([f64::INFINITY; 3], |p| extinction.path_optical_depth(p));
         SeaRay {
             launch_rad,
@@ -111,45 +110,30 @@ pub(super) struct SeaSunTable {
     /// just above rays that do not leave); otherwise below the table the refraction is the
     /// lowest ray's.
     hidden_below: bool,
-    /// Whether the traced true elevations rose with the launch everywhere.
-    monotonic: bool,
+    /// Bounds (lo, hi) on each interval's launch cubic, and on runs of 2, 4, 8, … intervals:
+    /// `launch_bounds[k][i]` bounds intervals i … i + 2^k − 1 (a sparse table, so that the
+    /// bounds over any run of intervals are one lookup).
+    launch_bounds: Vec<Vec<(f64, f64)>>,
     /// Rays traced to build the table.
     #[cfg_attr(not(test), allow(dead_code))]
     rays: usize,
 }
 
 impl SeaSunTable {
-    /// Tabulate over true elevations `sun_elevation_rad` ± `max_tilt_rad` (padded).
-    pub(super) fn build(
-        tracer: &dyn RayTracer,
-        sun_elevation_rad: f64,
-        max_tilt_rad: f64,
-        extinction: &Extinction,
-    ) -> Self {
-        let tilt = if max_tilt_rad.is_finite() {
-            max_tilt_rad.abs()
-        } else {
-            0.0
-        };
-        let want = (
-            sun_elevation_rad - tilt - PAD_RAD,
-            sun_elevation_rad + tilt + PAD_RAD,
-        );
+    /// Tabulate every true elevation a sun can have above a sea point's horizontal: rays from
+    /// launched level up to [`MAX_LAUNCH_RAD`]. The table depends on the atmosphere and the
+    /// sky's extinction alone, not on the sun or the frame, so the frames of a sweep share it
+    /// and a single render builds the very same one.
+    pub(super) fn build(tracer: &dyn RayTracer, extinction: &Extinction) -> Self {
         let trace = |a: f64| SeaRay::trace(tracer, extinction, a);
-        let (lo, hi) = rayon::join(
-            || lowest_ray(&trace, want.0),
-            || highest_ray(&trace, want.1),
-        );
-        let mut rays = vec![lo];
-        let width = hi.launch_rad - lo.launch_rad;
-        let inner: Vec<SeaRay> = (1..INITIAL_INTERVALS)
-            .into_par_iter()
-            .map(|i| trace(lo.launch_rad + width * i as f64 / INITIAL_INTERVALS as f64))
+        // Launches doubling from a milliradian: the map changes fastest near the horizon.
+        let launches: Vec<f64> = std::iter::once(0.0)
+            .chain((0..).map(|k| FIRST_LAUNCH_RAD * f64::from(1u32 << k)))
+            .take_while(|&a| a < MAX_LAUNCH_RAD)
+            .chain(std::iter::once(MAX_LAUNCH_RAD))
             .collect();
-        rays.extend(inner);
-        rays.push(hi);
-        let rays = refine(&trace, rays, want);
-        Self::from_rays(&rays)
+        let rays: Vec<SeaRay> = launches.into_par_iter().map(trace).collect();
+        Self::from_rays(&refine(&trace, rays))
     }
 
     /// The table of `rays` (ascending launches).
@@ -160,16 +144,12 @@ impl SeaSunTable {
             _ => true,
         };
         let (mut true_rad, mut launch_rad, mut depth) = (Vec::new(), Vec::new(), Vec::new());
-        let mut monotonic = true;
         for r in rays {
             let Some(s) = r.true_rad else {
-                // A ray above leaving ones that does not leave: the map is not monotone.
-                monotonic &= true_rad.is_empty();
                 continue;
             };
             // Only rays above every lower one's true elevation (one launch per true elevation).
             if true_rad.last().is_some_and(|&last| s <= last) {
-                monotonic = false;
                 continue;
             }
             true_rad.push(s);
@@ -178,6 +158,7 @@ impl SeaSunTable {
         }
         let (cubics, inv_width) = cubics(&true_rad, &launch_rad, &depth);
         let (buckets, bucket_scale) = buckets(&true_rad);
+        let launch_bounds = sparse_bounds(cubics.iter().map(|c| cubic_bounds(c[0])).collect());
         SeaSunTable {
             true_rad,
             launch_rad,
@@ -187,7 +168,7 @@ impl SeaSunTable {
             buckets,
             bucket_scale,
             hidden_below,
-            monotonic,
+            launch_bounds,
             rays: rays.len(),
         }
     }
@@ -263,24 +244,95 @@ impl SeaSunTable {
         self.at(true_rad).1
     }
 
-    /// Bounds (lo, hi) on the apparent elevation of every true elevation in `true_rad` (lo, hi),
-    /// padded for the interpolation's wiggle.
-    pub(super) fn apparent_range(&self, true_rad: (f64, f64)) -> (f64, f64) {
-        const WIGGLE_RAD: f64 = 1e-6;
-        if !self.monotonic {
-            let (lo, hi) = self
-                .launch_rad
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                    (a.min(v), b.max(v))
-                });
-            let (a, b) = (self.apparent_rad(true_rad.0), self.apparent_rad(true_rad.1));
-            return (lo.min(a) - WIGGLE_RAD, hi.max(b) + WIGGLE_RAD);
+    /// Bounds (lo, hi) on the apparent elevation [`Self::at`] gives for every true elevation in
+    /// `true_rad` (lo, hi), padded for rounding: the ends' values and the bounds of the cubics
+    /// of every interval the range meets (whether or not the map is monotone). `None` when the
+    /// sun is hidden at every one of them (below the sea's horizon).
+    pub(super) fn apparent_range(&self, true_rad: (f64, f64)) -> Option<(f64, f64)> {
+        const ROUNDING_RAD: f64 = 1e-9;
+        let (lo, hi) = true_rad;
+        let hidden = |s: f64| self.true_rad.first().is_none_or(|&s0| s < s0) && self.hidden_below;
+        if hidden(hi) && !hi.is_nan() {
+            return None;
         }
-        (
-            self.apparent_rad(true_rad.0) - WIGGLE_RAD,
-            self.apparent_rad(true_rad.1) + WIGGLE_RAD,
-        )
+        let n = self.true_rad.len();
+        if n >= 2 && lo > self.true_rad[0] && hi < self.true_rad[n - 1] && lo <= hi {
+            // Inside the table: the bounds of the cubics of the intervals met hold the ends.
+            let (p, q) = self.launch_bounds_over(self.cell(lo).0, self.cell(hi).0);
+            return Some((p - ROUNDING_RAD, q + ROUNDING_RAD));
+        }
+        let (a, b) = (self.apparent_rad(lo), self.apparent_rad(hi));
+        let (mut min, mut max) = (a.min(b), a.max(b));
+        if n >= 2 && lo <= hi && hi > self.true_rad[0] && lo < self.true_rad[n - 1] {
+            // The table's own ends where the range reaches past them.
+            let first = if lo > self.true_rad[0] {
+                self.cell(lo).0
+            } else {
+                0
+            };
+            let last = if hi < self.true_rad[n - 1] {
+                self.cell(hi).0
+            } else {
+                n - 2
+            };
+            let (p, q) = self.launch_bounds_over(first, last);
+            (min, max) = (min.min(p), max.max(q));
+        }
+        Some((min - ROUNDING_RAD, max + ROUNDING_RAD))
+    }
+
+    /// Bounds on the launch cubics of intervals `first` ..= `last`.
+    fn launch_bounds_over(&self, first: usize, last: usize) -> (f64, f64) {
+        let count = last - first + 1;
+        let k = (usize::BITS - 1 - count.leading_zeros()) as usize;
+        let (p, q) = (
+            self.launch_bounds[k][first],
+            self.launch_bounds[k][last + 1 - (1 << k)],
+        );
+        (p.0.min(q.0), p.1.max(q.1))
+    }
+}
+
+/// The least and greatest values on u ∈ [0, 1] of the cubic c0 + c1 u + c2 u² + c3 u³.
+fn cubic_bounds(c: [f64; 4]) -> (f64, f64) {
+    let value = |u: f64| c[0] + u * (c[1] + u * (c[2] + u * c[3]));
+    let (mut lo, mut hi) = (value(0.0).min(value(1.0)), value(0.0).max(value(1.0)));
+    // Turning points: roots of c1 + 2 c2 u + 3 c3 u² inside (0, 1).
+    let (qa, qb, qc) = (3.0 * c[3], 2.0 * c[2], c[1]);
+    let roots = if qa == 0.0 {
+        [(qb != 0.0).then(|| -qc / qb), None]
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc < 0.0 {
+            [None, None]
+        } else {
+            let r = disc.sqrt();
+            [Some((-qb - r) / (2.0 * qa)), Some((-qb + r) / (2.0 * qa))]
+        }
+    };
+    for u in roots.into_iter().flatten().filter(|u| *u > 0.0 && *u < 1.0) {
+        lo = lo.min(value(u));
+        hi = hi.max(value(u));
+    }
+    (lo, hi)
+}
+
+/// The sparse table of [`SeaSunTable::launch_bounds`] over per-interval `bounds`.
+fn sparse_bounds(bounds: Vec<(f64, f64)>) -> Vec<Vec<(f64, f64)>> {
+    let mut levels = vec![bounds];
+    loop {
+        let prev = levels.last().expect("one level");
+        let span = 1 << (levels.len() - 1);
+        if prev.len() <= span {
+            return levels;
+        }
+        let next = (0..prev.len() - span)
+            .map(|i| {
+                let (p, q) = (prev[i], prev[i + span]);
+                (p.0.min(q.0), p.1.max(q.1))
+            })
+            .collect();
+        levels.push(next);
     }
 }
 
@@ -347,44 +399,13 @@ fn buckets(xs: &[f64]) -> (Vec<u32>, f64) {
     (buckets, scale)
 }
 
-/// The first (lowest) ray of the table: one that does not leave, is launched level, or leaves
-/// at or below `true_lo_rad`.
-fn lowest_ray(trace: &(impl Fn(f64) -> SeaRay + Sync), true_lo_rad: f64) -> SeaRay {
-    let mut margin = 0.01;
-    loop {
-        let ray = trace((true_lo_rad - margin).max(0.0));
-        if ray.launch_rad <= 0.0 || ray.true_rad.is_none_or(|s| s <= true_lo_rad) {
-            return ray;
-        }
-        margin *= 4.0;
-    }
-}
-
-/// The last (highest) ray of the table: one that leaves at or above `true_hi_rad`, or the
-/// highest traced ([`MAX_LAUNCH_RAD`]).
-fn highest_ray(trace: &(impl Fn(f64) -> SeaRay + Sync), true_hi_rad: f64) -> SeaRay {
-    let mut margin = 0.03;
-    loop {
-        let launch = (true_hi_rad + margin).clamp(1e-3, MAX_LAUNCH_RAD);
-        let ray = trace(launch);
-        if launch >= MAX_LAUNCH_RAD || ray.true_rad.is_some_and(|s| s >= true_hi_rad) {
-            return ray;
-        }
-        margin *= 4.0;
-    }
-}
-
-/// `rays` (ascending launches, the first and last bracketing the true elevations `want`) with
-/// rays added where the table needs them (module docs), ascending.
-fn refine(
-    trace: &(impl Fn(f64) -> SeaRay + Sync),
-    mut rays: Vec<SeaRay>,
-    want: (f64, f64),
-) -> Vec<SeaRay> {
+/// `rays` (ascending launches) with rays added where the table needs them (module docs),
+/// ascending.
+fn refine(trace: &(impl Fn(f64) -> SeaRay + Sync), mut rays: Vec<SeaRay>) -> Vec<SeaRay> {
     // Intervals to test, by their ends' launches.
     let mut open: Vec<(f64, f64)> = rays
         .windows(2)
-        .filter(|w| needs_middle(w[0], w[1], want))
+        .filter(|w| needs_middle(w[0], w[1]))
         .map(|w| (w[0].launch_rad, w[1].launch_rad))
         .collect();
     while !open.is_empty() && rays.len() < MAX_RAYS {
@@ -410,7 +431,7 @@ fn refine(
                     let i = rays.partition_point(|r| r.launch_rad < l);
                     rays[i.min(rays.len() - 1)]
                 };
-                needs_middle(find(a), find(b), want)
+                needs_middle(find(a), find(b))
             })
             .collect();
     }
@@ -418,17 +439,17 @@ fn refine(
 }
 
 /// Whether the interval between rays `p` and `q` (ascending launches) needs its middle ray
-/// tested: it is wide enough, and it is a trapping edge whose leaving side is neither dark
-/// nor below the wanted true elevations, or both leave and the interval meets `want`.
-fn needs_middle(p: SeaRay, q: SeaRay, want: (f64, f64)) -> bool {
+/// tested: it is wide enough, and both leave, or it is a trapping edge whose leaving side is
+/// not dark.
+fn needs_middle(p: SeaRay, q: SeaRay) -> bool {
     if q.launch_rad - p.launch_rad <= MIN_WIDTH_RAD {
         return false;
     }
     match (p.true_rad, q.true_rad) {
         (None, None) => false,
-        (None, Some(s)) => s > want.0 && q.least_depth() < DARK_DEPTH,
-        (Some(s), None) => s < want.1 && p.least_depth() < DARK_DEPTH,
-        (Some(a), Some(b)) => a.min(b) <= want.1 && a.max(b) >= want.0,
+        (None, Some(_)) => q.least_depth() < DARK_DEPTH,
+        (Some(_), None) => p.least_depth() < DARK_DEPTH,
+        (Some(_), Some(_)) => true,
     }
 }
 
@@ -573,18 +594,19 @@ mod tests {
             ("smooth", &smooth as &(dyn Fn(f64) -> Option<f64> + Sync)),
             ("ducted", &ducted),
         ] {
+            let tracer = Leaving {
+                leave,
+                traces: AtomicUsize::new(0),
+            };
+            let table = SeaSunTable::build(&tracer, &extinction);
+            let rays = tracer.traces.load(Ordering::Relaxed);
+            eprintln!("{name}: {rays} traces");
+            assert!(rays <= 300, "{name}: {rays} traces");
             for (sun_deg, tilt) in [(-0.3, 0.01), (0.5, 0.04), (5.0, 0.02), (20.0, 0.05)] {
-                let tracer = Leaving {
-                    leave,
-                    traces: AtomicUsize::new(0),
-                };
                 let sun = f64::to_radians(sun_deg);
-                let table = SeaSunTable::build(&tracer, sun, tilt, &extinction);
-                let rays = tracer.traces.load(Ordering::Relaxed);
                 let worst = worst_launch_error(&tracer, &table, sun, tilt, 400);
-                eprintln!("{name} {sun_deg}° ± {tilt}: {rays} traces, worst {worst:.2e} rad");
+                eprintln!("{name} {sun_deg}° ± {tilt}: worst {worst:.2e} rad");
                 assert!(worst <= 1e-7, "{name} {sun_deg}°: {worst:e} rad");
-                assert!(rays <= 200, "{name} {sun_deg}°: {rays} traces");
             }
         }
     }
@@ -605,9 +627,52 @@ mod tests {
         // Sea points out to 250 km tilt the sun by up to 0.039 rad.
         let tilt = 250e3 / scene.earth_radius_m;
         let extinction = scene.sky.sun_extinction();
-        let table = SeaSunTable::build(tracer.as_ref(), sun, tilt, &extinction);
+        let table = SeaSunTable::build(tracer.as_ref(), &extinction);
         let worst = worst_launch_error(tracer.as_ref(), &table, sun, tilt, 200);
         eprintln!("fig12: {} rays, worst {worst:.2e} rad", table.rays());
         assert!(worst <= 1e-7, "{worst:e} rad");
+    }
+
+    #[test]
+    fn the_apparent_range_bounds_every_lookup_of_a_folded_map() {
+        let extinction = Sky::default().sun_extinction();
+        // A map that folds back between launches 0.01 and 0.012 rad (true elevation falling
+        // by 2e-4 rad there), as a ray bent back down by a layer aloft would.
+        let folded = |e: f64| {
+            let fold = if e < 0.01 {
+                0.0
+            } else if e < 0.012 {
+                -1.1 * (e - 0.01)
+            } else {
+                -0.0022
+            };
+            Some(e - 0.005 * (-e / 0.02).exp() + fold)
+        };
+        let tracer = Leaving {
+            leave: folded,
+            traces: AtomicUsize::new(0),
+        };
+        let table = SeaSunTable::build(&tracer, &extinction);
+        let mut widest = 0.0f64;
+        for i in 0..200 {
+            let lo = -0.01 + 0.03 * f64::from(i) / 200.0;
+            for width in [0.0, 1e-4, 2e-3, 0.02] {
+                let range = table.apparent_range((lo, lo + width));
+                for k in 0..=50 {
+                    let s = lo + width * f64::from(k) / 50.0;
+                    let (e, depth) = table.at(s);
+                    match range {
+                        Some((a, b)) => assert!(a <= e && e <= b, "{s}: {e} outside {a}…{b}"),
+                        None => assert!(depth[0].is_infinite(), "{s}: lit but no range"),
+                    }
+                }
+                let Some((a, b)) = range else { continue };
+                // Not the whole table's span: a narrow range gives a narrow bound.
+                if width == 1e-4 {
+                    widest = widest.max(b - a);
+                }
+            }
+        }
+        assert!(widest < 3e-3, "{widest}");
     }
 }
