@@ -46,6 +46,8 @@ pub struct MemoRays<'a> {
     traces: Mutex<HashMap<Key, FanRay>>,
     /// Keyed with both scale heights (the second in `distances`).
     paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
+    /// As `paths`, for [`RayTracer::trace_to_sky_with_density_paths`].
+    sky_paths: Mutex<HashMap<Key, (FanEnd, Option<[f64; 2]>)>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
     heights: Mutex<HashMap<Key, Vec<Option<f64>>>>,
 }
@@ -57,6 +59,7 @@ impl<'a> MemoRays<'a> {
             inner,
             traces: Mutex::new(HashMap::new()),
             paths: Mutex::new(HashMap::new()),
+            sky_paths: Mutex::new(HashMap::new()),
             paths_along: Mutex::new(HashMap::new()),
             heights: Mutex::new(HashMap::new()),
         }
@@ -133,9 +136,19 @@ impl RayTracer for MemoRays<'_> {
         elevation_rad: f64,
         scale_heights_m: [f64; 2],
     ) -> (FanEnd, Option<[f64; 2]>) {
-        // Not remembered: the sea's sun table that asks is itself shared between frames.
-        self.inner
-            .trace_to_sky_with_density_paths(camera_height_m, elevation_rad, scale_heights_m)
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &scale_heights_m,
+            scales_key(scale_heights_m),
+        );
+        remembered(&self.sky_paths, key, || {
+            self.inner.trace_to_sky_with_density_paths(
+                camera_height_m,
+                elevation_rad,
+                scale_heights_m,
+            )
+        })
     }
 
     fn density_paths_along(
