@@ -40,6 +40,9 @@ fn scales_key(scale_heights_m: [f64; 2]) -> u64 {
     scale_heights_m[0].to_bits() ^ scale_heights_m[1].to_bits().rotate_left(32)
 }
 
+/// What [`RayTracer::trace_to_sky_with_density_paths`] answers.
+type SkyAndPaths = (FanEnd, Option<[f64; 2]>);
+
 /// A [`RayTracer`] that answers every call it has seen before from memory.
 pub struct MemoRays<'a> {
     inner: &'a dyn RayTracer,
@@ -47,7 +50,7 @@ pub struct MemoRays<'a> {
     /// Keyed with both scale heights (the second in `distances`).
     paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
     /// As `paths`, for [`RayTracer::trace_to_sky_with_density_paths`].
-    sky_paths: Mutex<HashMap<Key, (FanEnd, Option<[f64; 2]>)>>,
+    sky_paths: Mutex<HashMap<Key, SkyAndPaths>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
     heights: Mutex<HashMap<Key, Vec<Option<f64>>>>,
 }
