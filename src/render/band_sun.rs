@@ -158,8 +158,12 @@ impl BandColumns<'_> {
                 sun.glint_factor(refl, heading + self.azimuth_offset(x))
                     .unwrap_or(0.0)
             };
-            let radiance = |k: f64| {
-                let sun = sun.glint_radiance(refl, k);
+            // The sun's own attenuation to each column's sea point, exact per column (it
+            // varies slowly with the azimuth; the factor is what is interpolated).
+            let radiance = |x: usize, k: f64| {
+                let azimuth = heading + self.azimuth_offset(x);
+                let t = sun.glint_transmittance(refl, azimuth);
+                let sun = sun.glint_radiance(refl, k, t);
                 [0, 1, 2].map(|c| sun[c] * transmittance[c])
             };
             let glitter = Smooth { factor, radiance };
@@ -232,13 +236,14 @@ fn predicts(out: &[[f64; 3]], i: usize, j: usize, m: usize, background: [f64; 3]
 
 /// A positive factor that is smooth in the column and whose logarithm is close to a quadratic
 /// over many columns — the glitter's Cox–Munk factor, exp(−tan²β/σ²) times slowly varying
-/// terms — and the radiance it gives (which may cap it).
+/// terms — and the radiance it gives in a column (which may cap it, and may weight it by a
+/// column's own slowly varying attenuation).
 struct Smooth<F, R> {
     factor: F,
     radiance: R,
 }
 
-impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
+impl<F: Fn(usize) -> f64, R: Fn(usize, f64) -> [f64; 3]> Smooth<F, R> {
     /// Fill `out[x]` for the columns x of [`a`, `b`): the radiance of the exact factor at nodes
     /// ([`SMOOTH_STRIDE`] apart, the last column, `centre` and its neighbours) and at the
     /// points refinement evaluates; elsewhere of the factor interpolated by a quadratic in its
@@ -262,7 +267,7 @@ impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
             if k[x - a].is_nan() {
                 let f = (self.factor)(x);
                 k[x - a] = if f.is_nan() { 0.0 } else { f };
-                out[x] = (self.radiance)(f);
+                out[x] = (self.radiance)(x, f);
             }
         };
         for &x in &nodes {
@@ -285,7 +290,7 @@ impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
             match fit.filter(|fit| self.accepts(fit, (i, j), tests, factor, background, out)) {
                 Some(fit) => fit.for_each(i, j, |x, f| {
                     if k[x - a].is_nan() {
-                        out[x] = (self.radiance)(f);
+                        out[x] = (self.radiance)(x, f);
                     }
                 }),
                 None => open.extend([(i, m), (m, j)]),
@@ -321,7 +326,7 @@ impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
         for t in tests.into_iter().flatten() {
             let (want, got) = (exact(t), fit.at(t));
             largest = largest.max(want);
-            if !within((self.radiance)(got), out[t], background) {
+            if !within((self.radiance)(t, got), out[t], background) {
                 return false;
             }
             if want == got {
@@ -341,8 +346,11 @@ impl<F: Fn(usize) -> f64, R: Fn(f64) -> [f64; 3]> Smooth<F, R> {
         if excess <= 0.0 {
             return true;
         }
-        let v = (self.radiance)(largest * growth);
-        (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
+        // The columns' own weights at the interval's ends and middle bound those between.
+        [i, (i + j) / 2, j].into_iter().all(|x| {
+            let v = (self.radiance)(x, largest * growth);
+            (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
+        })
     }
 }
 
@@ -536,12 +544,27 @@ mod tests {
     /// The worst error of [`Smooth::fill`] over 400 columns for the factor `k` and a capped
     /// radiance, in units of the tolerance; and how many factors it evaluated.
     fn worst_smooth(k: impl Fn(usize) -> f64, centre: usize, background: [f64; 3]) -> (f64, usize) {
+        worst_attenuated(k, |_| 1.0, centre, background)
+    }
+
+    /// [`worst_smooth`] with the radiance of column x weighted by `weight(x)`.
+    fn worst_attenuated(
+        k: impl Fn(usize) -> f64,
+        weight: impl Fn(usize) -> f64,
+        centre: usize,
+        background: [f64; 3],
+    ) -> (f64, usize) {
         let calls = std::cell::Cell::new(0);
-        let radiance = |k: f64| {
+        let radiance = |x: usize, k: f64| {
             if k <= 0.0 {
                 return [0.0; 3];
             }
-            [(k * 2.0).min(900.0), k * 0.6, (k * 0.02).min(0.5)]
+            let w = weight(x);
+            [
+                (k * 2.0).min(900.0) * w,
+                k * 0.6 * w,
+                (k * 0.02).min(0.5) * w,
+            ]
         };
         let glitter = Smooth {
             factor: |x: usize| {
@@ -553,7 +576,7 @@ mod tests {
         let mut out = vec![[f64::NAN; 3]; 400];
         glitter.fill((0, 400), Some(centre), background, &mut out);
         (
-            worst_error(&out, |x| radiance(k(x)), background),
+            worst_error(&out, |x| radiance(x, k(x)), background),
             calls.get(),
         )
     }
@@ -621,6 +644,12 @@ mod tests {
         };
         let (err, _) = worst_smooth(cut, 200, sea);
         assert!(err <= 1.0, "cut: {err}");
+        // The sun's own attenuation to each column's sea point, falling by a factor of 3
+        // across the row, weights the radiance per column.
+        let wide = |x: usize| cox_munk(x, 180.0, 30.0, 3e4);
+        let fading = |x: usize| (-(x as f64) / 360.0).exp();
+        let (err, _) = worst_attenuated(wide, fading, 180, sea);
+        assert!(err <= 1.0, "attenuated: {err}");
     }
 
     #[test]

@@ -292,6 +292,32 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         density_paths_through(&self.tracer, &self.fates, h, elevation_rad, scales)
     }
 
+    fn trace_to_sky_with_density_paths(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        scales: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        // The fate rule of `trace` with the sky direction, which `density_paths_m` also
+        // follows: one trace gives both.
+        let watch = self
+            .fates
+            .watch(self.tracer.field(), h, elevation_rad, &[], true);
+        let mut hook = DensityPaths::new(watch, scales);
+        let mut record = RayRecord::default();
+        match self
+            .tracer
+            .trace_into(h, elevation_rad, &[], &mut hook, &mut record, None)
+        {
+            Ok(()) => (
+                fan_ray(&record, elevation_rad, 0).end,
+                self.tracer
+                    .density_paths_m(h, elevation_rad, &hook, &record),
+            ),
+            Err(_) => (FanEnd::Lost, None),
+        }
+    }
+
     fn trace(
         &self,
         camera_height_m: f64,
@@ -570,6 +596,34 @@ mod tests {
         );
         let path = std::path::Path::new("camera_test.toml");
         Scene::from_toml_str(&text, std::path::Path::new("."), path).expect("valid scene")
+    }
+
+    #[test]
+    fn one_trace_to_the_sky_gives_the_end_and_paths_of_the_two_calls() {
+        // A duct at 0–40 m that traps the lowest rays from the sea, and plain air.
+        for field in [
+            Layered {
+                g: -2e-7,
+                lo: 0.0,
+                hi: 40.0,
+            },
+            plain(),
+        ] {
+            let rays = CurvedRays::new(&field, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
+            let scales = [8_000.0, 1_000.0];
+            let mut kinds = [0; 2];
+            for i in 0..60 {
+                let e = -0.001 + 0.0005 * f64::from(i) * f64::from(i);
+                let (end, paths) = rays.trace_to_sky_with_density_paths(0.0, e, scales);
+                let want = (
+                    rays.trace(0.0, e, &[], true).end,
+                    rays.density_paths_m(0.0, e, scales),
+                );
+                assert_eq!(format!("{:?}", (end, paths)), format!("{want:?}"), "{e}");
+                kinds[usize::from(matches!(end, FanEnd::Sky { .. }))] += 1;
+            }
+            assert!(kinds[1] > 10, "{kinds:?}");
+        }
     }
 
     #[test]

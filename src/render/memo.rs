@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use super::ray_model::{FanRay, RayTracer};
+use super::ray_model::{FanEnd, FanRay, RayTracer};
 use crate::tracer::RayDensityPaths;
 
 /// The arguments of one call, by their bits.
@@ -40,12 +40,17 @@ fn scales_key(scale_heights_m: [f64; 2]) -> u64 {
     scale_heights_m[0].to_bits() ^ scale_heights_m[1].to_bits().rotate_left(32)
 }
 
+/// What [`RayTracer::trace_to_sky_with_density_paths`] answers.
+type SkyAndPaths = (FanEnd, Option<[f64; 2]>);
+
 /// A [`RayTracer`] that answers every call it has seen before from memory.
 pub struct MemoRays<'a> {
     inner: &'a dyn RayTracer,
     traces: Mutex<HashMap<Key, FanRay>>,
     /// Keyed with both scale heights (the second in `distances`).
     paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
+    /// As `paths`, for [`RayTracer::trace_to_sky_with_density_paths`].
+    sky_paths: Mutex<HashMap<Key, SkyAndPaths>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
     heights: Mutex<HashMap<Key, Vec<Option<f64>>>>,
 }
@@ -57,6 +62,7 @@ impl<'a> MemoRays<'a> {
             inner,
             traces: Mutex::new(HashMap::new()),
             paths: Mutex::new(HashMap::new()),
+            sky_paths: Mutex::new(HashMap::new()),
             paths_along: Mutex::new(HashMap::new()),
             heights: Mutex::new(HashMap::new()),
         }
@@ -124,6 +130,27 @@ impl RayTracer for MemoRays<'_> {
         remembered(&self.paths, key, || {
             self.inner
                 .density_paths_m(camera_height_m, elevation_rad, scale_heights_m)
+        })
+    }
+
+    fn trace_to_sky_with_density_paths(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        scale_heights_m: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &scale_heights_m,
+            scales_key(scale_heights_m),
+        );
+        remembered(&self.sky_paths, key, || {
+            self.inner.trace_to_sky_with_density_paths(
+                camera_height_m,
+                elevation_rad,
+                scale_heights_m,
+            )
         })
     }
 

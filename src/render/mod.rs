@@ -46,6 +46,7 @@ mod objects;
 mod plan;
 pub mod ray_model;
 mod reflection;
+mod sea_sun;
 mod shade;
 pub mod spectral;
 mod sun;

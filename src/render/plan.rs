@@ -32,7 +32,8 @@ use rayon::prelude::*;
 use super::air_paths::AirPaths;
 use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
-use super::reflection::{self, FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
+use super::reflection::{FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
+use super::sea_sun::SeaSunTable;
 use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
@@ -43,7 +44,7 @@ use super::{
     row_may_meet_terrain, shade_fan_sample, shade_flat_row, shade_traced_sample, sun_band_rad,
     traced_grid,
 };
-use crate::scene::camera::CameraFrame;
+use crate::scene::camera::{Camera, CameraFrame};
 use crate::scene::sky::SunDisc;
 use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
@@ -345,32 +346,88 @@ fn texture_columns(
     c
 }
 
-/// The sun's glitter on a rough sea: its light at the sea comes along its own curved ray from
-/// the sea surface (a ray skimming a surface duct crosses far more air than any air-mass
-/// formula of its elevation gives); none when the sun is below the sea's apparent horizon.
-fn glint(scene: &Scene, tracer: &dyn RayTracer) -> Option<Glint> {
-    let sky = scene.sky;
-    scene
-        .sun
-        .filter(|_| scene.sea.wave_slope_rad != 0.0)
-        .map(|sun| {
-            let launch = reflection::sea_level_sun_launch_rad(tracer, sun.elevation_rad);
-            let extinction = sky.sun_extinction();
-            let t = launch
-                .and_then(|a| tracer.density_paths_m(0.0, a, extinction.scale_heights_m()))
-                .map_or([0.0; 3], |paths| {
-                    extinction.path_optical_depth(paths).map(|tau| (-tau).exp())
-                });
-            let refraction_rad = launch.map_or(0.0, |a| a - sun.elevation_rad);
-            let r = 0.5 * sun.angular_diameter_rad;
-            let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
-            Glint {
-                sun,
-                refraction_rad,
-                irradiance: t.map(|t| sun.intensity * solid_angle * t),
-                radiance_cap: t.map(|t| sun.intensity * t),
-            }
-        })
+/// The sun's glitter on a rough sea: its light at a sea point comes along its own curved ray
+/// from there (a ray skimming a surface duct crosses far more air than any air-mass formula of
+/// its elevation gives), at the apparent elevation the sea-level refraction of its true
+/// elevation there gives. The table of that refraction depends on the atmosphere and the sky
+/// alone: `shared` is the one of a base frame with the same ones, if any.
+fn glint(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    shared: Option<&Arc<SeaSunTable>>,
+    elevations: (f64, f64),
+) -> Option<Glint> {
+    let sun = scene.sun.filter(|_| scene.sea.wave_slope_rad != 0.0)?;
+    let at_sea = shared.map_or_else(
+        || Arc::new(SeaSunTable::build(tracer, &scene.sky.sun_extinction())),
+        Arc::clone,
+    );
+    let cos_azimuth = cos_azimuth_range(&scene.camera, sun.azimuth_rad, elevations);
+    let r = 0.5 * sun.angular_diameter_rad;
+    let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
+    Some(Glint {
+        sun,
+        at_sea,
+        cos_azimuth,
+        irradiance: [sun.intensity * solid_angle; 3],
+        radiance_cap: [sun.intensity; 3],
+    })
+}
+
+/// Bounds on cos φ over the frame of `camera`, φ the azimuth of a film point from the sun's
+/// `sun_azimuth_rad`: from film points one pixel apart along the film's edges (a direction's
+/// azimuth has no extreme inside a frame that holds neither the zenith nor the nadir; with
+/// one, whose frame reaches `elevations`, any azimuth), widened by twice the largest step
+/// between neighbouring points.
+fn cos_azimuth_range(camera: &Camera, sun_azimuth_rad: f64, elevations: (f64, f64)) -> (f64, f64) {
+    const POLE_MARGIN_RAD: f64 = 1e-3;
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    if !(elevations.0 > -half_pi + POLE_MARGIN_RAD && elevations.1 < half_pi - POLE_MARGIN_RAD) {
+        return (-1.0, 1.0);
+    }
+    let frame = camera.frame();
+    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+    let centre = frame.direction(0.5 * w, 0.5 * h).0;
+    let offset = |x: f64, y: f64| {
+        // φ relative to the centre's, unwrapped into (−π, π] about it.
+        wrap_pi(frame.direction(x, y).0 - centre)
+    };
+    // Around the film's edge: the offsets' bounds and the largest step between neighbours.
+    let (w_px, h_px) = (camera.width, camera.height);
+    let edge = (0..w_px)
+        .map(|x| (f64::from(x), 0.0))
+        .chain((0..h_px).map(|y| (w, f64::from(y))))
+        .chain((0..w_px).map(|x| (w - f64::from(x), h)))
+        .chain((0..h_px).map(|y| (0.0, h - f64::from(y))));
+    let (mut lo, mut hi, mut step) = (0.0f64, 0.0f64, 0.0f64);
+    let mut last = offset(0.0, 0.0);
+    for (x, y) in edge.chain(std::iter::once((0.0, 0.0))) {
+        let d = offset(x, y);
+        (lo, hi, step) = (lo.min(d), hi.max(d), step.max((d - last).abs()));
+        last = d;
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (-1.0, 1.0);
+    }
+    let pad = 2.0 * step;
+    // φ = sun − pixel over [sun − centre − hi − pad, sun − centre − lo + pad].
+    let base = sun_azimuth_rad - centre;
+    let (a, b) = (base - hi - pad, base - lo + pad);
+    if b - a >= std::f64::consts::TAU {
+        return (-1.0, 1.0);
+    }
+    let has = |phi: f64| {
+        let k = ((a - phi) / std::f64::consts::TAU).ceil();
+        phi + k * std::f64::consts::TAU <= b
+    };
+    let ends = [a.cos(), b.cos()];
+    let min = if has(std::f64::consts::PI) {
+        -1.0
+    } else {
+        ends[0].min(ends[1])
+    };
+    let max = if has(0.0) { 1.0 } else { ends[0].max(ends[1]) };
+    (min, max)
 }
 
 /// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter
@@ -544,12 +601,7 @@ impl<'a> FramePlan<'a> {
             Some(b) => b.shader.terrain.clone(),
             None => terrain_view(scene, tracer, options, span, inputs.elevations),
         };
-        // The sun's glitter needs its own sea-level ray (a serial bisection), not the fan:
-        // found while the fan is traced.
-        let ((fan, sky_table), glint) = rayon::join(
-            || inputs.fan_and_sky(&inputs.fan_spec(&view), base),
-            || glint(scene, tracer).filter(|_| scene.sea.reflections),
-        );
+        let (fan, sky_table) = inputs.fan_and_sky(&inputs.fan_spec(&view), base);
         let clear_sky_from = fan.as_ref().map_or(f64::INFINITY, |f| {
             clear_sky_from(scene, f, &view.max_top_m, terrain.as_deref())
         });
@@ -563,7 +615,6 @@ impl<'a> FramePlan<'a> {
             distances_m: &view.distances_m,
             farthest_terrain_m: terrain.as_ref().and_then(|t| t.distances_m.last().copied()),
         };
-        let (sea, same_sea) = inputs.sea_tables(&sea_inputs, base);
         // The rays whose paths the sun and the haze integrate: the fan's, or a grid in exact
         // mode.
         let needs_paths = scene.sun.is_some() || scene.sky.aerial.is_some();
@@ -572,6 +623,22 @@ impl<'a> FramePlan<'a> {
             None if needs_paths => traced_grid(tracer, cam.height_m, inputs.elevations, pixel_rad),
             _ => Vec::new(),
         };
+        // The sun's glitter needs its own rays from the sea, not the sea's tables: found while
+        // they are built (or the base frame's, which has the same atmosphere and sky).
+        let base_table = base
+            .and_then(|b| b.shader.reflection.as_ref())
+            .and_then(|r| r.glint.as_ref())
+            .map(|g| &g.at_sea);
+        let ((sea, same_sea), glint) = rayon::join(
+            || inputs.sea_tables(&sea_inputs, base),
+            || {
+                scene
+                    .sea
+                    .reflections
+                    .then(|| glint(scene, tracer, base_table, inputs.elevations))
+                    .flatten()
+            },
+        );
         let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
         let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
         let shares_base = base.is_none_or(|b| {
@@ -944,5 +1011,68 @@ impl FramePlan<'_> {
             && !reads.any(fan, elevations)
             && !base_reads.any(base_fan, elevations)
             && fan.same_rays_over(base_fan, elevations.0, elevations.1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The frame's elevations, from its film's edges (enough for these pole-free frames).
+    fn elevations_of(camera: &Camera) -> (f64, f64) {
+        let frame = camera.frame();
+        let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+        let e = [
+            (0.0, 0.0),
+            (w, 0.0),
+            (0.0, h),
+            (w, h),
+            (0.5 * w, 0.0),
+            (0.5 * w, h),
+        ]
+        .map(|(x, y)| frame.direction(x, y).1);
+        e.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            })
+    }
+
+    #[test]
+    fn the_frames_azimuth_bounds_hold_every_film_point_and_are_narrow() {
+        for (heading_deg, pitch_deg, hfov_deg, sun_deg) in [
+            (0.0, 0.0, 10.0, 0.0),
+            (0.0, -2.0, 10.0, 3.0),
+            (10.0, 5.0, 60.0, -170.0),
+            (179.0, -30.0, 90.0, -179.0),
+            (90.0, 40.0, 120.0, 90.0),
+        ] {
+            let camera = Camera {
+                height_m: 10.0,
+                heading_rad: f64::to_radians(heading_deg),
+                pitch_rad: f64::to_radians(pitch_deg),
+                hfov_rad: f64::to_radians(hfov_deg),
+                width: 200,
+                height: 100,
+                samples_per_pixel: 1,
+            };
+            let sun = f64::to_radians(sun_deg);
+            let (lo, hi) = cos_azimuth_range(&camera, sun, elevations_of(&camera));
+            let frame = camera.frame();
+            let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
+            for i in 0..=400 {
+                for j in 0..=200 {
+                    let (x, y) = (0.5 * f64::from(i), 0.5 * f64::from(j));
+                    let c = (sun - frame.direction(x, y).0).cos();
+                    assert!(lo <= c && c <= hi, "{heading_deg}°: {c} outside {lo}…{hi}");
+                    (min, max) = (min.min(c), max.max(c));
+                }
+            }
+            // Within a few pixels' worth of the film's own bounds.
+            let slack = 10.0 * camera.pixel_angle_rad();
+            assert!(
+                min - lo <= slack && hi - max <= slack,
+                "{heading_deg}°: {lo}…{hi} vs {min}…{max}"
+            );
+        }
     }
 }

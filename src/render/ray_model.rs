@@ -101,6 +101,21 @@ pub trait RayTracer: Sync {
         None
     }
 
+    /// The end of [`Self::trace`] with the sky direction and no distances, and
+    /// [`Self::density_paths_m`] of the same ray, from one trace where the model can (the same
+    /// values as the two calls). Default: the two calls.
+    fn trace_to_sky_with_density_paths(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        scale_heights_m: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        (
+            self.trace(camera_height_m, elevation_rad, &[], true).end,
+            self.density_paths_m(camera_height_m, elevation_rad, scale_heights_m),
+        )
+    }
+
     /// The same integrals from the camera to each of the ground distances `distances_m` the ray
     /// reaches and to where it meets the sea, for the aerial perspective towards cards and the
     /// sea. `None` when the model cannot follow the ray's path (the renderer then integrates

@@ -25,6 +25,7 @@ use rayon::prelude::*;
 
 use super::objects::{RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
+use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
 use super::terrain::{TerrainView, piece_density};
 use crate::scene::camera::ViewDirection;
@@ -828,13 +829,31 @@ pub(super) enum Facets {
 /// The sun's glitter on a rough sea, resolved once per frame.
 pub(super) struct Glint {
     pub(super) sun: Sun,
-    /// Apparent minus true elevation of the sun seen from the sea surface (rad).
-    pub(super) refraction_rad: f64,
-    /// Solar irradiance normal to the beam at the sea, per channel (film units × sr): the sun
-    /// attenuated along its own curved ray from the sea surface below the camera to the top.
+    /// The sun seen from the sea surface by its true elevation above a sea point's horizontal:
+    /// its apparent elevation there and the optical depth of its own curved ray from there.
+    pub(super) at_sea: Arc<SeaSunTable>,
+    /// Bounds on cos φ over the frame, φ a film point's azimuth from the sun's: a sea point at
+    /// ground distance d stands the sun d/R · cos φ higher than the camera's horizontal does.
+    pub(super) cos_azimuth: (f64, f64),
+    /// Solar irradiance normal to the beam outside the atmosphere, per channel (film units ×
+    /// sr); at the sea it is attenuated by the table's optical depth.
     pub(super) irradiance: [f64; 3],
-    /// The sun's attenuated disc-centre radiance at the sea (the glint's cap before ρ).
+    /// The sun's disc-centre radiance outside the atmosphere (the glint's cap before ρ and the
+    /// attenuation).
     pub(super) radiance_cap: [f64; 3],
+}
+
+impl Glint {
+    /// Bounds (lo, hi) on the sun's true elevation above the horizontal of sea points whose
+    /// verticals tilt by `near_rad` … `far_rad` (ground distance / R) towards any azimuth of
+    /// the frame.
+    fn true_range(&self, near_rad: f64, far_rad: f64) -> (f64, f64) {
+        let s = self.sun.elevation_rad;
+        let (c0, c1) = self.cos_azimuth;
+        let lo = (near_rad * c0).min(far_rad * c0);
+        let hi = (near_rad * c1).max(far_rad * c1);
+        (s + lo, s + hi)
+    }
 }
 
 /// Everything the sea's reflections need, per frame.
@@ -865,7 +884,9 @@ pub(super) struct Reflection {
 /// The search is regula falsi with the Illinois modification (the final elevation is smooth in
 /// the launch elevation wherever rays leave), falling back to bisection where an end of the
 /// bracket does not leave or the bracket has not halved in two steps: a handful of rays where
-/// bisection alone took 32 (each frame of a sun sweep needs its own search).
+/// bisection alone took 32. The renderer inverts one set of rays from the sea instead
+/// ([`super::sea_sun`]); this search is the reference its tests check it against.
+#[cfg(test)]
 pub(super) fn sea_level_sun_launch_rad(
     tracer: &dyn RayTracer,
     sun_elevation_rad: f64,
@@ -924,11 +945,13 @@ pub(super) fn sea_level_sun_launch_rad(
 
 /// How closely [`sea_level_sun_launch_rad`] brackets the launch elevation (rad): a thousandth of
 /// an arcsecond, far below any pixel.
+#[cfg(test)]
 pub(super) const SEA_SUN_LAUNCH_TOLERANCE_RAD: f64 = 5e-9;
 
 /// The most rays [`sea_level_sun_launch_rad`] traces after its first two: bisection alone
 /// reaches its tolerance from 0.5 rad in 27 halvings, and the search halves the bracket at
 /// least once every three steps (a step bisects when the last two did not halve it).
+#[cfg(test)]
 const MAX_LAUNCH_STEPS: usize = 96;
 
 impl Reflection {
@@ -937,10 +960,10 @@ impl Reflection {
     pub(super) fn may_show_sun(&self, grazing_rad: f64, distance_m: f64) -> bool {
         let tilt = distance_m / self.earth_radius_m;
         if let Some(g) = &self.glint {
-            let e = g.sun.elevation_rad + g.refraction_rad;
-            return self
-                .sea
-                .may_glint(grazing_rad, (e - tilt.abs(), e + tilt.abs()));
+            return g
+                .at_sea
+                .apparent_range(g.true_range(tilt.abs(), tilt.abs()))
+                .is_some_and(|e| self.sea.may_glint(grazing_rad, e));
         }
         match (&self.mirror_sun, &self.fan) {
             (Some((sun, _)), Some(fan)) => fan.sky_elevation(grazing_rad).is_some_and(|e| {
@@ -961,15 +984,19 @@ impl Reflection {
         distance_m: (f64, f64),
     ) -> bool {
         if let Some(g) = &self.glint {
-            // The farthest hit tilts the sun most (padded for the rounding of interpolated
-            // distances); a NaN distance bounds nothing.
-            let far = distance_m.0.abs().max(distance_m.1.abs());
-            let tilt = far / self.earth_radius_m * (1.0 + 1e-9) + 1e-12;
-            if !tilt.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
+            // The nearest and farthest hits tilt the sun least and most (padded for the
+            // rounding of interpolated distances); a NaN distance bounds nothing.
+            let (d0, d1) = (distance_m.0.abs(), distance_m.1.abs());
+            let r = self.earth_radius_m;
+            let near = (d0.min(d1) / r * (1.0 - 1e-9) - 1e-12).max(0.0);
+            let far = d0.max(d1) / r * (1.0 + 1e-9) + 1e-12;
+            if !far.is_finite() || distance_m.0.is_nan() || distance_m.1.is_nan() {
                 return true;
             }
-            let e = g.sun.elevation_rad + g.refraction_rad;
-            return self.sea.may_glint_range(grazing_rad, (e - tilt, e + tilt));
+            return g
+                .at_sea
+                .apparent_range(g.true_range(near, far))
+                .is_some_and(|e| self.sea.may_glint_range(grazing_rad, e));
         }
         self.mirror_sun.is_some() && self.fan.is_some()
     }
@@ -1039,35 +1066,61 @@ impl SeaSunAt {
         let (SeaSunAt::Glint { geometry, tilt, .. }, Some(g)) = (self, &refl.glint) else {
             return None;
         };
-        // The sun's elevation above the local horizontal of the sea point (the true direction
-        // tilted by the Earth's curvature, plus the sea-level refraction), and its azimuth
-        // relative to the ray there.
+        // The sun's true elevation above the local horizontal of the sea point (tilted by the
+        // Earth's curvature), its apparent one there (the sea-level refraction of that
+        // elevation), and its azimuth relative to the ray there.
         let phi = g.sun.azimuth_rad - azimuth_rad;
-        let e = g.sun.elevation_rad + g.refraction_rad + tilt * phi.cos();
+        let e = g
+            .at_sea
+            .apparent_rad(g.sun.elevation_rad + tilt * phi.cos());
         Some(geometry.per_irradiance(e, phi))
     }
 
-    /// The glitter's radiance for the factor `k` of [`Self::glint_factor`]: the sun's
-    /// irradiance times `k`, capped by the Fresnel-reflected disc (zero where `k` ≤ 0, or when
-    /// this is not glitter).
+    /// The transmittance per channel of the sun's light to the sea point along its own curved
+    /// ray from there, for the ray towards absolute azimuth `azimuth_rad` (zero where the sun
+    /// is below the sea's apparent horizon there, or when this is not glitter).
     #[inline]
-    pub(super) fn glint_radiance(&self, refl: &Reflection, k: f64) -> [f64; 3] {
+    pub(super) fn glint_transmittance(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
+        let (SeaSunAt::Glint { tilt, .. }, Some(g)) = (self, &refl.glint) else {
+            return [0.0; 3];
+        };
+        let phi = g.sun.azimuth_rad - azimuth_rad;
+        g.at_sea
+            .depth(g.sun.elevation_rad + tilt * phi.cos())
+            .map(|tau| (-tau).exp())
+    }
+
+    /// The glitter's radiance for the factor `k` of [`Self::glint_factor`] and the
+    /// transmittance `t` of [`Self::glint_transmittance`]: the sun's irradiance times `k`,
+    /// capped by the Fresnel-reflected disc, times `t` (zero where `k` ≤ 0, or when this is not
+    /// glitter).
+    #[inline]
+    pub(super) fn glint_radiance(&self, refl: &Reflection, k: f64, t: [f64; 3]) -> [f64; 3] {
         let (SeaSunAt::Glint { rho, .. }, Some(g)) = (self, &refl.glint) else {
             return [0.0; 3];
         };
         if k <= 0.0 {
             return [0.0; 3];
         }
-        [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]))
+        [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]) * t[c])
     }
 
     /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
     pub(super) fn at(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
         match *self {
-            SeaSunAt::Glint { .. } => match self.glint_factor(refl, azimuth_rad) {
-                Some(k) => self.glint_radiance(refl, k),
-                None => [0.0; 3],
-            },
+            SeaSunAt::Glint { geometry, tilt, .. } => {
+                let Some(g) = &refl.glint else {
+                    return [0.0; 3];
+                };
+                // As glint_factor and glint_transmittance, from one look-up of the sun.
+                let phi = g.sun.azimuth_rad - azimuth_rad;
+                let (e, depth) = g.at_sea.at(g.sun.elevation_rad + tilt * phi.cos());
+                let k = geometry.per_irradiance(e, phi);
+                if k <= 0.0 {
+                    return [0.0; 3];
+                }
+                self.glint_radiance(refl, k, depth.map(|tau| (-tau).exp()))
+            }
             SeaSunAt::Mirror {
                 elevation_rad,
                 reflectance,

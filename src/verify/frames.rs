@@ -637,6 +637,19 @@ impl RayTracer for Recording<'_> {
         self.timed(|| self.inner.density_paths_m(h, elevation_rad, scales))
     }
 
+    /// Passed on and timed with the traces (one trace for both, as the inner tracer does it).
+    fn trace_to_sky_with_density_paths(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        scales: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        self.timed(|| {
+            self.inner
+                .trace_to_sky_with_density_paths(h, elevation_rad, scales)
+        })
+    }
+
     /// Passed on and timed with the traces.
     fn density_paths_along(
         &self,

@@ -26,7 +26,7 @@ use ghostship::tracer::{StratifiedIndex, Tracer, TracerConfig};
 use crate::support::data::data_dir;
 use crate::support::films::differing_and_edge_pixels;
 use crate::support::reference::{
-    BreakSource, atmosphere_index, bouguer_escape_elevation, reference_density_paths,
+    BreakSource, RefReach, atmosphere_index, bouguer_escape_elevation, reference_density_paths,
     reference_heights,
 };
 
@@ -630,10 +630,12 @@ fn brightest(film: &Film) -> [f32; 4] {
 
 /// The ducted sun of figure 12, whose rays skim ~850 km of the lowest air, against the same sun
 /// at +5° in the same atmosphere (camera pitched up to it): redder (red over blue, red over
-/// green) and dimmer (every channel).
+/// green) and dimmer (every channel). The disc alone: the sea's reflections are off, as its
+/// glitter far out is lit by a sun that stands higher above those sea points' horizontals.
 #[test]
 fn the_ducted_sun_is_redder_and_dimmer_than_the_sun_at_five_degrees() {
-    let scene = load_scene("fig12_novaya_zemlya.toml");
+    let mut scene = load_scene("fig12_novaya_zemlya.toml");
+    scene.sea.reflections = false;
     let atm = atmosphere(&scene);
     let ducted = render(&scene, &atm, false);
     assert!(ducted.stats.sun_rays > 0);
@@ -658,10 +660,14 @@ fn the_ducted_sun_is_redder_and_dimmer_than_the_sun_at_five_degrees() {
 }
 
 /// The sun's glitter on the sea takes its colour from the sun's own curved ray from the sea
-/// surface: in the Novaya Zemlya inversion, with the sun 0.5° above the true horizon, the ratios
-/// of the glitter's channels (the render with the sun minus the same render without it) are
-/// those of e^(−τ_c), τ_c along the independent reference tracer's ray launched from the sea
-/// towards the sun (its launch elevation found from Bouguer's invariant alone), within 1 %.
+/// surface at the glittering point: in the Novaya Zemlya inversion, with the sun 0.5° above the
+/// camera's true horizon, the ratios of the channels of the brightest glitter pixel whose sea
+/// point is well defined (not one near the sea horizon that spans tens of kilometres of sea) (the render with
+/// the sun minus the same render without it) are those of e^(−τ_c), τ_c along the independent
+/// reference tracer's ray launched from that pixel's own sea point towards the sun. That point,
+/// d from the camera, is found with the reference rays; its vertical is tilted by d/R, so the
+/// sun stands at 0.5° + d/R·cos φ above its horizontal (φ the sun's azimuth from the pixel's),
+/// and the launch is found from Bouguer's invariant alone. Within 1 %.
 #[test]
 fn the_glitter_is_lit_along_the_suns_curved_ray_from_the_sea() {
     let mut scene = load_scene("fig12_novaya_zemlya.toml");
@@ -669,6 +675,7 @@ fn the_glitter_is_lit_along_the_suns_curved_ray_from_the_sea() {
     scene.camera.pitch_rad = f64::to_radians(-1.0);
     scene.camera.hfov_rad = f64::to_radians(4.0);
     (scene.camera.width, scene.camera.height) = (200, 100);
+    let sun = scene.sun.unwrap();
     let sun_elevation = f64::to_radians(0.5);
     scene.sun.as_mut().unwrap().elevation_rad = sun_elevation;
     assert!(scene.sea.wave_slope_rad > 0.0, "a rough sea shows glitter");
@@ -676,28 +683,65 @@ fn the_glitter_is_lit_along_the_suns_curved_ray_from_the_sea() {
     let mut dark = scene.clone();
     dark.sun = None;
     let dark = render(&dark, &atm, false);
-    let glint = lit
+    let glitter: Vec<[f64; 3]> = lit
         .pixels
         .iter()
         .zip(&dark.pixels)
         .map(|(a, b)| [0, 1, 2].map(|c| f64::from(a[c]) - f64::from(b[c])))
-        .max_by(|a, b| a[0].total_cmp(&b[0]))
-        .unwrap();
-    // The reference: the launch elevation at the sea whose ray leaves towards the sun.
+        .collect();
+    let frame = scene.camera.frame();
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    let r = atm_radius();
+    let h0 = scene.camera.height_m;
+    // The ground distance of the sea point seen at (x, y) (pixel units), by bisection with
+    // the reference rays; `None` where the ray does not meet the sea within 600 km.
+    let sea_point = |x: f64, y: f64| {
+        let alpha = frame.view_direction(x, y).elevation_rad;
+        let below = |d: f64| {
+            matches!(
+                reference_heights(&index, r, 40e3, h0, alpha, &[d])[0],
+                RefReach::GroundBefore
+            )
+        };
+        below(600e3).then(|| {
+            let (lo, hi) = crate::support::bisect(0.0, 600e3, 50, below);
+            0.5 * (lo + hi)
+        })
+    };
+    // The brightest glitter pixel whose sea point is well defined: its pixel's top and bottom
+    // edges see sea points within 2 % of each other (near the sea horizon a pixel spans tens
+    // of kilometres of sea, and with them the sun's elevation there and its colour).
+    let mut order: Vec<usize> = (0..glitter.len()).collect();
+    order.sort_by(|&a, &b| glitter[b][0].total_cmp(&glitter[a][0]));
+    let (brightest, d) = order
+        .iter()
+        .take(2000)
+        .find_map(|&i| {
+            let (x, y) = ((i as u32 % lit.width) as f64, (i as u32 / lit.width) as f64);
+            let (top, bottom) = (sea_point(x + 0.5, y)?, sea_point(x + 0.5, y + 1.0)?);
+            ((top - bottom).abs() <= 0.02 * top).then(|| (i, sea_point(x + 0.5, y + 0.5)))
+        })
+        .expect("a glitter pixel with a well-defined sea point");
+    let d = d.expect("it sees the sea");
+    let glint = glitter[brightest];
+    let (x, y) = (brightest as u32 % lit.width, brightest as u32 / lit.width);
+    let dir = frame.view_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+    let phi = sun.azimuth_rad - (scene.camera.heading_rad + dir.azimuth_offset_rad());
+    let true_there = sun_elevation + d / r * phi.cos();
+    // The reference: the launch elevation at the sea whose ray leaves towards the sun there.
     let n = |h: f64| atm.exact(h).0;
-    let exit = |a: f64| bouguer_escape_elevation(&n, atm_radius(), 40e3, 0.0, a, 4000);
+    let exit = |a: f64| bouguer_escape_elevation(&n, r, 40e3, 0.0, a, 4000);
     let (mut lo, mut hi) = (f64::to_radians(0.2), f64::to_radians(5.0));
-    assert!(exit(lo) < sun_elevation && exit(hi) > sun_elevation);
+    assert!(exit(lo) < true_there && exit(hi) > true_there);
     for _ in 0..40 {
         let mid = 0.5 * (lo + hi);
-        if exit(mid) < sun_elevation {
+        if exit(mid) < true_there {
             lo = mid;
         } else {
             hi = mid;
         }
     }
     let launch = 0.5 * (lo + hi);
-    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
     let extinction = scene.sky.sun_extinction();
     let paths = reference_density_paths(
         &index,
@@ -708,9 +752,11 @@ fn the_glitter_is_lit_along_the_suns_curved_ray_from_the_sea() {
         extinction.scale_heights_m(),
     );
     let tau = extinction.path_optical_depth(paths);
-    let air_mass = scene.sky.transmittance(launch);
     eprintln!(
-        "launch {:.4}°, τ {tau:?}; glitter {glint:?}; air-mass transmittance {air_mass:?}",
+        "pixel ({x}, {y}): sea point {:.2} km out, sun there {:.4}° true, launch {:.4}°, \
+         τ {tau:?}; glitter {glint:?}",
+        d / 1e3,
+        true_there.to_degrees(),
         launch.to_degrees()
     );
     assert!(glint[2] > 0.0, "the glitter is in the frame: {glint:?}");

@@ -353,6 +353,111 @@ fn calm_mirror_image_through_a_refracting_atmosphere_lies_where_the_reference_ra
     }
 }
 
+/// Fig. 12's ducted sun (true centre 1.5° below the horizon, camera 100 m in the critical
+/// Novaya Zemlya inversion) on the default Cox–Munk sea: the glitter at each sea point lies where
+/// Cox–Munk puts it for the sun seen from *that* point. A point d from the camera has its
+/// vertical tilted by d/R, so the sun's true elevation there is −1.5° + d/R·cos φ, and its
+/// apparent elevation e is where a ray launched from the sea leaves towards it (Bouguer's
+/// integral, `support::reference`, not the renderer's tracer); the camera ray's sea point comes
+/// from the independent reference rays. With the facet tilt tan²β of the half vector between
+/// the sun and the ray, the glitter is exp(−tan²β/σ²) times at most ~10⁵ of the sun's
+/// irradiance: where tan²β/σ² > 40 it must be absent (the renderer had added the camera foot's
+/// 1.54° refraction to every point, so far out its sun stood ~1° too high and the glitter
+/// spread across the whole frame), and where it is < 1 present.
+#[test]
+fn ducted_sun_glitter_lies_where_cox_munk_puts_it_for_each_sea_points_own_sun() {
+    use crate::support::data::repo_file;
+    use crate::support::reference::{
+        BreakSource, RefReach, atmosphere_index, bouguer_escape_elevation, reference_heights,
+    };
+    use ghostship::jobs::render::render_film;
+    use ghostship::profile::SyntheticAtmosphere;
+    use ghostship::refractivity::RefractiveAtmosphere;
+    use ghostship::render::render_tracer_config;
+    use std::sync::Arc;
+
+    let path = repo_file("data/scenes/fig12_novaya_zemlya.toml");
+    let scene = Scene::from_file(&path).unwrap();
+    let mut away = scene.clone();
+    // The same frame with the sun 90° off to the side: no glitter can reach it.
+    away.sun.as_mut().unwrap().azimuth_rad = 90f64.to_radians();
+    let loaded = scene.atmosphere.load().unwrap();
+    let options = RenderOptions {
+        quiet: true,
+        samples_per_pixel: Some(1),
+        ..RenderOptions::default()
+    };
+    let film = render_film(&scene, loaded.as_ref(), &options).unwrap();
+    let base = render_film(&away, loaded.as_ref(), &options).unwrap();
+
+    let r = scene.earth_radius_m;
+    let sun = scene.sun.unwrap();
+    let sigma2 = scene.sea.wave_slope_rad.tan().powi(2);
+    let h0 = scene.camera.height_m;
+    let nz = SyntheticAtmosphere::from_file(&repo_file("data/novaya_zemlya.toml")).unwrap();
+    let atm = RefractiveAtmosphere::new(Arc::new(nz.clone()), 550.0).unwrap();
+    let index = atmosphere_index(&atm, BreakSource::Synthetic(&nz));
+    let top_m = render_tracer_config(r).top_m;
+    let n = |h: f64| atm.exact(h).0;
+    let below = |alpha: f64, x: f64| {
+        matches!(
+            reference_heights(&index, r, 40e3, h0, alpha, &[x])[0],
+            RefReach::GroundBefore
+        )
+    };
+    // The sun's apparent elevation from the sea surface at true elevation `s`.
+    let apparent = |s: f64| {
+        let (lo, hi) = bisect(1e-7, 0.2, 40, |a| {
+            bouguer_escape_elevation(&n, r, top_m, 0.0, a, 4000) >= s
+        });
+        0.5 * (lo + hi)
+    };
+    let frame = scene.camera.frame();
+    let (mut absent, mut present) = (0, 0);
+    for y in (0..film.height).step_by(4) {
+        let centre = frame.view_direction(0.5 * film.width as f64, y as f64 + 0.5);
+        let alpha = centre.elevation_rad;
+        if !below(alpha, 600e3) {
+            continue; // sky, or the sea too near the horizon to locate
+        }
+        // The sea point: bisection on the ground distance; its grazing angle from Bouguer's
+        // invariant n(h)(R + h) cos = const.
+        let (lo, hi) = bisect(0.0, 600e3, 40, |x| below(alpha, x));
+        let d = 0.5 * (lo + hi);
+        let grazing = (n(h0) * (r + h0) * alpha.cos() / (n(0.0) * r)).acos();
+        for x in (0..film.width).step_by(8) {
+            let dir = frame.view_direction(x as f64 + 0.5, y as f64 + 0.5);
+            let phi = sun.azimuth_rad - dir.azimuth_offset_rad();
+            let e = apparent(sun.elevation_rad + d / r * phi.cos());
+            let (se, ce) = e.sin_cos();
+            let h = [
+                ce * phi.cos() - grazing.cos(),
+                ce * phi.sin(),
+                se + grazing.sin(),
+            ];
+            let x2 = (h[0] * h[0] + h[1] * h[1]) / (h[2] * h[2]) / sigma2;
+            let glitter = max_channel_difference(film.pixel(x, y), base.pixel(x, y));
+            if x2 > 40.0 {
+                absent += 1;
+                assert!(
+                    glitter < 1e-3,
+                    "({x}, {y}): d {:.1} km, e {:.4}°, tan²β/σ² {x2:.1}: glitter {glitter}",
+                    d / 1e3,
+                    e.to_degrees()
+                );
+            } else if x2 < 1.0 {
+                present += 1;
+                assert!(
+                    glitter > 0.05,
+                    "({x}, {y}): tan²β/σ² {x2:.2}: glitter {glitter}"
+                );
+            }
+        }
+    }
+    eprintln!("{absent} samples without glitter, {present} with");
+    assert!(absent > 100 && present > 10, "{absent} {present}");
+}
+
 /// On a wind-roughened sea (rms slope 3°) the mirror image of a tall uniform card, under
 /// straight rays, is the slope distribution's blur of it, not copies of it at a few slopes: in
 /// every row of a column through it, what the card adds to the sea (the render with it minus

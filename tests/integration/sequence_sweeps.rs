@@ -13,7 +13,9 @@ use ghostship::jobs::sequence::{
 };
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::sweep::render_shared;
-use ghostship::render::{FanRay, RayTracer, RenderOptions, prepare_tracer, render_tracer_config};
+use ghostship::render::{
+    FanEnd, FanRay, RayTracer, RenderOptions, prepare_tracer, render_tracer_config,
+};
 use ghostship::scene::Scene;
 use ghostship::solar::{Site, UtcTime, sun_position_with_delta_t};
 use ghostship::tracer::{RayDensityPaths, Tracer};
@@ -136,6 +138,15 @@ impl RayTracer for Counting<'_> {
     fn density_paths_m(&self, h: f64, alpha: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
         self.calls.fetch_add(1, Ordering::Relaxed);
         self.inner.density_paths_m(h, alpha, scales)
+    }
+    fn trace_to_sky_with_density_paths(
+        &self,
+        h: f64,
+        alpha: f64,
+        scales: [f64; 2],
+    ) -> (FanEnd, Option<[f64; 2]>) {
+        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.inner.trace_to_sky_with_density_paths(h, alpha, scales)
     }
     fn density_paths_along(
         &self,
