@@ -23,7 +23,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::objects::{RayAlong, SampleRay};
+use super::objects::{PartHeights, RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
 use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
@@ -1223,18 +1223,46 @@ impl Shader<'_> {
             None => {
                 let mut parts = Vec::new();
                 self.blur_parts(fan, table, grazing_rad, distance_m, az, |p| parts.push(p));
-                cache.entries.push(CachedParts { band, cards, parts });
+                let heights = self.part_heights(fan, distance_m, &parts);
+                cache.entries.push(CachedParts {
+                    band,
+                    cards,
+                    parts,
+                    heights,
+                });
                 cache.entries.len() - 1
             }
         };
+        let entry = &cache.entries[at];
+        let n_dist = self.distances_m.len();
         let mut out = [0.0; 3];
-        for part in &cache.entries[at].parts {
-            let image = self.blur_part(fan, dir, az, distance_m, part);
+        for (i, part) in entry.parts.iter().enumerate() {
+            let known = &entry.heights[i * n_dist..(i + 1) * n_dist];
+            let image = self.blur_part(fan, dir, az, distance_m, part, Some(known));
             for c in 0..3 {
                 out[c] += image[c];
             }
         }
         Some(out)
+    }
+
+    /// The heights of `parts`' rays reflected at `distance_m` at each card distance
+    /// ([`PartHeights`]; part by part, `distances_m.len()` each): they depend on the part, not
+    /// on the sample's azimuth, so a band's samples share them.
+    pub(super) fn part_heights(
+        &self,
+        fan: &SeaFan,
+        distance_m: f64,
+        parts: &[BlurPart],
+    ) -> Vec<PartHeights> {
+        parts
+            .iter()
+            .flat_map(|part| {
+                self.distances_m.iter().map(move |&d| {
+                    PartHeights::of(fan, part.elevation_rad, part.span_rad, d - distance_m)
+                })
+            })
+            .collect()
     }
 
     /// The mirror images on a calm sea: the one reflected ray of [`FacetTable`].
@@ -1279,6 +1307,7 @@ impl Shader<'_> {
                     elevation_rad: e,
                     from_m: distance_m,
                     span_rad: (e, e),
+                    known_heights: None,
                 },
                 az,
             );
@@ -1310,7 +1339,7 @@ impl Shader<'_> {
         let mut out = [0.0; 3];
         let az = azimuth();
         self.blur_parts(fan, table, grazing_rad, distance_m, az, |part| {
-            let image = self.blur_part(fan, dir, az, distance_m, &part);
+            let image = self.blur_part(fan, dir, az, distance_m, &part, None);
             for c in 0..3 {
                 out[c] += image[c];
             }
@@ -1320,7 +1349,7 @@ impl Shader<'_> {
 
     /// What one part of a rough sea's slopes adds along `dir` (azimuth offset `az`), reflected
     /// at `distance_m`: the objects its middle ray meets, weighted by the part's share, over the
-    /// sky they hide.
+    /// sky they hide. `known`: the part's [`Self::part_heights`], if found before.
     #[inline]
     pub(super) fn blur_part(
         &self,
@@ -1329,6 +1358,7 @@ impl Shader<'_> {
         az: f64,
         distance_m: f64,
         part: &BlurPart,
+        known: Option<&[PartHeights]>,
     ) -> [f64; 3] {
         let ray = SampleRay::with_azimuth(
             dir,
@@ -1337,6 +1367,7 @@ impl Shader<'_> {
                 elevation_rad: part.elevation_rad,
                 from_m: distance_m,
                 span_rad: part.span_rad,
+                known_heights: known,
             },
             az,
         );
@@ -1502,6 +1533,8 @@ struct CachedParts {
     /// Bit i: card i of the shader is mirrored.
     cards: u64,
     parts: Vec<BlurPart>,
+    /// The parts' [`Shader::part_heights`].
+    heights: Vec<PartHeights>,
 }
 
 /// One part of a rough sea's slopes that mirrors something ([`Shader::blur_parts`]).

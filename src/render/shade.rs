@@ -177,13 +177,19 @@ impl ViewCard<'_> {
                     fan,
                     from_m,
                     span_rad: (e0, e1),
+                    known_heights,
                     ..
                 },
                 Some(columns),
             ) if e1 > e0 => {
-                let range_m = self.distance_m - from_m;
-                let end = |e: f64, edge: f64| fan.height(e, range_m).map_or(edge, v);
-                let (v0, v1) = (end(e0, 1.0), end(e1, 0.0));
+                let [h0, h1] = match known_heights {
+                    Some(known) => known[self.distance_index].ends_m,
+                    None => {
+                        let range_m = self.distance_m - from_m;
+                        [fan.height(e0, range_m), fan.height(e1, range_m)]
+                    }
+                };
+                let (v0, v1) = (h0.map_or(1.0, v), h1.map_or(0.0, v));
                 columns.mean(self.texture, meet.u, v0, v1)
             }
             _ => self.texture.sample(meet.u, v(meet.height_m)),
@@ -223,6 +229,7 @@ impl SceneObject for ViewCard<'_> {
                 fan,
                 elevation_rad,
                 from_m,
+                known_heights,
                 ..
             } => {
                 // Beyond the reflection point and in the card's azimuth range first (cheap).
@@ -234,7 +241,11 @@ impl SceneObject for ViewCard<'_> {
                 {
                     return None;
                 }
-                (fan.height(elevation_rad, self.distance_m - from_m)?, true)
+                let h = match known_heights {
+                    Some(known) => known[self.distance_index].mid_m,
+                    None => fan.height(elevation_rad, self.distance_m - from_m),
+                };
+                (h?, true)
             }
         };
         if h < self.base_m || h > self.top_m {
