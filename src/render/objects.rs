@@ -17,6 +17,7 @@ use super::ray_model::FanEnd;
 use super::reflection::SeaFan;
 use super::shade::{Shader, ViewCard};
 use super::terrain::TerrainView;
+use super::texture_box::ColumnMemo;
 use crate::scene::camera::ViewDirection;
 
 /// How a sample's ray is known.
@@ -38,35 +39,39 @@ pub(super) enum RayAlong<'a> {
     /// heights from the sea fan at ranges beyond `from_m`. It stands for the rays leaving
     /// between the elevations `span_rad` (equal for one ray; on a rough sea, a part of a
     /// sample's slopes that meets the same objects): a card shows its mean over them.
-    /// `known_heights`: its heights at the card distances found beforehand (by distance index;
-    /// the same as the sea fan gives), or `None` to look them up.
+    /// `at_cards`: what it has at each card found beforehand (by the card's index in the
+    /// shader; the same as the sea fan gives), or `None` to look it up.
     Reflected {
         fan: &'a SeaFan,
         elevation_rad: f64,
         from_m: f64,
         span_rad: (f64, f64),
-        known_heights: Option<&'a [PartHeights]>,
+        at_cards: Option<&'a [PartAtCard]>,
     },
 }
 
-/// A reflected ray's heights (m) at one card distance, from the sea fan: of the ray itself and
-/// of the rays at the ends of the span it stands for (`None` where the fan has none).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct PartHeights {
+/// A reflected ray at one card, from the sea fan: its heights (m) there, of the ray itself and
+/// of the rays at the ends of the span it stands for (`None` where the fan has none), and the
+/// card's texture column means over the heights they span as found so far.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct PartAtCard {
     /// The ray's own height.
     pub(super) mid_m: Option<f64>,
     /// The heights of the span's lowest and highest rays.
     pub(super) ends_m: [Option<f64>; 2],
+    /// The column means found ([`super::texture_box::TextureColumns::mean_memo`]).
+    pub(super) columns: Cell<ColumnMemo>,
 }
 
-impl PartHeights {
+impl PartAtCard {
     /// The heights at range `range_m` of the reflected ray at `elevation_rad` and of those at
-    /// the ends of `span_rad` ([`SeaFan::height`] each).
+    /// the ends of `span_rad` ([`SeaFan::height`] each); no column means yet.
     #[inline]
     pub(super) fn of(fan: &SeaFan, elevation_rad: f64, span_rad: (f64, f64), range_m: f64) -> Self {
         Self {
             mid_m: fan.height(elevation_rad, range_m),
             ends_m: [span_rad.0, span_rad.1].map(|e| fan.height(e, range_m)),
+            columns: Cell::new(ColumnMemo::default()),
         }
     }
 }

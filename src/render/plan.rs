@@ -140,6 +140,7 @@ impl<'a> ViewCards<'a> {
             let k = out.distances_m.len() - 1;
             out.max_top_m[k] = out.max_top_m[k].max(top_m);
             out.cards.push(ViewCard {
+                index: out.cards.len(),
                 distance_index: k,
                 distance_m: c.distance_m,
                 offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),

@@ -23,7 +23,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::objects::{PartHeights, RayAlong, SampleRay};
+use super::objects::{PartAtCard, RayAlong, SampleRay};
 use super::ray_model::{FanEnd, RayTracer};
 use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
@@ -1223,22 +1223,22 @@ impl Shader<'_> {
             None => {
                 let mut parts = Vec::new();
                 self.blur_parts(fan, table, grazing_rad, distance_m, az, |p| parts.push(p));
-                let heights = self.part_heights(fan, distance_m, &parts);
+                let at_cards = self.parts_at_cards(fan, distance_m, &parts);
                 cache.entries.push(CachedParts {
                     band,
                     cards,
                     parts,
-                    heights,
+                    at_cards,
                 });
                 cache.entries.len() - 1
             }
         };
         let entry = &cache.entries[at];
-        let n_dist = self.distances_m.len();
+        let n_cards = self.cards.len();
         let mut out = [0.0; 3];
         for (i, part) in entry.parts.iter().enumerate() {
-            let known = &entry.heights[i * n_dist..(i + 1) * n_dist];
-            let image = self.blur_part(fan, dir, az, distance_m, part, Some(known));
+            let at = &entry.at_cards[i * n_cards..(i + 1) * n_cards];
+            let image = self.blur_part(fan, dir, az, distance_m, part, Some(at));
             for c in 0..3 {
                 out[c] += image[c];
             }
@@ -1246,20 +1246,21 @@ impl Shader<'_> {
         Some(out)
     }
 
-    /// The heights of `parts`' rays reflected at `distance_m` at each card distance
-    /// ([`PartHeights`]; part by part, `distances_m.len()` each): they depend on the part, not
-    /// on the sample's azimuth, so a band's samples share them.
-    pub(super) fn part_heights(
+    /// `parts`' rays reflected at `distance_m` at each card ([`PartAtCard`]; part by part,
+    /// one per card in order): their heights depend on the part, not on the sample's azimuth,
+    /// so a band's samples share them, and the cards' column means as its samples find them.
+    pub(super) fn parts_at_cards(
         &self,
         fan: &SeaFan,
         distance_m: f64,
         parts: &[BlurPart],
-    ) -> Vec<PartHeights> {
+    ) -> Vec<PartAtCard> {
         parts
             .iter()
             .flat_map(|part| {
-                self.distances_m.iter().map(move |&d| {
-                    PartHeights::of(fan, part.elevation_rad, part.span_rad, d - distance_m)
+                self.cards.iter().map(move |card| {
+                    let range_m = card.distance_m - distance_m;
+                    PartAtCard::of(fan, part.elevation_rad, part.span_rad, range_m)
                 })
             })
             .collect()
@@ -1307,7 +1308,7 @@ impl Shader<'_> {
                     elevation_rad: e,
                     from_m: distance_m,
                     span_rad: (e, e),
-                    known_heights: None,
+                    at_cards: None,
                 },
                 az,
             );
@@ -1349,7 +1350,7 @@ impl Shader<'_> {
 
     /// What one part of a rough sea's slopes adds along `dir` (azimuth offset `az`), reflected
     /// at `distance_m`: the objects its middle ray meets, weighted by the part's share, over the
-    /// sky they hide. `known`: the part's [`Self::part_heights`], if found before.
+    /// sky they hide. `at_cards`: the part's [`Self::parts_at_cards`], if found before.
     #[inline]
     pub(super) fn blur_part(
         &self,
@@ -1358,7 +1359,7 @@ impl Shader<'_> {
         az: f64,
         distance_m: f64,
         part: &BlurPart,
-        known: Option<&[PartHeights]>,
+        at_cards: Option<&[PartAtCard]>,
     ) -> [f64; 3] {
         let ray = SampleRay::with_azimuth(
             dir,
@@ -1367,7 +1368,7 @@ impl Shader<'_> {
                 elevation_rad: part.elevation_rad,
                 from_m: distance_m,
                 span_rad: part.span_rad,
-                known_heights: known,
+                at_cards,
             },
             az,
         );
@@ -1533,8 +1534,8 @@ struct CachedParts {
     /// Bit i: card i of the shader is mirrored.
     cards: u64,
     parts: Vec<BlurPart>,
-    /// The parts' [`Shader::part_heights`].
-    heights: Vec<PartHeights>,
+    /// The parts' [`Shader::parts_at_cards`].
+    at_cards: Vec<PartAtCard>,
 }
 
 /// One part of a rough sea's slopes that mirrors something ([`Shader::blur_parts`]).

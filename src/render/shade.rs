@@ -74,6 +74,8 @@ impl AerialShading {
 
 /// A card prepared for shading.
 pub(super) struct ViewCard<'a> {
+    /// Its index in the frame's cards (sorted by distance).
+    pub(super) index: usize,
     pub(super) distance_index: usize,
     /// Its ground distance (m).
     pub(super) distance_m: f64,
@@ -177,20 +179,23 @@ impl ViewCard<'_> {
                     fan,
                     from_m,
                     span_rad: (e0, e1),
-                    known_heights,
+                    at_cards,
                     ..
                 },
                 Some(columns),
             ) if e1 > e0 => {
-                let [h0, h1] = match known_heights {
-                    Some(known) => known[self.distance_index].ends_m,
+                let ends = |[h0, h1]: [Option<f64>; 2]| (h0.map_or(1.0, v), h1.map_or(0.0, v));
+                match at_cards {
+                    Some(at) => {
+                        let at = &at[self.index];
+                        columns.mean_memo(self.texture, meet.u, ends(at.ends_m), &at.columns)
+                    }
                     None => {
                         let range_m = self.distance_m - from_m;
-                        [fan.height(e0, range_m), fan.height(e1, range_m)]
+                        let (v0, v1) = ends([fan.height(e0, range_m), fan.height(e1, range_m)]);
+                        columns.mean(self.texture, meet.u, v0, v1)
                     }
-                };
-                let (v0, v1) = (h0.map_or(1.0, v), h1.map_or(0.0, v));
-                columns.mean(self.texture, meet.u, v0, v1)
+                }
             }
             _ => self.texture.sample(meet.u, v(meet.height_m)),
         }
@@ -229,7 +234,7 @@ impl SceneObject for ViewCard<'_> {
                 fan,
                 elevation_rad,
                 from_m,
-                known_heights,
+                at_cards,
                 ..
             } => {
                 // Beyond the reflection point and in the card's azimuth range first (cheap).
@@ -241,8 +246,8 @@ impl SceneObject for ViewCard<'_> {
                 {
                     return None;
                 }
-                let h = match known_heights {
-                    Some(known) => known[self.distance_index].mid_m,
+                let h = match at_cards {
+                    Some(at) => at[self.index].mid_m,
                     None => fan.height(elevation_rad, self.distance_m - from_m),
                 };
                 (h?, true)

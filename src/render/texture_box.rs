@@ -10,6 +10,8 @@
 //! A rough sea mirrors a whole interval of a card's heights into one part of a pixel's slope
 //! cell, and this is the card's mean over it (see `super::reflection`).
 
+use std::cell::Cell;
+
 use crate::scene::Texture;
 
 /// Running integrals along v of each column of one texture.
@@ -110,6 +112,41 @@ impl TextureColumns {
     /// over the interval; the sample itself when the interval is empty.
     #[inline]
     pub(super) fn mean(&self, texture: &Texture, u: f64, v0: f64, v1: f64) -> [f32; 4] {
+        self.mean_by(texture, u, v0, v1, |x, a, b| {
+            self.column_mean(texture, x, a, b)
+        })
+    }
+
+    /// [`Self::mean`], the columns' means kept in `memo` and taken from it when found before
+    /// over the same interval: the same values, each found once for a run of samples whose
+    /// `u` moves across the texture over one interval (a band's samples on one part of a rough
+    /// sea's slopes).
+    #[inline]
+    pub(super) fn mean_memo(
+        &self,
+        texture: &Texture,
+        u: f64,
+        (v0, v1): (f64, f64),
+        memo: &Cell<ColumnMemo>,
+    ) -> [f32; 4] {
+        self.mean_by(texture, u, v0, v1, |x, a, b| {
+            let mut m = memo.get();
+            let out = m.get_or(x, (a, b), || self.column_mean(texture, x, a, b));
+            memo.set(m);
+            out
+        })
+    }
+
+    /// [`Self::mean`] with the column means from `column` (column, v₀, v₁ with v₀ ≤ v₁).
+    #[inline(always)]
+    fn mean_by(
+        &self,
+        texture: &Texture,
+        u: f64,
+        v0: f64,
+        v1: f64,
+        mut column: impl FnMut(usize, f64, f64) -> [f64; 4],
+    ) -> [f32; 4] {
         let (v0, v1) = (v0.min(v1), v0.max(v1));
         if v1.is_nan() || v0.is_nan() || v1 <= v0 || self.prefix.is_empty() {
             return texture.sample(u, 0.5 * (v0 + v1));
@@ -122,14 +159,45 @@ impl TextureColumns {
         let x0 = (x as usize).min(w - 1);
         let x1 = (x0 + 1).min(w - 1);
         let fx = x - x0 as f64;
-        let (a, b) = (
-            self.column_mean(texture, x0, v0, v1),
-            self.column_mean(texture, x1, v0, v1),
-        );
+        let (a, b) = (column(x0, v0, v1), column(x1, v0, v1));
         let mut out = [0.0f32; 4];
         for c in 0..4 {
             out[c] = (a[c] + (b[c] - a[c]) * fx) as f32;
         }
+        out
+    }
+}
+
+/// The means of the last two texture columns found over one interval of v ([`TextureColumns::mean_memo`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct ColumnMemo {
+    /// Column, interval (v₀, v₁) and the column's mean over it; `usize::MAX`: empty.
+    slots: [(usize, (f64, f64), [f64; 4]); 2],
+    /// The slot the next new mean replaces.
+    next: usize,
+}
+
+impl Default for ColumnMemo {
+    fn default() -> Self {
+        Self {
+            slots: [(usize::MAX, (0.0, 0.0), [0.0; 4]); 2],
+            next: 0,
+        }
+    }
+}
+
+impl ColumnMemo {
+    /// The mean of column `x` over `v` kept here, else `find()`'s, kept in place of the older.
+    #[inline]
+    fn get_or(&mut self, x: usize, v: (f64, f64), find: impl FnOnce() -> [f64; 4]) -> [f64; 4] {
+        let same =
+            |(a, b): (f64, f64)| a.to_bits() == v.0.to_bits() && b.to_bits() == v.1.to_bits();
+        if let Some(slot) = self.slots.iter().find(|s| s.0 == x && same(s.1)) {
+            return slot.2;
+        }
+        let out = find();
+        self.slots[self.next] = (x, v, out);
+        self.next ^= 1;
         out
     }
 }
@@ -190,6 +258,30 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_memo_gives_the_means_found_without_it() {
+        let tex = texture();
+        let cols = TextureColumns::new(&tex);
+        let memo = Cell::new(ColumnMemo::default());
+        // A run of samples across the texture over one interval, then back over another (and
+        // outside the texture, and empty intervals): bit for bit the same.
+        let mut found = 0;
+        for (v0, v1) in [(0.2, 0.7), (0.8, 0.31), (0.5, 0.5), (-0.2, 1.3)] {
+            for i in 0..=60 {
+                let u = -0.1 + 1.2 * f64::from(i) / 60.0;
+                let want = cols.mean(&tex, u, v0, v1);
+                let got = cols.mean_memo(&tex, u, (v0, v1), &memo);
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    want.map(f32::to_bits),
+                    "{u} {v0} {v1}"
+                );
+                found += usize::from(want != [0.0; 4]);
+            }
+        }
+        assert!(found > 100, "{found}");
     }
 
     #[test]
