@@ -60,7 +60,7 @@ pub(super) struct PartAtCard {
     /// The heights of the span's lowest and highest rays.
     pub(super) ends_m: [Option<f64>; 2],
     /// The column means found ([`super::texture_box::TextureColumns::mean_memo`]).
-    pub(super) columns: Cell<ColumnMemo>,
+    pub(super) columns: ColumnMemo,
 }
 
 impl PartAtCard {
@@ -71,7 +71,7 @@ impl PartAtCard {
         Self {
             mid_m: fan.height(elevation_rad, range_m),
             ends_m: [span_rad.0, span_rad.1].map(|e| fan.height(e, range_m)),
-            columns: Cell::new(ColumnMemo::default()),
+            columns: ColumnMemo::default(),
         }
     }
 }

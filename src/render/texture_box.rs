@@ -112,32 +112,31 @@ impl TextureColumns {
     /// over the interval; the sample itself when the interval is empty.
     #[inline]
     pub(super) fn mean(&self, texture: &Texture, u: f64, v0: f64, v1: f64) -> [f32; 4] {
-        self.mean_by(texture, u, v0, v1, |x, a, b| {
-            self.column_mean(texture, x, a, b)
+        self.mean_by(texture, u, v0, v1, |x0, x1, a, b| {
+            let column = |x: usize| self.column_mean(texture, x, a, b);
+            (column(x0), column(x1))
         })
     }
 
-    /// [`Self::mean`], the columns' means kept in `memo` and taken from it when found before
-    /// over the same interval: the same values, each found once for a run of samples whose
-    /// `u` moves across the texture over one interval (a band's samples on one part of a rough
-    /// sea's slopes).
+    /// [`Self::mean`], the two columns' means kept in `memo` and taken from it when found
+    /// before over the same interval: the same values, each found once for a run of samples
+    /// whose `u` moves rightwards across the texture over one interval (a band's samples on one
+    /// part of a rough sea's slopes).
     #[inline]
     pub(super) fn mean_memo(
         &self,
         texture: &Texture,
         u: f64,
         (v0, v1): (f64, f64),
-        memo: &Cell<ColumnMemo>,
+        memo: &ColumnMemo,
     ) -> [f32; 4] {
-        self.mean_by(texture, u, v0, v1, |x, a, b| {
-            let mut m = memo.get();
-            let out = m.get_or(x, (a, b), || self.column_mean(texture, x, a, b));
-            memo.set(m);
-            out
+        self.mean_by(texture, u, v0, v1, |x0, x1, a, b| {
+            memo.pair((x0, x1), (a, b), |x| self.column_mean(texture, x, a, b))
         })
     }
 
-    /// [`Self::mean`] with the column means from `column` (column, v₀, v₁ with v₀ ≤ v₁).
+    /// [`Self::mean`] with the means of the two columns it interpolates from `pair` (columns
+    /// x₀ and x₁, v₀, v₁ with v₀ ≤ v₁).
     #[inline(always)]
     fn mean_by(
         &self,
@@ -145,7 +144,7 @@ impl TextureColumns {
         u: f64,
         v0: f64,
         v1: f64,
-        mut column: impl FnMut(usize, f64, f64) -> [f64; 4],
+        pair: impl FnOnce(usize, usize, f64, f64) -> ([f64; 4], [f64; 4]),
     ) -> [f32; 4] {
         let (v0, v1) = (v0.min(v1), v0.max(v1));
         if v1.is_nan() || v0.is_nan() || v1 <= v0 || self.prefix.is_empty() {
@@ -159,7 +158,7 @@ impl TextureColumns {
         let x0 = (x as usize).min(w - 1);
         let x1 = (x0 + 1).min(w - 1);
         let fx = x - x0 as f64;
-        let (a, b) = (column(x0, v0, v1), column(x1, v0, v1));
+        let (a, b) = pair(x0, x1, v0, v1);
         let mut out = [0.0f32; 4];
         for c in 0..4 {
             out[c] = (a[c] + (b[c] - a[c]) * fx) as f32;
@@ -168,37 +167,49 @@ impl TextureColumns {
     }
 }
 
-/// The means of the last two texture columns found over one interval of v ([`TextureColumns::mean_memo`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The means of the last pair of neighbouring texture columns found over one interval of v
+/// ([`TextureColumns::mean_memo`]).
+#[derive(Debug, Clone, PartialEq)]
 pub(super) struct ColumnMemo {
-    /// Column, interval (v₀, v₁) and the column's mean over it; `usize::MAX`: empty.
-    slots: [(usize, (f64, f64), [f64; 4]); 2],
-    /// The slot the next new mean replaces.
-    next: usize,
+    /// The pair's columns and the interval's bits; `usize::MAX`: none yet.
+    key: Cell<(usize, usize, u64, u64)>,
+    /// The two columns' means.
+    means: Cell<[[f64; 4]; 2]>,
 }
 
 impl Default for ColumnMemo {
     fn default() -> Self {
         Self {
-            slots: [(usize::MAX, (0.0, 0.0), [0.0; 4]); 2],
-            next: 0,
+            key: Cell::new((usize::MAX, usize::MAX, 0, 0)),
+            means: Cell::new([[0.0; 4]; 2]),
         }
     }
 }
 
 impl ColumnMemo {
-    /// The mean of column `x` over `v` kept here, else `find()`'s, kept in place of the older.
+    /// The means of columns `x` over `v`: those kept here, else from `find` (the left one taken
+    /// over from the pair kept when that ended at it), kept in its place.
     #[inline]
-    fn get_or(&mut self, x: usize, v: (f64, f64), find: impl FnOnce() -> [f64; 4]) -> [f64; 4] {
-        let same =
-            |(a, b): (f64, f64)| a.to_bits() == v.0.to_bits() && b.to_bits() == v.1.to_bits();
-        if let Some(slot) = self.slots.iter().find(|s| s.0 == x && same(s.1)) {
-            return slot.2;
+    fn pair(
+        &self,
+        x: (usize, usize),
+        v: (f64, f64),
+        find: impl Fn(usize) -> [f64; 4],
+    ) -> ([f64; 4], [f64; 4]) {
+        let key = (x.0, x.1, v.0.to_bits(), v.1.to_bits());
+        let (kept, means) = (self.key.get(), self.means.get());
+        if kept == key {
+            return (means[0], means[1]);
         }
-        let out = find();
-        self.slots[self.next] = (x, v, out);
-        self.next ^= 1;
-        out
+        let a = if (kept.1, kept.2, kept.3) == (x.0, key.2, key.3) {
+            means[1]
+        } else {
+            find(x.0)
+        };
+        let b = find(x.1);
+        self.key.set(key);
+        self.means.set([a, b]);
+        (a, b)
     }
 }
 
@@ -264,7 +275,7 @@ mod tests {
     fn the_memo_gives_the_means_found_without_it() {
         let tex = texture();
         let cols = TextureColumns::new(&tex);
-        let memo = Cell::new(ColumnMemo::default());
+        let memo = ColumnMemo::default();
         // A run of samples across the texture over one interval, then back over another (and
         // outside the texture, and empty intervals): bit for bit the same.
         let mut found = 0;
@@ -282,6 +293,26 @@ mod tests {
             }
         }
         assert!(found > 100, "{found}");
+    }
+
+    #[test]
+    fn a_rightward_run_finds_each_column_mean_once() {
+        let memo = ColumnMemo::default();
+        let calls = Cell::new(0);
+        let find = |x: usize| {
+            calls.set(calls.get() + 1);
+            [x as f64; 4]
+        };
+        // Four samples per column pair, across columns 0…9.
+        for i in 0..36 {
+            let x0 = i / 4;
+            let (a, b) = memo.pair((x0, x0 + 1), (0.25, 0.5), find);
+            assert_eq!((a[0], b[0]), (x0 as f64, (x0 + 1) as f64));
+        }
+        assert_eq!(calls.get(), 10);
+        // Another interval is found anew.
+        let (a, _) = memo.pair((8, 9), (0.25, 0.75), find);
+        assert_eq!((a[0], calls.get()), (8.0, 12));
     }
 
     #[test]
