@@ -161,20 +161,8 @@ pub(super) fn compose<O: SceneObject + Copy>(
             pending.insert(obj, m);
         }
     }
-    let mut out = Composed {
-        radiance: [0.0; 3],
-        transmittance: 1.0,
-        meets: 0,
-    };
-    let add = |out: &mut Composed, obj: O, m: &Meet| {
-        let (rgb, alpha) = obj.shade(ray, m, shader);
-        for (acc, v) in out.radiance.iter_mut().zip(rgb) {
-            *acc += out.transmittance * v;
-        }
-        out.transmittance *= 1.0 - alpha;
-        out.meets += 1;
-        out.transmittance < OPAQUE
-    };
+    let mut out = Composed::nothing();
+    let add = |out: &mut Composed, obj: O, m: &Meet| out.add(obj.shade(ray, m, shader));
     for obj in fixed {
         let d = obj.fixed_distance_m().unwrap_or(f64::INFINITY);
         while let Some((p, m)) = pending.pop_until(d) {
@@ -294,6 +282,29 @@ pub(super) struct Composed {
     pub(super) transmittance: f64,
     /// How many of the objects met were shaded (the rest lie behind an opaque one).
     pub(super) meets: usize,
+}
+
+impl Composed {
+    /// Nothing met yet: no radiance, everything shows through.
+    pub(super) fn nothing() -> Self {
+        Self {
+            radiance: [0.0; 3],
+            transmittance: 1.0,
+            meets: 0,
+        }
+    }
+
+    /// Compose an object's premultiplied radiance and coverage behind those so far; returns
+    /// whether nothing shows through any more (below [`OPAQUE`]).
+    #[inline]
+    pub(super) fn add(&mut self, (rgb, alpha): ([f64; 3], f64)) -> bool {
+        for (acc, v) in self.radiance.iter_mut().zip(rgb) {
+            *acc += self.transmittance * v;
+        }
+        self.transmittance *= 1.0 - alpha;
+        self.meets += 1;
+        self.transmittance < OPAQUE
+    }
 }
 
 #[cfg(test)]

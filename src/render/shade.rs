@@ -146,7 +146,7 @@ impl ViewCard<'_> {
     /// coordinate there, if within its width. A camera ray wraps the offset only when it is
     /// beyond ±π, a reflected ray always (as each path always has).
     #[inline]
-    fn across(&self, azimuth: f64, always_wrap: bool) -> Option<f64> {
+    pub(super) fn across(&self, azimuth: f64, always_wrap: bool) -> Option<f64> {
         let mut offset = azimuth - self.offset_rad;
         if always_wrap {
             if !in_width(offset, self.half_width_rad) {
