@@ -515,23 +515,18 @@ fn shade_bands(
     let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
     // A rough sea's parts of the slopes, found once per band and set of mirrored cards.
     let mut parts = reflection::PartsCache::default();
-    let fills: Vec<[f32; 4]> = bands
+    // Each band's fill, and whether its background was not finite (then the fallback).
+    let fills: Vec<([f32; 4], bool)> = bands
         .iter()
         .map(|b| {
             let c = b.background;
-            pixel(if c.iter().all(|v| v.is_finite()) {
-                c
-            } else {
-                ctx.shader.fallback
-            })
+            let finite = c.iter().all(|v| v.is_finite());
+            (pixel(if finite { c } else { ctx.shader.fallback }), !finite)
         })
         .collect();
+    let mut k = 0;
     for (x, px) in row.iter_mut().enumerate() {
-        let mirrored = x.max(width - 1 - x);
-        let k = bands
-            .iter()
-            .position(|b| (b.start..b.end).contains(&mirrored))
-            .unwrap_or(0);
+        k = band_of(bands, x.max(width - 1 - x), k);
         let band = &bands[k];
         let in_card = !band.clear_sky
             && columns
@@ -553,12 +548,25 @@ fn shade_bands(
             let (c, add) = (band.background, sun_added[x]);
             pixel(finite([c[0] + add[0], c[1] + add[1], c[2] + add[2]]))
         } else {
-            if !band.background.iter().all(|v| v.is_finite()) {
+            let (fill, bad) = fills[k];
+            if bad {
                 non_finite.fetch_add(1, Ordering::Relaxed);
             }
-            fills[k]
+            fill
         };
     }
+}
+
+/// The band holding right-half column `mirrored` (0 if none): `hint` when it holds it (a row's
+/// neighbouring columns mostly share a band), else found by search. The bands are disjoint
+/// (each ends where the next begins), so the one holding it is the only one.
+#[inline]
+fn band_of(bands: &[FlatBand], mirrored: usize, hint: usize) -> usize {
+    let holds = |b: &FlatBand| (b.start..b.end).contains(&mirrored);
+    if bands.get(hint).is_some_and(holds) {
+        return hint;
+    }
+    bands.iter().position(holds).unwrap_or(0)
 }
 
 /// Pixel columns [a, b) of row `y` whose samples may see `card`, given that their elevations lie
@@ -788,6 +796,30 @@ mod tests {
             assert!(banded_rows >= 2, "w{width}: {banded_rows}");
         }
         assert!(most_bands >= 2, "{most_bands}");
+    }
+
+    #[test]
+    fn the_band_of_a_column_is_found_from_any_hint() {
+        let band = |start: usize, end: usize| FlatBand {
+            start,
+            end,
+            alpha: 0.0,
+            background: [0.0; 3],
+            clear_sky: false,
+            fan_end: FanEnd::Lost,
+            reflects: false,
+            sun: false,
+        };
+        let bands = [band(50, 61), band(61, 62), band(62, 90), band(90, 100)];
+        for mirrored in 40..110 {
+            let want = bands
+                .iter()
+                .position(|b| (b.start..b.end).contains(&mirrored))
+                .unwrap_or(0);
+            for hint in 0..6 {
+                assert_eq!(band_of(&bands, mirrored, hint), want, "{mirrored} {hint}");
+            }
+        }
     }
 
     #[test]

@@ -17,6 +17,7 @@ use super::ray_model::FanEnd;
 use super::reflection::SeaFan;
 use super::shade::{Shader, ViewCard};
 use super::terrain::TerrainView;
+use super::texture_box::ColumnMemo;
 use crate::scene::camera::ViewDirection;
 
 /// How a sample's ray is known.
@@ -38,12 +39,41 @@ pub(super) enum RayAlong<'a> {
     /// heights from the sea fan at ranges beyond `from_m`. It stands for the rays leaving
     /// between the elevations `span_rad` (equal for one ray; on a rough sea, a part of a
     /// sample's slopes that meets the same objects): a card shows its mean over them.
+    /// `at_cards`: what it has at each card found beforehand (by the card's index in the
+    /// shader; the same as the sea fan gives), or `None` to look it up.
     Reflected {
         fan: &'a SeaFan,
         elevation_rad: f64,
         from_m: f64,
         span_rad: (f64, f64),
+        at_cards: Option<&'a [PartAtCard]>,
     },
+}
+
+/// A reflected ray at one card, from the sea fan: its heights (m) there, of the ray itself and
+/// of the rays at the ends of the span it stands for (`None` where the fan has none), and the
+/// card's texture column means over the heights they span as found so far.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct PartAtCard {
+    /// The ray's own height.
+    pub(super) mid_m: Option<f64>,
+    /// The heights of the span's lowest and highest rays.
+    pub(super) ends_m: [Option<f64>; 2],
+    /// The column means found ([`super::texture_box::TextureColumns::mean_memo`]).
+    pub(super) columns: ColumnMemo,
+}
+
+impl PartAtCard {
+    /// The heights at range `range_m` of the reflected ray at `elevation_rad` and of those at
+    /// the ends of `span_rad` ([`SeaFan::height`] each); no column means yet.
+    #[inline]
+    pub(super) fn of(fan: &SeaFan, elevation_rad: f64, span_rad: (f64, f64), range_m: f64) -> Self {
+        Self {
+            mid_m: fan.height(elevation_rad, range_m),
+            ends_m: [span_rad.0, span_rad.1].map(|e| fan.height(e, range_m)),
+            columns: ColumnMemo::default(),
+        }
+    }
 }
 
 /// One sample's ray, with its view direction and its azimuth computed once when needed.
@@ -131,20 +161,8 @@ pub(super) fn compose<O: SceneObject + Copy>(
             pending.insert(obj, m);
         }
     }
-    let mut out = Composed {
-        radiance: [0.0; 3],
-        transmittance: 1.0,
-        meets: 0,
-    };
-    let add = |out: &mut Composed, obj: O, m: &Meet| {
-        let (rgb, alpha) = obj.shade(ray, m, shader);
-        for (acc, v) in out.radiance.iter_mut().zip(rgb) {
-            *acc += out.transmittance * v;
-        }
-        out.transmittance *= 1.0 - alpha;
-        out.meets += 1;
-        out.transmittance < OPAQUE
-    };
+    let mut out = Composed::nothing();
+    let add = |out: &mut Composed, obj: O, m: &Meet| out.add(obj.shade(ray, m, shader));
     for obj in fixed {
         let d = obj.fixed_distance_m().unwrap_or(f64::INFINITY);
         while let Some((p, m)) = pending.pop_until(d) {
@@ -264,6 +282,29 @@ pub(super) struct Composed {
     pub(super) transmittance: f64,
     /// How many of the objects met were shaded (the rest lie behind an opaque one).
     pub(super) meets: usize,
+}
+
+impl Composed {
+    /// Nothing met yet: no radiance, everything shows through.
+    pub(super) fn nothing() -> Self {
+        Self {
+            radiance: [0.0; 3],
+            transmittance: 1.0,
+            meets: 0,
+        }
+    }
+
+    /// Compose an object's premultiplied radiance and coverage behind those so far; returns
+    /// whether nothing shows through any more (below [`OPAQUE`]).
+    #[inline]
+    pub(super) fn add(&mut self, (rgb, alpha): ([f64; 3], f64)) -> bool {
+        for (acc, v) in self.radiance.iter_mut().zip(rgb) {
+            *acc += self.transmittance * v;
+        }
+        self.transmittance *= 1.0 - alpha;
+        self.meets += 1;
+        self.transmittance < OPAQUE
+    }
 }
 
 #[cfg(test)]

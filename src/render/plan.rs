@@ -140,6 +140,7 @@ impl<'a> ViewCards<'a> {
             let k = out.distances_m.len() - 1;
             out.max_top_m[k] = out.max_top_m[k].max(top_m);
             out.cards.push(ViewCard {
+                index: out.cards.len(),
                 distance_index: k,
                 distance_m: c.distance_m,
                 offset_rad: wrap_pi(c.azimuth_rad - cam.heading_rad),
@@ -1017,6 +1018,8 @@ impl FramePlan<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::reflection::PartsCache;
+    use crate::render::{RenderOptions, flat_bands};
 
     /// The frame's elevations, from its film's edges (enough for these pole-free frames).
     fn elevations_of(camera: &Camera) -> (f64, f64) {
@@ -1035,6 +1038,71 @@ mod tests {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
                 (a.min(v), b.max(v))
             })
+    }
+
+    /// fig01's ships over its wind-roughened sea, `width` × `height` at 1 sample per pixel.
+    fn fig01_plan_inputs(width: u32, height: u32) -> (Scene, RenderOptions) {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/scenes/fig01_horizon_straight.toml"
+        );
+        let mut scene = Scene::from_file(std::path::Path::new(path)).expect("scene");
+        (scene.camera.width, scene.camera.height) = (width, height);
+        let options = RenderOptions {
+            samples_per_pixel: Some(1),
+            quiet: true,
+            ..RenderOptions::default()
+        };
+        (scene, options)
+    }
+
+    #[test]
+    fn a_bands_cached_mirror_images_are_each_samples_own() {
+        let (scene, options) = fig01_plan_inputs(480, 270);
+        let tracer = crate::render::prepare_tracer(&scene, None, &options).expect("tracer");
+        let plan = FramePlan::new(&scene, tracer.as_ref(), &options, None).expect("plan");
+        let (fan, shader) = (plan.fan.as_ref().expect("fan"), &plan.shader);
+        let mut heights = vec![None; shader.distances_m.len()];
+        let (mut compared, mut mirrored) = (0, 0);
+        for y in 0..plan.height {
+            let film_y = f64::from(y) + 0.5;
+            let bands = flat_bands(&plan.frame, y, plan.width, plan.flat_row_limit_rad);
+            let mut cache = PartsCache::default();
+            for (k, &(start, alpha)) in bands.iter().flatten().enumerate() {
+                let FanEnd::Ground {
+                    grazing_rad,
+                    distance_m,
+                } = fan.interpolate(alpha, &mut heights)
+                else {
+                    continue;
+                };
+                // The band's columns, both halves, left to right as a row is shaded.
+                let w = plan.width as usize;
+                let end = bands.iter().flatten().nth(k + 1).map_or(w, |b| b.0);
+                for x in (w - end..(w - start).min(w / 2)).chain(start..end) {
+                    let dir = plan
+                        .frame
+                        .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha);
+                    let Some(got) =
+                        shader.band_reflections(&dir, grazing_rad, distance_m, k, &mut cache)
+                    else {
+                        continue;
+                    };
+                    let want = shader.sea_reflections(&dir, grazing_rad, distance_m, false);
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "row {y} column {x}"
+                    );
+                    compared += 1;
+                    mirrored += usize::from(got.iter().any(|&v| v.abs() > 1e-4));
+                }
+            }
+        }
+        assert!(
+            compared > 10_000 && mirrored > 1_000,
+            "{compared} {mirrored}"
+        );
     }
 
     #[test]

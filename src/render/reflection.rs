@@ -23,7 +23,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::objects::{RayAlong, SampleRay};
+use super::objects::{Composed, Meet, PartAtCard, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, RayTracer};
 use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
@@ -1223,18 +1223,111 @@ impl Shader<'_> {
             None => {
                 let mut parts = Vec::new();
                 self.blur_parts(fan, table, grazing_rad, distance_m, az, |p| parts.push(p));
-                cache.entries.push(CachedParts { band, cards, parts });
+                let at_cards = self.parts_at_cards(fan, distance_m, &parts);
+                let met = self.cards_met(cards, &at_cards);
+                cache.entries.push(CachedParts {
+                    band,
+                    cards,
+                    parts,
+                    at_cards,
+                    met,
+                });
                 cache.entries.len() - 1
             }
         };
+        let entry = &cache.entries[at];
+        let n_cards = self.cards.len();
         let mut out = [0.0; 3];
-        for part in &cache.entries[at].parts {
-            let image = self.blur_part(fan, dir, az, distance_m, part);
+        for (i, (part, &met)) in entry.parts.iter().zip(&entry.met).enumerate() {
+            let at = &entry.at_cards[i * n_cards..(i + 1) * n_cards];
+            let image = self.band_part(fan, dir, az, distance_m, part, (met, at));
             for c in 0..3 {
                 out[c] += image[c];
             }
         }
         Some(out)
+    }
+
+    /// `parts`' rays reflected at `distance_m` at each card ([`PartAtCard`]; part by part,
+    /// one per card in order): their heights depend on the part, not on the sample's azimuth,
+    /// so a band's samples share them, and the cards' column means as its samples find them.
+    pub(super) fn parts_at_cards(
+        &self,
+        fan: &SeaFan,
+        distance_m: f64,
+        parts: &[BlurPart],
+    ) -> Vec<PartAtCard> {
+        parts
+            .iter()
+            .flat_map(|part| {
+                self.cards.iter().map(move |card| {
+                    let range_m = card.distance_m - distance_m;
+                    PartAtCard::of(fan, part.elevation_rad, part.span_rad, range_m)
+                })
+            })
+            .collect()
+    }
+
+    /// Which cards each part's ray meets (bit i: card i), part by part, for a band's samples
+    /// within the azimuth ranges of the cards `cards` (bit i: card i, beyond the sea point),
+    /// given the parts' [`Self::parts_at_cards`]: those whose height range holds the ray's
+    /// height there (as [`ViewCard`]'s meet tests it).
+    fn cards_met(&self, cards: u64, at_cards: &[PartAtCard]) -> Vec<u64> {
+        at_cards
+            .chunks(self.cards.len().max(1))
+            .map(|at| {
+                let meets = |(i, (card, at)): (usize, (&ViewCard<'_>, &PartAtCard))| {
+                    let within = at
+                        .mid_m
+                        .is_some_and(|h| !(h < card.base_m || h > card.top_m));
+                    ((cards >> i) & 1 == 1 && within).then_some(1u64 << i)
+                };
+                self.cards
+                    .iter()
+                    .zip(at)
+                    .enumerate()
+                    .filter_map(meets)
+                    .fold(0, |m, b| m | b)
+            })
+            .collect()
+    }
+
+    /// [`Self::blur_part`] for a sample of a band whose part's ray meets the cards `met`
+    /// ([`Self::cards_met`]) with `at` their [`PartAtCard`]s: those composed in order (the
+    /// cards are sorted by distance; no terrain), as [`Self::compose`] would; the same result.
+    fn band_part(
+        &self,
+        fan: &SeaFan,
+        dir: &ViewDirection,
+        az: f64,
+        distance_m: f64,
+        part: &BlurPart,
+        (met, at): (u64, &[PartAtCard]),
+    ) -> [f64; 3] {
+        if met == 0 {
+            return [0.0; 3];
+        }
+        let ray = part_ray(fan, dir, az, distance_m, part, Some(at));
+        let mut found = Composed::nothing();
+        let mut bits = met;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let card = &self.cards[i];
+            let (Some(height_m), Some(u)) = (at[i].mid_m, card.across(az, true)) else {
+                continue;
+            };
+            let meet = Meet {
+                distance_m: card.distance_m,
+                height_m,
+                u,
+                density_paths_m: None,
+            };
+            if found.add(card.shade(&ray, &meet, self)) {
+                break;
+            }
+        }
+        part_image(part, &found)
     }
 
     /// The mirror images on a calm sea: the one reflected ray of [`FacetTable`].
@@ -1279,6 +1372,7 @@ impl Shader<'_> {
                     elevation_rad: e,
                     from_m: distance_m,
                     span_rad: (e, e),
+                    at_cards: None,
                 },
                 az,
             );
@@ -1310,7 +1404,7 @@ impl Shader<'_> {
         let mut out = [0.0; 3];
         let az = azimuth();
         self.blur_parts(fan, table, grazing_rad, distance_m, az, |part| {
-            let image = self.blur_part(fan, dir, az, distance_m, &part);
+            let image = self.blur_part(fan, dir, az, distance_m, &part, None);
             for c in 0..3 {
                 out[c] += image[c];
             }
@@ -1320,7 +1414,7 @@ impl Shader<'_> {
 
     /// What one part of a rough sea's slopes adds along `dir` (azimuth offset `az`), reflected
     /// at `distance_m`: the objects its middle ray meets, weighted by the part's share, over the
-    /// sky they hide.
+    /// sky they hide. `at_cards`: the part's [`Self::parts_at_cards`], if found before.
     #[inline]
     pub(super) fn blur_part(
         &self,
@@ -1329,27 +1423,10 @@ impl Shader<'_> {
         az: f64,
         distance_m: f64,
         part: &BlurPart,
+        at_cards: Option<&[PartAtCard]>,
     ) -> [f64; 3] {
-        let ray = SampleRay::with_azimuth(
-            dir,
-            RayAlong::Reflected {
-                fan,
-                elevation_rad: part.elevation_rad,
-                from_m: distance_m,
-                span_rad: part.span_rad,
-            },
-            az,
-        );
-        let found = self.compose(&ray);
-        let covered = 1.0 - found.transmittance;
-        if covered == 0.0 {
-            return [0.0; 3];
-        }
-        let mut out = [0.0; 3];
-        for (c, v) in out.iter_mut().enumerate() {
-            *v = part.share * found.radiance[c] - covered * part.sky[c];
-        }
-        out
+        let ray = part_ray(fan, dir, az, distance_m, part, at_cards);
+        part_image(part, &self.compose(&ray))
     }
 
     /// The parts of the slopes a ray meeting a rough sea at `grazing_rad`, `distance_m` (azimuth
@@ -1502,6 +1579,10 @@ struct CachedParts {
     /// Bit i: card i of the shader is mirrored.
     cards: u64,
     parts: Vec<BlurPart>,
+    /// The parts' [`Shader::parts_at_cards`].
+    at_cards: Vec<PartAtCard>,
+    /// The cards each part's ray meets ([`Shader::cards_met`]).
+    met: Vec<u64>,
 }
 
 /// One part of a rough sea's slopes that mirrors something ([`Shader::blur_parts`]).
@@ -1530,6 +1611,42 @@ fn terrain_part(span: &SlopeSpan<'_>, top: f64, weight: f64) -> BlurPart {
         share: weight * share,
         sky: span.sky(t_top).map(|v| weight * v),
     }
+}
+
+/// The ray that stands for `part` of the slopes of a sample along `dir` (azimuth offset `az`)
+/// reflected at `distance_m` ([`Shader::blur_part`]).
+#[inline]
+fn part_ray<'a>(
+    fan: &'a SeaFan,
+    dir: &'a ViewDirection,
+    az: f64,
+    distance_m: f64,
+    part: &BlurPart,
+    at_cards: Option<&'a [PartAtCard]>,
+) -> SampleRay<'a> {
+    let along = RayAlong::Reflected {
+        fan,
+        elevation_rad: part.elevation_rad,
+        from_m: distance_m,
+        span_rad: part.span_rad,
+        at_cards,
+    };
+    SampleRay::with_azimuth(dir, along, az)
+}
+
+/// What `part` adds given what its ray `found`: the objects' radiance weighted by its share,
+/// over the sky they hide (nothing where they hide none).
+#[inline]
+fn part_image(part: &BlurPart, found: &Composed) -> [f64; 3] {
+    let covered = 1.0 - found.transmittance;
+    if covered == 0.0 {
+        return [0.0; 3];
+    }
+    let mut out = [0.0; 3];
+    for (c, v) in out.iter_mut().enumerate() {
+        *v = part.share * found.radiance[c] - covered * part.sky[c];
+    }
+    out
 }
 
 /// Whether `card`'s azimuth range holds azimuth offset `az`.

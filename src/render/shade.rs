@@ -74,6 +74,8 @@ impl AerialShading {
 
 /// A card prepared for shading.
 pub(super) struct ViewCard<'a> {
+    /// Its index in the frame's cards (sorted by distance).
+    pub(super) index: usize,
     pub(super) distance_index: usize,
     /// Its ground distance (m).
     pub(super) distance_m: f64,
@@ -144,7 +146,7 @@ impl ViewCard<'_> {
     /// coordinate there, if within its width. A camera ray wraps the offset only when it is
     /// beyond ±π, a reflected ray always (as each path always has).
     #[inline]
-    fn across(&self, azimuth: f64, always_wrap: bool) -> Option<f64> {
+    pub(super) fn across(&self, azimuth: f64, always_wrap: bool) -> Option<f64> {
         let mut offset = azimuth - self.offset_rad;
         if always_wrap {
             if !in_width(offset, self.half_width_rad) {
@@ -177,14 +179,23 @@ impl ViewCard<'_> {
                     fan,
                     from_m,
                     span_rad: (e0, e1),
+                    at_cards,
                     ..
                 },
                 Some(columns),
             ) if e1 > e0 => {
-                let range_m = self.distance_m - from_m;
-                let end = |e: f64, edge: f64| fan.height(e, range_m).map_or(edge, v);
-                let (v0, v1) = (end(e0, 1.0), end(e1, 0.0));
-                columns.mean(self.texture, meet.u, v0, v1)
+                let ends = |[h0, h1]: [Option<f64>; 2]| (h0.map_or(1.0, v), h1.map_or(0.0, v));
+                match at_cards {
+                    Some(at) => {
+                        let at = &at[self.index];
+                        columns.mean_memo(self.texture, meet.u, ends(at.ends_m), &at.columns)
+                    }
+                    None => {
+                        let range_m = self.distance_m - from_m;
+                        let (v0, v1) = ends([fan.height(e0, range_m), fan.height(e1, range_m)]);
+                        columns.mean(self.texture, meet.u, v0, v1)
+                    }
+                }
             }
             _ => self.texture.sample(meet.u, v(meet.height_m)),
         }
@@ -223,6 +234,7 @@ impl SceneObject for ViewCard<'_> {
                 fan,
                 elevation_rad,
                 from_m,
+                at_cards,
                 ..
             } => {
                 // Beyond the reflection point and in the card's azimuth range first (cheap).
@@ -234,7 +246,11 @@ impl SceneObject for ViewCard<'_> {
                 {
                     return None;
                 }
-                (fan.height(elevation_rad, self.distance_m - from_m)?, true)
+                let h = match at_cards {
+                    Some(at) => at[self.index].mid_m,
+                    None => fan.height(elevation_rad, self.distance_m - from_m),
+                };
+                (h?, true)
             }
         };
         if h < self.base_m || h > self.top_m {

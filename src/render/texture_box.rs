@@ -10,6 +10,8 @@
 //! A rough sea mirrors a whole interval of a card's heights into one part of a pixel's slope
 //! cell, and this is the card's mean over it (see `super::reflection`).
 
+use std::cell::Cell;
+
 use crate::scene::Texture;
 
 /// Running integrals along v of each column of one texture.
@@ -110,6 +112,40 @@ impl TextureColumns {
     /// over the interval; the sample itself when the interval is empty.
     #[inline]
     pub(super) fn mean(&self, texture: &Texture, u: f64, v0: f64, v1: f64) -> [f32; 4] {
+        self.mean_by(texture, u, v0, v1, |x0, x1, a, b| {
+            let column = |x: usize| self.column_mean(texture, x, a, b);
+            (column(x0), column(x1))
+        })
+    }
+
+    /// [`Self::mean`], the two columns' means kept in `memo` and taken from it when found
+    /// before over the same interval: the same values, each found once for a run of samples
+    /// whose `u` moves rightwards across the texture over one interval (a band's samples on one
+    /// part of a rough sea's slopes).
+    #[inline]
+    pub(super) fn mean_memo(
+        &self,
+        texture: &Texture,
+        u: f64,
+        (v0, v1): (f64, f64),
+        memo: &ColumnMemo,
+    ) -> [f32; 4] {
+        self.mean_by(texture, u, v0, v1, |x0, x1, a, b| {
+            memo.pair((x0, x1), (a, b), |x| self.column_mean(texture, x, a, b))
+        })
+    }
+
+    /// [`Self::mean`] with the means of the two columns it interpolates from `pair` (columns
+    /// x₀ and x₁, v₀, v₁ with v₀ ≤ v₁).
+    #[inline(always)]
+    fn mean_by(
+        &self,
+        texture: &Texture,
+        u: f64,
+        v0: f64,
+        v1: f64,
+        pair: impl FnOnce(usize, usize, f64, f64) -> ([f64; 4], [f64; 4]),
+    ) -> [f32; 4] {
         let (v0, v1) = (v0.min(v1), v0.max(v1));
         if v1.is_nan() || v0.is_nan() || v1 <= v0 || self.prefix.is_empty() {
             return texture.sample(u, 0.5 * (v0 + v1));
@@ -122,15 +158,58 @@ impl TextureColumns {
         let x0 = (x as usize).min(w - 1);
         let x1 = (x0 + 1).min(w - 1);
         let fx = x - x0 as f64;
-        let (a, b) = (
-            self.column_mean(texture, x0, v0, v1),
-            self.column_mean(texture, x1, v0, v1),
-        );
+        let (a, b) = pair(x0, x1, v0, v1);
         let mut out = [0.0f32; 4];
         for c in 0..4 {
             out[c] = (a[c] + (b[c] - a[c]) * fx) as f32;
         }
         out
+    }
+}
+
+/// The means of the last pair of neighbouring texture columns found over one interval of v
+/// ([`TextureColumns::mean_memo`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct ColumnMemo {
+    /// The pair's columns and the interval's bits; `usize::MAX`: none yet.
+    key: Cell<(usize, usize, u64, u64)>,
+    /// The two columns' means.
+    means: Cell<[[f64; 4]; 2]>,
+}
+
+impl Default for ColumnMemo {
+    fn default() -> Self {
+        Self {
+            key: Cell::new((usize::MAX, usize::MAX, 0, 0)),
+            means: Cell::new([[0.0; 4]; 2]),
+        }
+    }
+}
+
+impl ColumnMemo {
+    /// The means of columns `x` over `v`: those kept here, else from `find` (the left one taken
+    /// over from the pair kept when that ended at it), kept in its place.
+    #[inline]
+    fn pair(
+        &self,
+        x: (usize, usize),
+        v: (f64, f64),
+        find: impl Fn(usize) -> [f64; 4],
+    ) -> ([f64; 4], [f64; 4]) {
+        let key = (x.0, x.1, v.0.to_bits(), v.1.to_bits());
+        let (kept, means) = (self.key.get(), self.means.get());
+        if kept == key {
+            return (means[0], means[1]);
+        }
+        let a = if (kept.1, kept.2, kept.3) == (x.0, key.2, key.3) {
+            means[1]
+        } else {
+            find(x.0)
+        };
+        let b = find(x.1);
+        self.key.set(key);
+        self.means.set([a, b]);
+        (a, b)
     }
 }
 
@@ -190,6 +269,50 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_memo_gives_the_means_found_without_it() {
+        let tex = texture();
+        let cols = TextureColumns::new(&tex);
+        let memo = ColumnMemo::default();
+        // A run of samples across the texture over one interval, then back over another (and
+        // outside the texture, and empty intervals): bit for bit the same.
+        let mut found = 0;
+        for (v0, v1) in [(0.2, 0.7), (0.8, 0.31), (0.5, 0.5), (-0.2, 1.3)] {
+            for i in 0..=60 {
+                let u = -0.1 + 1.2 * f64::from(i) / 60.0;
+                let want = cols.mean(&tex, u, v0, v1);
+                let got = cols.mean_memo(&tex, u, (v0, v1), &memo);
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    want.map(f32::to_bits),
+                    "{u} {v0} {v1}"
+                );
+                found += usize::from(want != [0.0; 4]);
+            }
+        }
+        assert!(found > 100, "{found}");
+    }
+
+    #[test]
+    fn a_rightward_run_finds_each_column_mean_once() {
+        let memo = ColumnMemo::default();
+        let calls = Cell::new(0);
+        let find = |x: usize| {
+            calls.set(calls.get() + 1);
+            [x as f64; 4]
+        };
+        // Four samples per column pair, across columns 0…9.
+        for i in 0..36 {
+            let x0 = i / 4;
+            let (a, b) = memo.pair((x0, x0 + 1), (0.25, 0.5), find);
+            assert_eq!((a[0], b[0]), (x0 as f64, (x0 + 1) as f64));
+        }
+        assert_eq!(calls.get(), 10);
+        // Another interval is found anew.
+        let (a, _) = memo.pair((8, 9), (0.25, 0.75), find);
+        assert_eq!((a[0], calls.get()), (8.0, 12));
     }
 
     #[test]
