@@ -106,7 +106,7 @@ fn train_palette(frames: &[Vec<u8>]) -> Palette {
     let mut k = 0usize;
     for f in frames {
         for p in f.chunks_exact(3) {
-            if k % stride == 0 {
+            if k.is_multiple_of(stride) {
                 sample.extend_from_slice(&[p[0], p[1], p[2], 255]);
             }
             k += 1;
