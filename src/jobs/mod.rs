@@ -230,8 +230,8 @@ pub enum JobError {
     #[error(transparent)]
     Film(#[from] crate::output::film::FilmExportError),
     /// A sequence's animated GIF could not be encoded.
-    #[error("cannot encode GIF: {0}")]
-    Gif(#[source] image::ImageError),
+    #[error(transparent)]
+    Gif(#[from] crate::output::gif::GifError),
     /// A sequence's plot could not be drawn.
     #[error("cannot draw the sequence plot sun.png: {0}")]
     Plot(String),

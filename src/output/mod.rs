@@ -8,6 +8,7 @@
 
 pub mod exr;
 pub mod film;
+pub mod gif;
 pub mod plot;
 pub mod png;
 

@@ -72,32 +72,27 @@ pub fn frames_csv(columns: &[String], plans: &[FramePlan], frames: &[SweepFrame]
     text
 }
 
-/// An animated GIF of `films` (8-bit sRGB at `exposure`, each frame quantised to 256 colours,
-/// [`GIF_FRAME_MS`] per frame, looping).
+/// An animated GIF of `films` (8-bit sRGB at `exposure`, one palette of 256 colours for all
+/// frames, [`GIF_FRAME_MS`] per frame, looping; `crate::output::gif`).
 pub fn encode_gif(films: &[&Film], exposure: f64) -> Result<Vec<u8>, JobError> {
-    use image::codecs::gif::{GifEncoder, Repeat};
-    use image::{Delay, Frame, RgbaImage};
-    let gif_error = JobError::Gif;
-    let frames: Vec<Frame> = films
+    let Some(first) = films.first() else {
+        return Ok(crate::output::gif::encode_animation(
+            &[],
+            1,
+            1,
+            GIF_FRAME_MS,
+        )?);
+    };
+    let frames: Vec<Vec<u8>> = films
         .par_iter()
-        .map(|film| {
-            let rgb = crate::output::png::film_to_srgb8(film, exposure);
-            let rgba: Vec<u8> = rgb
-                .chunks_exact(3)
-                .flat_map(|p| [p[0], p[1], p[2], 255])
-                .collect();
-            let image = RgbaImage::from_raw(film.width, film.height, rgba)
-                .unwrap_or_else(|| RgbaImage::new(film.width, film.height));
-            Frame::from_parts(image, 0, 0, Delay::from_numer_denom_ms(GIF_FRAME_MS, 1))
-        })
+        .map(|film| crate::output::png::film_to_srgb8(film, exposure))
         .collect();
-    let mut bytes = Vec::new();
-    {
-        let mut encoder = GifEncoder::new_with_speed(&mut bytes, 10);
-        encoder.set_repeat(Repeat::Infinite).map_err(gif_error)?;
-        encoder.encode_frames(frames).map_err(gif_error)?;
-    }
-    Ok(bytes)
+    Ok(crate::output::gif::encode_animation(
+        &frames,
+        first.width,
+        first.height,
+        GIF_FRAME_MS,
+    )?)
 }
 
 /// The first executable file `name` in the folders of the PATH environment variable.
