@@ -378,8 +378,14 @@ mod tests {
     #[test]
     fn straddle_kernels_bound_the_steps_error_on_a_jump_and_a_kink() {
         let (jump, kink) = (straddle_error(1), straddle_error(2));
-        assert!(jump <= STRADDLE_KERNEL && jump > 0.7 * STRADDLE_KERNEL, "{jump}");
-        assert!(kink <= STRADDLE_KINK_KERNEL && kink > 0.7 * STRADDLE_KINK_KERNEL, "{kink}");
+        assert!(
+            jump <= STRADDLE_KERNEL && jump > 0.7 * STRADDLE_KERNEL,
+            "{jump}"
+        );
+        assert!(
+            kink <= STRADDLE_KINK_KERNEL && kink > 0.7 * STRADDLE_KINK_KERNEL,
+            "{kink}"
+        );
     }
 
     #[test]
