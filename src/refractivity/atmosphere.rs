@@ -135,7 +135,8 @@ pub struct RefractiveSample {
 ///
 /// The column's breaks are split into those where dn/dh jumps (see
 /// [`breaks_m`](StratifiedIndex::breaks_m)) and the minor ones where only d²n/dh² does, with
-/// the size of that jump (see [`minor_breaks`](StratifiedIndex::minor_breaks)), so the tracer
+/// the sizes of its jumps of d²n/dh² and d³n/dh³ (see
+/// [`minor_breaks`](StratifiedIndex::minor_breaks)), so the tracer
 /// ends its steps only where that matters at its tolerance.
 pub struct RefractiveAtmosphere {
     column: Arc<dyn AirColumn>,
@@ -149,7 +150,7 @@ pub struct RefractiveAtmosphere {
     error: OnceLock<TableError>,
     /// The column's breaks where dn/dh jumps, as heights above the surface (m).
     breaks_agl_m: Vec<f64>,
-    /// The column's breaks where only d²n/dh² jumps.
+    /// The column's breaks where dn/dh is continuous (d²n/dh² or d³n/dh³ jumps).
     minor_breaks: Vec<MinorBreak>,
     /// The column's fine zones, as heights above the surface (m).
     fine_zones: Vec<FineZone>,
@@ -478,7 +479,7 @@ impl StratifiedIndex for RefractiveAtmosphere {
         &self.breaks_agl_m
     }
 
-    /// The column's breaks where only d²n/dh² jumps, with the jump.
+    /// The column's breaks where dn/dh is continuous, with their jumps of d²n/dh² and d³n/dh³.
     fn minor_breaks(&self) -> &[MinorBreak] {
         &self.minor_breaks
     }
@@ -516,12 +517,13 @@ fn validate_column(
 const BREAK_PROBE_M: f64 = 1e-3;
 /// A break whose dn/dh jumps by more than this (m⁻¹) is a break the tracer always honours;
 /// below it, dn/dh is continuous to the precision of the one-sided differences and the level
-/// is a minor break, described by its jump of d²n/dh².
+/// is a minor break, described by its jumps of d²n/dh² and d³n/dh³.
 const BREAK_MIN_SLOPE_JUMP_PER_M: f64 = 1e-15;
 
 /// The column's breaks (m above mean sea level) as heights above the surface, split into those
-/// where dn/dh jumps and the minor ones where only d²n/dh² does, with that jump (one-sided
-/// differences of the exact dn/dh). Levels where neither jumps are dropped.
+/// where dn/dh jumps and the minor ones where only d²n/dh² or d³n/dh³ does, with those jumps
+/// (one-sided first and second differences of the exact dn/dh). Levels where nothing jumps
+/// are dropped.
 fn split_breaks(
     breaks_msl_m: Vec<f64>,
     surface_m: f64,
@@ -532,24 +534,22 @@ fn split_breaks(
     let mut minor = Vec::new();
     for b in crate::profile::normalise_breaks(breaks_msl_m) {
         let h = b - surface_m;
-        if h <= 2.0 * d {
+        if h <= 3.0 * d {
             continue;
         }
         let slope = |x: f64| exact(x).map(|v| v.1);
-        let (m2, m1, p1, p2) = (
-            slope(h - 2.0 * d)?,
-            slope(h - d)?,
-            slope(h + d)?,
-            slope(h + 2.0 * d)?,
-        );
+        let (m3, m2, m1) = (slope(h - 3.0 * d)?, slope(h - 2.0 * d)?, slope(h - d)?);
+        let (p1, p2, p3) = (slope(h + d)?, slope(h + 2.0 * d)?, slope(h + 3.0 * d)?);
         let slope_jump = ((2.0 * p1 - p2) - (2.0 * m1 - m2)).abs();
         let curvature_jump = ((p2 - p1) - (m1 - m2)).abs() / d;
+        let curvature_kink = ((p3 - 2.0 * p2 + p1) - (m1 - 2.0 * m2 + m3)).abs() / (d * d);
         if slope_jump > BREAK_MIN_SLOPE_JUMP_PER_M {
             major.push(h);
-        } else if curvature_jump > 0.0 {
+        } else if curvature_jump > 0.0 || curvature_kink > 0.0 {
             minor.push(MinorBreak {
                 height_m: h,
                 curvature_jump_per_m2: curvature_jump,
+                curvature_kink_per_m3: curvature_kink,
             });
         }
     }

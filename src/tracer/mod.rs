@@ -54,7 +54,7 @@ pub trait IndexField: Send + Sync {
     fn breaks_m(&self) -> &[f64] {
         &[]
     }
-    /// Levels where only d²n/dh² jumps, with the size of the jump (see
+    /// Levels where dn/dh is continuous but d²n/dh² or d³n/dh³ jumps, with the jumps (see
     /// [`StratifiedIndex::minor_breaks`]). Default: none.
     fn minor_breaks(&self) -> &[MinorBreak] {
         &[]
@@ -93,9 +93,10 @@ pub trait StratifiedIndex: Send + Sync {
     fn breaks_m(&self) -> &[f64] {
         &[]
     }
-    /// Further levels where only d²n/dh² jumps, each with the size of its jump (ascending). A
-    /// step straddling one loses little, so the tracer ends its steps only on those that could
-    /// matter at its tolerance (see `breaks::settle`). Default: none.
+    /// Further levels where dn/dh is continuous and only d²n/dh² or d³n/dh³ jumps, each with
+    /// the sizes of its jumps (ascending). A step straddling one loses little, so the tracer
+    /// ends its steps only on those that could matter at its tolerance (see `breaks::settle`).
+    /// Default: none.
     fn minor_breaks(&self) -> &[MinorBreak] {
         &[]
     }

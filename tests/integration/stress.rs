@@ -1130,6 +1130,32 @@ fn a_steep_ray_across_the_thin_jumps_gets_more_accurate_as_the_tolerance_shrinks
     assert_error_falls_with_the_tolerance("thin_jumps_30k", 2.0, 15.0, steps, &tolerances_m);
 }
 
+/// The row of `thin_jumps_30k` whose worst error grew as the tolerance shrank (observer 2 m,
+/// 0.46°, 168 m high at 26 km). Between the jumps at 30 and 60 m the sounding's levels are 0.5 m
+/// apart with temperatures written to 1e-6 K; their fit meets at each knot with nearly equal
+/// curvature (jump ≈ 3e-15 m⁻²) but a kink (d³n/dh³ jumps by ≈ 9e-11 m⁻³). Costed by the
+/// curvature jump alone, those knots were dropped at 1 m … 1 cm, and steps 4 m high and up to
+/// 1 160 m long crossed eight of them each: the Dormand–Prince weights on that field turn the
+/// ray by 0.9–1.5e-9 rad per step, while the 5(4) estimate sees 1.2e-10 rad. At 26 km the ray
+/// was 3.3e-5 / 2.8e-5 / 4.1e-5 / 6.2e-9 m off at 1 m / 0.1 m / 1 cm / 1 mm; the kink now
+/// enters each knot's straddle cost, and the error falls with the tolerance.
+#[test]
+fn a_ray_across_the_kinked_knots_between_the_thin_jumps_gets_more_accurate_as_the_tolerance_shrinks()
+ {
+    // Short ground steps: at 0.46° the reference is settled to 3e-10 m with these (to 3e-6 m
+    // with 2 m ground steps).
+    let steps = ReferenceSteps {
+        max_ground_step_m: 0.5,
+        max_height_step_m: 0.05,
+        fine: Some(FineSteps {
+            below_m: LAYERS_TOP_M,
+            max_height_step_m: 0.00625,
+        }),
+    };
+    let tolerances_m = [1.0, 0.1, 1e-2, 1e-3, 1e-4];
+    assert_error_falls_with_the_tolerance("thin_jumps_30k", 2.0, 0.46, steps, &tolerances_m);
+}
+
 /// A 50° ray from 2 km through `arctic_surface_inversion` crosses the US 1976 layer base at
 /// 32.16 km (dn/dh jumps by 1.4e-11 m⁻¹) just before 26 km of ground. The step landing just
 /// short of it is over a kilometre long, and its last internal stages, less accurate than its
