@@ -553,7 +553,8 @@ impl<'a> TerrainView<'a> {
         let end = if t >= 0.5 { eb } else { ea };
         let mut hit = self.march(p, 0, height, |b| ma[b].min(mb[b]), end)?;
         if self.frame.scale_heights_m.is_some() {
-            let density = |k: usize| self.density_to(k, fan.ray_heights(k), hit);
+            let c = self.traced.interval(hit.distance_m);
+            let density = |k: usize| self.density_in(k, fan.ray_heights(k), c, hit);
             hit.density_paths_m = match (density(i), density(j1)) {
                 (Some(x), Some(y)) => Some([0, 1].map(|c| x[c] + (y[c] - x[c]) * t)),
                 (x, y) => x.or(y),
@@ -562,18 +563,24 @@ impl<'a> TerrainView<'a> {
         Some(hit)
     }
 
-    /// Density-weighted lengths along fan ray `i` (its traced `heights`) to `hit`: its sum to
-    /// the traced distance before the hit, then linear to the next one, or (past its last
-    /// traced height) the piece from there to the hit point.
+    /// Density-weighted lengths along fan ray `i` (its traced `heights`) to `hit`, in traced
+    /// interval `c` ([`TracedGrid::interval`] of its distance): its sum to the traced distance
+    /// before the hit, then linear to the next one, or (past its last traced height) the piece
+    /// from there to the hit point.
     #[inline]
-    fn density_to(&self, i: usize, heights: &[Option<f64>], hit: TerrainHit) -> Option<[f64; 2]> {
+    fn density_in(
+        &self,
+        i: usize,
+        heights: &[Option<f64>],
+        c: usize,
+        hit: TerrainHit,
+    ) -> Option<[f64; 2]> {
         let m = self.traced.traced_m.len();
         let sums = &self.ray_density[i * m..(i + 1) * m];
-        let c = self.traced.interval(hit.distance_m);
         self.interpolated_density(sums, heights, c, hit)
     }
 
-    /// [`Self::density_to`] on the sums `sums` of one ray, the hit in traced interval `c`.
+    /// [`Self::density_in`] on the sums `sums` of one ray, the hit in traced interval `c`.
     #[inline]
     fn interpolated_density(
         &self,

@@ -21,6 +21,7 @@
 //! [`Dem::fill_voids`] replaces those it can reach by the harmonic interpolation of the
 //! heights around them (what a scene's terrain does unless `fill_voids = false`).
 
+use rayon::prelude::*;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
@@ -242,9 +243,10 @@ impl Dem {
             (None, Some(a)) => a - here,
             (None, None) => f32::NAN,
         };
-        (0..rows * cols)
-            .map(|i| {
-                let (r, c) = (i / cols, i % cols);
+        (0..rows)
+            .into_par_iter()
+            .flat_map_iter(|r| (0..cols).map(move |c| (r, c)))
+            .map(|(r, c)| {
                 let here = h(r, c);
                 let south = diff(
                     r.checked_sub(1).map(|r| h(r, c)),
@@ -271,8 +273,7 @@ impl Dem {
         c: f64,
         radius_m: f64,
     ) -> Option<(f64, [f64; 3])> {
-        let south = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][0]));
-        let east = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][1]));
+        let [south, east] = bilinear_pair(self.rows, self.cols, r, c, gradients);
         if !(south.is_finite() && east.is_finite()) {
             return None;
         }
@@ -424,6 +425,22 @@ fn bilinear(rows: usize, cols: usize, r: f64, c: f64, at: impl Fn(usize) -> f64)
     let top = at(i) + (at(i + 1) - at(i)) * tc;
     let bottom = at(i + cols) + (at(i + cols + 1) - at(i + cols)) * tc;
     top + (bottom - top) * tr
+}
+
+/// [`bilinear`] of both components of `values` (the same arithmetic per component, one
+/// lookup of the cell).
+#[inline]
+fn bilinear_pair(rows: usize, cols: usize, r: f64, c: f64, values: &[[f32; 2]]) -> [f64; 2] {
+    let (r0, c0) = ((r as usize).min(rows - 2), (c as usize).min(cols - 2));
+    let (tr, tc) = (r - r0 as f64, c - c0 as f64);
+    let i = r0 * cols + c0;
+    let (top, bottom) = (&values[i..i + 2], &values[i + cols..i + cols + 2]);
+    [0, 1].map(|k| {
+        let at = |v: &[[f32; 2]], j: usize| f64::from(v[j][k]);
+        let top = at(top, 0) + (at(top, 1) - at(top, 0)) * tc;
+        let bottom = at(bottom, 0) + (at(bottom, 1) - at(bottom, 0)) * tc;
+        top + (bottom - top) * tr
+    })
 }
 
 fn invalid(path: &Path, field: &'static str, message: String) -> DemError {
