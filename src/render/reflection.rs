@@ -251,12 +251,12 @@ impl SeaFan {
         };
         // (`max` maps a NaN range to 0: every height of the ray bounds it.)
         let x = (range_m * self.inv_step_r).max(0.0);
-        if x > (self.n_r - 1) as f64 {
+        if x > (self.n_r - 1) as u32 as f64 {
             return f64::INFINITY;
         }
         // The interpolated height in cell m is a weighted mean of the nodes m, m + 1 of rows
         // i, i + 1, so the nodes' minimum from m on bounds it there and beyond.
-        let m = x as usize;
+        let m = x as u32 as usize;
         let at = |i: usize| self.min_beyond[i * self.n_r + m];
         f64::from(at(i).min(at(i + 1)))
     }

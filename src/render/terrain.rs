@@ -513,7 +513,8 @@ impl<'a> TerrainView<'a> {
     #[inline]
     fn profile(&self, offset_rad: f64) -> Option<usize> {
         let p = ((offset_rad - self.az_start_rad) * self.az_inv_step + 0.5).floor();
-        (p >= 0.0 && p < self.n_profiles as f64).then_some(p as usize)
+        // (At most MAX_TERRAIN_PROFILES: the u32 casts are exact.)
+        (p >= 0.0 && p < self.n_profiles as u32 as f64).then_some(p as u32 as usize)
     }
 
     /// Where a sample at apparent elevation `alpha` and azimuth offset `offset_rad` meets the
@@ -939,13 +940,16 @@ fn sample_profiles(
     n_profiles: usize,
 ) -> Vec<f32> {
     let radius = frame.earth_radius_m;
+    // The angles along the circles are the same for every profile.
+    let angles: Vec<(f64, f64)> = distances_m.iter().map(|&d| (d / radius).sin_cos()).collect();
+    let angles = &angles;
     (0..n_profiles)
         .into_par_iter()
         .flat_map_iter(|p| {
             let circle = terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step);
-            distances_m.iter().map(move |&d| {
+            angles.iter().map(move |&angle| {
                 circle
-                    .grid_at(terrain, d, radius)
+                    .grid_at_angle(terrain, angle)
                     .and_then(|(r, c)| terrain.dem.height_at_grid(r, c))
                     .filter(|&z| z > 0.0)
                     .map_or(f32::NEG_INFINITY, |z| z as f32)
