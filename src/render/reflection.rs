@@ -1904,6 +1904,40 @@ mod launch_tests {
     }
 
     #[test]
+    fn sea_fan_cells_are_those_of_the_usize_casts() {
+        // The u32 casts of `SeaFan::cell` and `min_height_beyond` against usize's, bit for bit,
+        // up to the largest fan (and off it).
+        let by_usize = |x: f64, n: usize| {
+            let last = (n - 1) as f64;
+            (x >= 0.0 && x <= last).then(|| {
+                let i = (x as usize).min(n - 2);
+                (i, x - i as f64)
+            })
+        };
+        for n in [2, 3, 17, MAX_SEA_FAN_RANGES, MAX_SEA_FAN_RAYS] {
+            let last = (n - 1) as f64;
+            let xs = [
+                -1e-300,
+                0.0,
+                1e-12,
+                0.5,
+                1.0 - 1e-16,
+                1.0,
+                last - 0.25,
+                last,
+                last + 1e-9,
+            ];
+            for x in xs.into_iter().chain([f64::NAN, f64::INFINITY]) {
+                let (a, b) = (SeaFan::cell(x, n), by_usize(x, n));
+                assert_eq!(
+                    a.map(|(i, u)| (i, u.to_bits())),
+                    b.map(|(i, u)| (i, u.to_bits()))
+                );
+            }
+        }
+    }
+
+    #[test]
     fn the_sea_level_sun_launch_is_found_within_its_tolerance_in_few_rays() {
         // Refraction falling from 0.6° at the surface (a strong duct) and a duct that traps
         // every ray launched below 0.2°.

@@ -941,7 +941,10 @@ fn sample_profiles(
 ) -> Vec<f32> {
     let radius = frame.earth_radius_m;
     // The angles along the circles are the same for every profile.
-    let angles: Vec<(f64, f64)> = distances_m.iter().map(|&d| (d / radius).sin_cos()).collect();
+    let angles: Vec<(f64, f64)> = distances_m
+        .iter()
+        .map(|&d| (d / radius).sin_cos())
+        .collect();
     let angles = &angles;
     (0..n_profiles)
         .into_par_iter()

@@ -762,4 +762,34 @@ mod tests {
         assert_eq!(dem.height_at(1.01, 0.1), None);
         assert!(dem.slope_at(0.5, 0.375, 6.371e6).is_some());
     }
+
+    #[test]
+    fn gradients_in_parallel_are_row_major_and_interpolated_as_each_component_alone() {
+        // A bumpy 7 × 9 grid with a void: every sample's central (one-sided next to the void
+        // and at the edges) differences, in row-major order.
+        let (rows, cols) = (7, 9);
+        let mut h: Vec<f32> = (0..rows * cols)
+            .map(|k| ((k * 37) % 23) as f32 * 1.5)
+            .collect();
+        h[3 * cols + 4] = f32::NAN;
+        let dem = Dem::new(rows, cols, (1.0, 0.0), (0.01, 0.01), h.clone()).unwrap();
+        let g = dem.gradients();
+        let at = |r: usize, c: usize| h[r * cols + c];
+        assert_eq!(
+            g[cols + 1],
+            [0.5 * (at(2, 1) - at(0, 1)), 0.5 * (at(1, 2) - at(1, 0))]
+        );
+        assert_eq!(g[2 * cols + 4][0], at(2, 4) - at(1, 4));
+        assert_eq!(g[3 * cols + 5][1], at(3, 6) - at(3, 5));
+        assert_eq!(g[cols - 1][1], at(0, cols - 1) - at(0, cols - 2));
+        assert_eq!(g[(rows - 1) * cols][0], at(rows - 1, 0) - at(rows - 2, 0));
+        // The pair interpolation is each component's own, bit for bit.
+        for (r, c) in [(0.0, 0.0), (0.3, 7.9), (5.999, 2.5), (6.0, 8.0), (2.7, 4.2)] {
+            let pair = bilinear_pair(rows, cols, r, c, &g);
+            for (k, v) in pair.into_iter().enumerate() {
+                let alone = bilinear(rows, cols, r, c, |i| f64::from(g[i][k]));
+                assert_eq!(v.to_bits(), alone.to_bits(), "({r}, {c}) {k}");
+            }
+        }
+    }
 }
