@@ -183,12 +183,13 @@ impl SeaFan {
     /// Cell and fraction of `x` (already scaled to grid units) on a grid of `n` nodes.
     #[inline]
     fn cell(x: f64, n: usize) -> Option<(usize, f64)> {
-        let last = (n - 1) as f64;
+        // n ≤ MAX_SEA_FAN_RAYS: through u32 the casts are exact and cheaper than usize's.
+        let last = (n - 1) as u32 as f64;
         if !(x >= 0.0 && x <= last) {
             return None;
         }
-        let i = (x as usize).min(n - 2);
-        Some((i, x - i as f64))
+        let i = (x as u32).min(n as u32 - 2);
+        Some((i as usize, x - f64::from(i)))
     }
 
     /// The ray launched from the sea at `elevation_rad`, for its heights at many ranges
@@ -250,12 +251,12 @@ impl SeaFan {
         };
         // (`max` maps a NaN range to 0: every height of the ray bounds it.)
         let x = (range_m * self.inv_step_r).max(0.0);
-        if x > (self.n_r - 1) as f64 {
+        if x > (self.n_r - 1) as u32 as f64 {
             return f64::INFINITY;
         }
         // The interpolated height in cell m is a weighted mean of the nodes m, m + 1 of rows
         // i, i + 1, so the nodes' minimum from m on bounds it there and beyond.
-        let m = x as usize;
+        let m = x as u32 as usize;
         let at = |i: usize| self.min_beyond[i * self.n_r + m];
         f64::from(at(i).min(at(i + 1)))
     }
@@ -354,8 +355,9 @@ impl SeaFan {
             return elevation_rad;
         };
         let mut i = ((elevation_rad * self.inv_step_e).max(0.0) as usize).min(self.n_e - 2);
+        let mut h0 = height(i);
         loop {
-            let (h0, h1) = (height(i), height(i + 1));
+            let h1 = height(i + 1);
             let e1 = (i + 1) as f64 * self.step_e;
             if h0.is_nan() || h1.is_nan() {
                 return elevation_rad.min(e_max);
@@ -368,6 +370,7 @@ impl SeaFan {
                 return e1.min(e_max);
             }
             i += 1;
+            h0 = h1;
         }
     }
 }
@@ -513,11 +516,12 @@ pub(super) struct SeaRay<'f> {
 
 impl SeaRay<'_> {
     /// Height (m) at range `range_m`, as [`SeaFan::height`] gives it.
-    #[inline]
+    #[inline(always)]
     pub(super) fn height(&self, range_m: f64) -> Option<f64> {
         let (m, u) = SeaFan::cell(range_m * self.inv_step_r, self.low.len())?;
-        let (a, b) = (self.low[m] as f64, self.low[m + 1] as f64);
-        let (c, d) = (self.high[m] as f64, self.high[m + 1] as f64);
+        let (low, high) = (&self.low[m..m + 2], &self.high[m..m + 2]);
+        let (a, b) = (low[0] as f64, low[1] as f64);
+        let (c, d) = (high[0] as f64, high[1] as f64);
         let low = a + (b - a) * u;
         let high = c + (d - c) * u;
         let h = low + (high - low) * self.t;
@@ -1449,6 +1453,14 @@ impl Shader<'_> {
         mut each: impl FnMut(BlurPart),
     ) {
         let span = table.span(grazing_rad);
+        let mirrored = |card: &ViewCard<'_>| card.distance_m > distance_m && in_range(card, az);
+        if !self.cards.iter().any(mirrored) {
+            // No card's image: no spans, the terrain's alone (as below, without them).
+            if let Some((top, weight)) = self.terrain_image(fan, &span, distance_m, az) {
+                each(terrain_part(&span, top, weight));
+            }
+            return;
+        }
         let (spans, cover) = self.images(fan, &span, distance_m, az);
         if spans.len() == 0 {
             if let Some((top, weight)) = cover {
@@ -1511,11 +1523,21 @@ impl Shader<'_> {
                 self.card_spans(fan, span, card, distance_m, &mut spans);
             }
         }
-        let cover = self
-            .terrain
+        (spans, self.terrain_image(fan, span, distance_m, az))
+    }
+
+    /// The terrain's part of [`Self::images`]: its [`terrain_cover`], if the frame has terrain.
+    #[inline]
+    fn terrain_image(
+        &self,
+        fan: &SeaFan,
+        span: &SlopeSpan<'_>,
+        distance_m: f64,
+        az: f64,
+    ) -> Option<(f64, f64)> {
+        self.terrain
             .as_ref()
-            .and_then(|t| terrain_cover(t, fan, span, az, distance_m));
-        (spans, cover)
+            .and_then(|t| terrain_cover(t, fan, span, az, distance_m))
     }
 
     /// Append to `spans` the reflected elevations of `span` whose rays from the sea at
@@ -1879,6 +1901,40 @@ mod launch_tests {
             }
         }
         0.5 * (lo + hi)
+    }
+
+    #[test]
+    fn sea_fan_cells_are_those_of_the_usize_casts() {
+        // The u32 casts of `SeaFan::cell` and `min_height_beyond` against usize's, bit for bit,
+        // up to the largest fan (and off it).
+        let by_usize = |x: f64, n: usize| {
+            let last = (n - 1) as f64;
+            (x >= 0.0 && x <= last).then(|| {
+                let i = (x as usize).min(n - 2);
+                (i, x - i as f64)
+            })
+        };
+        for n in [2, 3, 17, MAX_SEA_FAN_RANGES, MAX_SEA_FAN_RAYS] {
+            let last = (n - 1) as f64;
+            let xs = [
+                -1e-300,
+                0.0,
+                1e-12,
+                0.5,
+                1.0 - 1e-16,
+                1.0,
+                last - 0.25,
+                last,
+                last + 1e-9,
+            ];
+            for x in xs.into_iter().chain([f64::NAN, f64::INFINITY]) {
+                let (a, b) = (SeaFan::cell(x, n), by_usize(x, n));
+                assert_eq!(
+                    a.map(|(i, u)| (i, u.to_bits())),
+                    b.map(|(i, u)| (i, u.to_bits()))
+                );
+            }
+        }
     }
 
     #[test]

@@ -513,7 +513,8 @@ impl<'a> TerrainView<'a> {
     #[inline]
     fn profile(&self, offset_rad: f64) -> Option<usize> {
         let p = ((offset_rad - self.az_start_rad) * self.az_inv_step + 0.5).floor();
-        (p >= 0.0 && p < self.n_profiles as f64).then_some(p as usize)
+        // (At most MAX_TERRAIN_PROFILES: the u32 casts are exact.)
+        (p >= 0.0 && p < self.n_profiles as u32 as f64).then_some(p as u32 as usize)
     }
 
     /// Where a sample at apparent elevation `alpha` and azimuth offset `offset_rad` meets the
@@ -553,7 +554,8 @@ impl<'a> TerrainView<'a> {
         let end = if t >= 0.5 { eb } else { ea };
         let mut hit = self.march(p, 0, height, |b| ma[b].min(mb[b]), end)?;
         if self.frame.scale_heights_m.is_some() {
-            let density = |k: usize| self.density_to(k, fan.ray_heights(k), hit);
+            let c = self.traced.interval(hit.distance_m);
+            let density = |k: usize| self.density_in(k, fan.ray_heights(k), c, hit);
             hit.density_paths_m = match (density(i), density(j1)) {
                 (Some(x), Some(y)) => Some([0, 1].map(|c| x[c] + (y[c] - x[c]) * t)),
                 (x, y) => x.or(y),
@@ -562,18 +564,24 @@ impl<'a> TerrainView<'a> {
         Some(hit)
     }
 
-    /// Density-weighted lengths along fan ray `i` (its traced `heights`) to `hit`: its sum to
-    /// the traced distance before the hit, then linear to the next one, or (past its last
-    /// traced height) the piece from there to the hit point.
+    /// Density-weighted lengths along fan ray `i` (its traced `heights`) to `hit`, in traced
+    /// interval `c` ([`TracedGrid::interval`] of its distance): its sum to the traced distance
+    /// before the hit, then linear to the next one, or (past its last traced height) the piece
+    /// from there to the hit point.
     #[inline]
-    fn density_to(&self, i: usize, heights: &[Option<f64>], hit: TerrainHit) -> Option<[f64; 2]> {
+    fn density_in(
+        &self,
+        i: usize,
+        heights: &[Option<f64>],
+        c: usize,
+        hit: TerrainHit,
+    ) -> Option<[f64; 2]> {
         let m = self.traced.traced_m.len();
         let sums = &self.ray_density[i * m..(i + 1) * m];
-        let c = self.traced.interval(hit.distance_m);
         self.interpolated_density(sums, heights, c, hit)
     }
 
-    /// [`Self::density_to`] on the sums `sums` of one ray, the hit in traced interval `c`.
+    /// [`Self::density_in`] on the sums `sums` of one ray, the hit in traced interval `c`.
     #[inline]
     fn interpolated_density(
         &self,
@@ -932,13 +940,19 @@ fn sample_profiles(
     n_profiles: usize,
 ) -> Vec<f32> {
     let radius = frame.earth_radius_m;
+    // The angles along the circles are the same for every profile.
+    let angles: Vec<(f64, f64)> = distances_m
+        .iter()
+        .map(|&d| (d / radius).sin_cos())
+        .collect();
+    let angles = &angles;
     (0..n_profiles)
         .into_par_iter()
         .flat_map_iter(|p| {
             let circle = terrain.great_circle(frame.heading_rad + az_lo + p as f64 * az_step);
-            distances_m.iter().map(move |&d| {
+            angles.iter().map(move |&angle| {
                 circle
-                    .grid_at(terrain, d, radius)
+                    .grid_at_angle(terrain, angle)
                     .and_then(|(r, c)| terrain.dem.height_at_grid(r, c))
                     .filter(|&z| z > 0.0)
                     .map_or(f32::NEG_INFINITY, |z| z as f32)

@@ -21,6 +21,7 @@
 //! [`Dem::fill_voids`] replaces those it can reach by the harmonic interpolation of the
 //! heights around them (what a scene's terrain does unless `fill_voids = false`).
 
+use rayon::prelude::*;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
@@ -242,9 +243,10 @@ impl Dem {
             (None, Some(a)) => a - here,
             (None, None) => f32::NAN,
         };
-        (0..rows * cols)
-            .map(|i| {
-                let (r, c) = (i / cols, i % cols);
+        (0..rows)
+            .into_par_iter()
+            .flat_map_iter(|r| (0..cols).map(move |c| (r, c)))
+            .map(|(r, c)| {
                 let here = h(r, c);
                 let south = diff(
                     r.checked_sub(1).map(|r| h(r, c)),
@@ -271,8 +273,7 @@ impl Dem {
         c: f64,
         radius_m: f64,
     ) -> Option<(f64, [f64; 3])> {
-        let south = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][0]));
-        let east = bilinear(self.rows, self.cols, r, c, |i| f64::from(gradients[i][1]));
+        let [south, east] = bilinear_pair(self.rows, self.cols, r, c, gradients);
         if !(south.is_finite() && east.is_finite()) {
             return None;
         }
@@ -424,6 +425,22 @@ fn bilinear(rows: usize, cols: usize, r: f64, c: f64, at: impl Fn(usize) -> f64)
     let top = at(i) + (at(i + 1) - at(i)) * tc;
     let bottom = at(i + cols) + (at(i + cols + 1) - at(i + cols)) * tc;
     top + (bottom - top) * tr
+}
+
+/// [`bilinear`] of both components of `values` (the same arithmetic per component, one
+/// lookup of the cell).
+#[inline]
+fn bilinear_pair(rows: usize, cols: usize, r: f64, c: f64, values: &[[f32; 2]]) -> [f64; 2] {
+    let (r0, c0) = ((r as usize).min(rows - 2), (c as usize).min(cols - 2));
+    let (tr, tc) = (r - r0 as f64, c - c0 as f64);
+    let i = r0 * cols + c0;
+    let (top, bottom) = (&values[i..i + 2], &values[i + cols..i + cols + 2]);
+    [0, 1].map(|k| {
+        let at = |v: &[[f32; 2]], j: usize| f64::from(v[j][k]);
+        let top = at(top, 0) + (at(top, 1) - at(top, 0)) * tc;
+        let bottom = at(bottom, 0) + (at(bottom, 1) - at(bottom, 0)) * tc;
+        top + (bottom - top) * tr
+    })
 }
 
 fn invalid(path: &Path, field: &'static str, message: String) -> DemError {
@@ -744,5 +761,35 @@ mod tests {
         assert!((v - (10.0 * 0.5 + 2.0 * 0.5)).abs() < 1e-9, "{v}");
         assert_eq!(dem.height_at(1.01, 0.1), None);
         assert!(dem.slope_at(0.5, 0.375, 6.371e6).is_some());
+    }
+
+    #[test]
+    fn gradients_in_parallel_are_row_major_and_interpolated_as_each_component_alone() {
+        // A bumpy 7 × 9 grid with a void: every sample's central (one-sided next to the void
+        // and at the edges) differences, in row-major order.
+        let (rows, cols) = (7, 9);
+        let mut h: Vec<f32> = (0..rows * cols)
+            .map(|k| ((k * 37) % 23) as f32 * 1.5)
+            .collect();
+        h[3 * cols + 4] = f32::NAN;
+        let dem = Dem::new(rows, cols, (1.0, 0.0), (0.01, 0.01), h.clone()).unwrap();
+        let g = dem.gradients();
+        let at = |r: usize, c: usize| h[r * cols + c];
+        assert_eq!(
+            g[cols + 1],
+            [0.5 * (at(2, 1) - at(0, 1)), 0.5 * (at(1, 2) - at(1, 0))]
+        );
+        assert_eq!(g[2 * cols + 4][0], at(2, 4) - at(1, 4));
+        assert_eq!(g[3 * cols + 5][1], at(3, 6) - at(3, 5));
+        assert_eq!(g[cols - 1][1], at(0, cols - 1) - at(0, cols - 2));
+        assert_eq!(g[(rows - 1) * cols][0], at(rows - 1, 0) - at(rows - 2, 0));
+        // The pair interpolation is each component's own, bit for bit.
+        for (r, c) in [(0.0, 0.0), (0.3, 7.9), (5.999, 2.5), (6.0, 8.0), (2.7, 4.2)] {
+            let pair = bilinear_pair(rows, cols, r, c, &g);
+            for (k, v) in pair.into_iter().enumerate() {
+                let alone = bilinear(rows, cols, r, c, |i| f64::from(g[i][k]));
+                assert_eq!(v.to_bits(), alone.to_bits(), "({r}, {c}) {k}");
+            }
+        }
     }
 }

@@ -123,7 +123,13 @@ impl GreatCircle {
     /// circle, on a sphere of `radius_m`.
     #[inline]
     pub fn lat_lon_deg(&self, distance_m: f64, radius_m: f64) -> (f64, f64) {
-        let (s, c) = (distance_m / radius_m).sin_cos();
+        self.lat_lon_deg_at((distance_m / radius_m).sin_cos())
+    }
+
+    /// [`Self::lat_lon_deg`] of the point at the angle δ along the circle whose (sin δ, cos δ)
+    /// are `(s, c)`.
+    #[inline]
+    pub fn lat_lon_deg_at(&self, (s, c): (f64, f64)) -> (f64, f64) {
         let p = [0, 1, 2].map(|k| self.start[k] * c + self.tangent[k] * s);
         (
             p[2].clamp(-1.0, 1.0).asin().to_degrees(),
@@ -135,7 +141,13 @@ impl GreatCircle {
     /// (`None` off the model), on a sphere of `radius_m`.
     #[inline]
     pub fn grid_at(&self, terrain: &Terrain, distance_m: f64, radius_m: f64) -> Option<(f64, f64)> {
-        let (lat, lon) = self.lat_lon_deg(distance_m, radius_m);
+        self.grid_at_angle(terrain, (distance_m / radius_m).sin_cos())
+    }
+
+    /// [`Self::grid_at`] the angle δ along the circle whose (sin δ, cos δ) are `angle`.
+    #[inline]
+    pub fn grid_at_angle(&self, terrain: &Terrain, angle: (f64, f64)) -> Option<(f64, f64)> {
+        let (lat, lon) = self.lat_lon_deg_at(angle);
         terrain.dem.grid_position(lat, terrain.wrap_lon(lon))
     }
 }
