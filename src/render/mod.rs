@@ -53,6 +53,8 @@ mod sun;
 pub mod sweep;
 pub mod sweep_plot;
 pub mod terrain;
+#[cfg(test)]
+mod test_rays;
 mod texture_box;
 
 use std::sync::atomic::{AtomicU64, Ordering};

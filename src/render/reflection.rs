@@ -1863,32 +1863,8 @@ mod tests {
 /// The search for the sea-level launch towards the sun.
 #[cfg(test)]
 mod launch_tests {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-
     use super::*;
-    use crate::render::ray_model::FanRay;
-
-    /// Rays from the sea whose final elevation is `leave(launch)` (`None`: they do not leave),
-    /// counting the traces.
-    struct Leaving<F> {
-        leave: F,
-        traces: AtomicUsize,
-    }
-
-    impl<F: Fn(f64) -> Option<f64> + Sync> RayTracer for Leaving<F> {
-        fn trace(&self, _h: f64, elevation_rad: f64, _d: &[f64], _sky: bool) -> FanRay {
-            self.traces.fetch_add(1, Ordering::Relaxed);
-            FanRay {
-                elevation_rad,
-                heights_m: Vec::new(),
-                end: match (self.leave)(elevation_rad) {
-                    Some(e) => FanEnd::Sky { elevation_rad: e },
-                    None => FanEnd::Trapped,
-                },
-                monotone: false,
-            }
-        }
-    }
+    use crate::render::test_rays::Leaving;
 
     /// The launch whose ray leaves at `sun` by 200 bisection steps (the reference).
     fn bisected(leave: impl Fn(f64) -> Option<f64>, sun: f64) -> f64 {
@@ -1955,10 +1931,7 @@ mod launch_tests {
                 ),
                 ("ducted", 20, &ducted),
             ] {
-                let tracer = Leaving {
-                    leave,
-                    traces: AtomicUsize::new(0),
-                };
+                let tracer = Leaving::new(leave);
                 let want = bisected(leave, sun);
                 match sea_level_sun_launch_rad(&tracer, sun) {
                     Some(got) => {
@@ -1968,7 +1941,7 @@ mod launch_tests {
                         );
                         // Where the sun is below every ray that leaves, the launch is the
                         // duct's edge, found by bisection alone.
-                        let traces = tracer.traces.load(Ordering::Relaxed);
+                        let traces = tracer.traces();
                         let smooth_there = leave(want - 1e-6).is_some();
                         assert!(
                             traces <= limit || !smooth_there,
@@ -1983,10 +1956,7 @@ mod launch_tests {
             }
         }
         // Every ray from the surface leaves above a sun 0.8° below the horizon: hidden.
-        let tracer = Leaving {
-            leave: smooth,
-            traces: AtomicUsize::new(0),
-        };
+        let tracer = Leaving::new(smooth);
         assert_eq!(
             sea_level_sun_launch_rad(&tracer, f64::to_radians(-0.8)),
             None

@@ -532,38 +532,10 @@ fn lagrange_weights(xs: &[f64], x: f64) -> [f64; 4] {
 
 #[cfg(test)]
 mod tests {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-
     use super::*;
-    use crate::render::ray_model::FanRay;
     use crate::render::reflection::sea_level_sun_launch_rad;
+    use crate::render::test_rays::Leaving;
     use crate::scene::sky::Sky;
-
-    /// Rays from the sea whose final elevation is `leave(launch)` (`None`: they do not leave)
-    /// and whose density paths grow as they flatten, counting the traces.
-    struct Leaving<F> {
-        leave: F,
-        traces: AtomicUsize,
-    }
-
-    impl<F: Fn(f64) -> Option<f64> + Sync> RayTracer for Leaving<F> {
-        fn trace(&self, _h: f64, elevation_rad: f64, _d: &[f64], _sky: bool) -> FanRay {
-            self.traces.fetch_add(1, Ordering::Relaxed);
-            FanRay {
-                elevation_rad,
-                heights_m: Vec::new(),
-                end: match (self.leave)(elevation_rad) {
-                    Some(e) => FanEnd::Sky { elevation_rad: e },
-                    None => FanEnd::Trapped,
-                },
-                monotone: false,
-            }
-        }
-
-        fn density_paths_m(&self, _h: f64, e: f64, _s: [f64; 2]) -> Option<[f64; 2]> {
-            (self.leave)(e).map(|_| [8e3 / (e + 0.003), 1e3 / (e + 0.01)])
-        }
-    }
 
     /// The worst difference (rad) between the table's launch and the renderer's launch search
     /// over `count` true elevations across `sun` ± `tilt`, where the sun's light is not lost.
@@ -598,12 +570,9 @@ mod tests {
             ("smooth", &smooth as &(dyn Fn(f64) -> Option<f64> + Sync)),
             ("ducted", &ducted),
         ] {
-            let tracer = Leaving {
-                leave,
-                traces: AtomicUsize::new(0),
-            };
+            let tracer = Leaving::new(leave);
             let table = SeaSunTable::build(&tracer, &extinction);
-            let rays = tracer.traces.load(Ordering::Relaxed);
+            let rays = tracer.traces();
             eprintln!("{name}: {rays} traces");
             assert!(rays <= 300, "{name}: {rays} traces");
             for (sun_deg, tilt) in [(-0.3, 0.01), (0.5, 0.04), (5.0, 0.02), (20.0, 0.05)] {
@@ -652,10 +621,7 @@ mod tests {
             };
             Some(e - 0.005 * (-e / 0.02).exp() + fold)
         };
-        let tracer = Leaving {
-            leave: folded,
-            traces: AtomicUsize::new(0),
-        };
+        let tracer = Leaving::new(folded);
         let table = SeaSunTable::build(&tracer, &extinction);
         let mut widest = 0.0f64;
         for i in 0..200 {
