@@ -1,8 +1,7 @@
-//! Render — the sun seen from the sea surface, for its glitter. In: the tracer, the sun's true
-//! elevation at the camera, the farthest sea point of the frame and the sky's extinction. Out: a
-//! table by the sun's true elevation above a sea point's own horizontal of its apparent elevation
-//! there (the launch elevation of the ray from the sea that leaves towards it) and the optical
-//! depth of that ray.
+//! Render — the sun seen from the sea surface, for its glitter. In: the tracer and the sky's
+//! extinction. Out: a table by the sun's true elevation above a sea point's own horizontal of its
+//! apparent elevation there (the launch elevation of the ray from the sea that leaves towards
+//! it) and the optical depth of that ray, for every true elevation a sun can have.
 //!
 //! A sea point at ground distance d from the camera has its vertical tilted by d/R, so the sun
 //! stands higher (towards it) or lower (away) by up to d/R above its horizontal than above the
@@ -10,15 +9,16 @@
 //! 1.54° for a sun 1.5° below the horizontal, 0.5° for one at 0.2°), so each sea point needs the
 //! refraction of its own sun, not the camera foot's with the tilt added.
 //!
-//! The table is one set of rays launched from the sea surface (height 0) at elevations spanning
-//! the frame's true elevations, each with the elevation it leaves the atmosphere at (its true
-//! elevation) and its optical depth: a monotone map from launch to true elevation, inverted by
-//! cubic interpolation through four neighbouring rays. Rays are added at the middle of every
-//! interval whose middle ray the table without it mispredicts by more than
-//! [`LAUNCH_TOLERANCE_RAD`] in the launch or [`DEPTH_TOLERANCE`] in the optical depth, so they
-//! crowd where the final elevation changes fast (a duct's trapping edge). A ray that does not
-//! leave (trapped in a duct, or back on the sea) passes below every sun: a sun below the lowest
-//! leaving ray is hidden.
+//! The table is one set of rays launched from the sea surface (height 0) from level up to
+//! [`MAX_LAUNCH_RAD`], each with the elevation it leaves the atmosphere at (its true elevation)
+//! and its optical depth: a map from launch to true elevation, inverted by cubic interpolation
+//! through four neighbouring rays (rays whose true elevation falls below a lower ray's are left
+//! out). Rays are added at the middle of every interval whose middle ray the table without it
+//! mispredicts by more than [`LAUNCH_TOLERANCE_RAD`] in the launch or [`DEPTH_TOLERANCE`] in the
+//! optical depth, so they crowd where the final elevation changes fast (a duct's trapping edge).
+//! A ray that does not leave (trapped in a duct, or back on the sea) passes below every sun: a
+//! sun below the lowest leaving ray is hidden. The table depends on the atmosphere and the sky
+//! alone, so the frames of a sweep share it.
 
 use rayon::prelude::*;
 

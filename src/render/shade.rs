@@ -555,7 +555,7 @@ impl<'a> Shader<'a> {
 
     /// Radiance behind every card: the sea, or the sky (with the sun disc where the ray's final
     /// direction meets it), or the fallback for a lost ray. A sample whose ray meets no card is
-    /// shaded by this alone ([`Self::shade`] adds nothing to it).
+    /// shaded by this alone (no card adds to it).
     #[inline]
     pub(super) fn background(&self, dir: &ViewDirection, end: FanEnd) -> [f64; 3] {
         self.background_with(dir, end, true)

@@ -104,7 +104,7 @@ pub struct TerrainHit {
 pub(super) struct TracedGrid {
     /// Ascending: approach points before the land, then grid distances.
     pub(super) traced_m: Vec<f64>,
-    /// For each grid distance: the traced interval c (traced_m[c] ≤ dⱼ ≤ traced_m[c + 1], or c
+    /// For each grid distance: the traced interval c (`traced_m[c] ≤ dⱼ ≤ traced_m[c + 1]`, or c
     /// the last) and the fraction of the way through it.
     map: Vec<(usize, f64)>,
     /// The grid distances.

@@ -181,7 +181,7 @@ pub(crate) type Locate<'a> = dyn FnMut(&mut dyn FnMut(f64) -> f64, f64, f64) -> 
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Bracket<'b> {
     breaks: &'b [f64],
-    /// Number of breaks below the interval: it is (breaks[k − 1], breaks[k]).
+    /// Number of breaks below the interval: it is (`breaks[k − 1]`, `breaks[k]`).
     k: usize,
 }
 

@@ -3,7 +3,7 @@
 //! [`AccuracyConfig`] (tolerances, fan, distances). Out: per atmosphere and tolerance, the error
 //! of the ray heights at the target distances against a reference run of the same tracer at a
 //! far tighter tolerance, and the time and steps each ray took ([`CaseResult`]); rendered as
-//! `BENCHMARKS.md` ([`benchmarks_markdown`]) and a log-log plot ([`time_vs_error_png`]).
+//! `BENCHMARKS.md` ([`benchmarks_markdown`](super::benchmarks::benchmarks_markdown)) and a log-log plot ([`time_vs_error_png`]).
 //!
 //! The error is measured against the tracer's own tight run (a self-reference: it shows how the
 //! error falls with the tolerance, not the tracer's absolute accuracy, which the tests check

@@ -264,7 +264,7 @@ fn load_scenes(scenes_dir: &Path, files: &[&str]) -> Result<Vec<PaperScene>, Fra
 pub enum RenderPath {
     /// Curved rays: one elevation fan per frame, interpolated per pixel ([`CurvedRays`]).
     Fan,
-    /// Curved rays: the full 3-D ray equation per pixel sample ([`ExactRays`]).
+    /// Curved rays: the full 3-D ray equation per pixel sample ([`ExactRays`](crate::render::curved::ExactRays)).
     Exact,
     /// Straight rays (n ≡ 1, closed form), through the fan.
     Straight,
