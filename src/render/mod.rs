@@ -86,8 +86,8 @@ pub struct RenderOptions {
     pub tolerance_px: f64,
     /// Cap on fan bisections per base interval.
     pub max_refine_depth: u32,
-    /// The ray tracer's error tolerance on position per step (m), within
-    /// [`TRACER_TOLERANCE_RANGE_M`]; default [`render_tracer_config`]'s (1 cm). Straight rays
+    /// The ray tracer's error tolerance on the ray heights at the target distances (m), within
+    /// [`TRACER_TOLERANCE_RANGE_M`]; default [`render_tracer_config`]'s (1 mm). Straight rays
     /// (closed form) do not use it.
     pub tolerance_m: f64,
 }
@@ -131,7 +131,7 @@ pub enum RenderError {
     Tolerance(f64),
     /// The tracer tolerance is outside [`TRACER_TOLERANCE_RANGE_M`].
     #[error(
-        "tracer tolerance must be a finite number of metres from 1e-6 to 10 (default 0.01), got {0}"
+        "tracer tolerance must be a finite number of metres from 1e-6 to 10 (default 0.001), got {0}"
     )]
     TracerTolerance(f64),
     /// A sun sweep needs a scene with a `[sun]`.
@@ -737,6 +737,13 @@ pub fn render_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_tracer_tolerance_error_states_the_default_a_render_uses() {
+        let message = RenderError::TracerTolerance(0.0).to_string();
+        let default = format!("(default {})", RenderOptions::default().tolerance_m);
+        assert!(message.contains(&default), "{message}");
+    }
 
     #[test]
     fn tracer_tolerance_default_range_and_refusal() {
