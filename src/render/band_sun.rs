@@ -21,7 +21,7 @@
 //! test that bounds the error at every column of an accepted interval, not only at its middle.
 
 use super::ray_model::FanEnd;
-use super::reflection::SeaSunAt;
+use super::reflection::{SeaSunAt, glint_radiance};
 use super::shade::{Shader, wrap_pi};
 use crate::scene::camera::CameraFrame;
 
@@ -154,19 +154,16 @@ impl BandColumns<'_> {
             && let Some(refl) = &self.shader.reflection
         {
             let heading = self.shader.heading_rad;
-            let factor = |x: usize| {
-                sun.glint_factor(refl, heading + self.azimuth_offset(x))
-                    .unwrap_or(0.0)
+            let exact = |x: usize| {
+                sun.glint_factor_and_transmittance(refl, heading + self.azimuth_offset(x))
+                    .unwrap_or((0.0, [0.0; 3]))
             };
-            // The sun's own attenuation to each column's sea point, exact per column (it
-            // varies slowly with the azimuth; the factor is what is interpolated).
-            let radiance = |x: usize, k: f64| {
-                let azimuth = heading + self.azimuth_offset(x);
-                let t = sun.glint_transmittance(refl, azimuth);
-                let sun = sun.glint_radiance(refl, k, t);
+            let scales = sun.glint_scales(refl).unwrap_or(([0.0; 3], [0.0; 3]));
+            let radiance = |k: f64, t: [f64; 3]| {
+                let sun = glint_radiance(k, t, scales);
                 [0, 1, 2].map(|c| sun[c] * transmittance[c])
             };
-            let glitter = Smooth { factor, radiance };
+            let glitter = Smooth { exact, radiance };
             glitter.fill((a, b), centre, self.background, out);
             return;
         }
@@ -236,19 +233,27 @@ fn predicts(out: &[[f64; 3]], i: usize, j: usize, m: usize, background: [f64; 3]
 
 /// A positive factor that is smooth in the column and whose logarithm is close to a quadratic
 /// over many columns — the glitter's Cox–Munk factor, exp(−tan²β/σ²) times slowly varying
-/// terms — and the radiance it gives in a column (which may cap it, and may weight it by a
-/// column's own slowly varying attenuation).
-struct Smooth<F, R> {
-    factor: F,
+/// terms — with a transmittance per channel that is smooth in the column too (the sun's own
+/// attenuation to each column's sea point, the exponential of a slowly varying optical depth),
+/// and the radiance they give in a column (which may cap the factor, and is linear in the
+/// transmittance).
+struct Smooth<E, R> {
+    /// A column's exact factor and transmittance.
+    exact: E,
+    /// The radiance of a factor and a transmittance.
     radiance: R,
 }
 
-impl<F: Fn(usize) -> f64, R: Fn(usize, f64) -> [f64; 3]> Smooth<F, R> {
-    /// Fill `out[x]` for the columns x of [`a`, `b`): the radiance of the exact factor at nodes
-    /// ([`SMOOTH_STRIDE`] apart, the last column, `centre` and its neighbours) and at the
-    /// points refinement evaluates; elsewhere of the factor interpolated by a quadratic in its
-    /// logarithm through an interval's ends and middle, where [`Self::accepts`] it; other
-    /// intervals are halved.
+/// A column's factor and transmittance per channel.
+type Weights = (f64, [f64; 3]);
+
+impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
+    /// Fill `out[x]` for the columns x of [`a`, `b`): the radiance of the exact factor and
+    /// transmittance at nodes ([`SMOOTH_STRIDE`] apart, the last column, `centre` and its
+    /// neighbours) and at the points refinement evaluates; elsewhere of the factor and each
+    /// channel's transmittance interpolated by quadratics in their logarithms through an
+    /// interval's ends and middle ([`Fit`]), where [`Self::accepts`] them; other intervals are
+    /// halved.
     fn fill(
         &self,
         (a, b): (usize, usize),
@@ -260,18 +265,19 @@ impl<F: Fn(usize) -> f64, R: Fn(usize, f64) -> [f64; 3]> Smooth<F, R> {
             return;
         }
         let nodes = nodes((a, b), SMOOTH_STRIDE, centre);
-        // The exact factor of each column of [a, b) evaluated so far (NaN: not yet; a NaN
-        // factor is kept as 0, and its radiance as the exact shading gives it).
-        let mut k = vec![f64::NAN; b - a];
-        let exact = |x: usize, k: &mut [f64], out: &mut [[f64; 3]]| {
-            if k[x - a].is_nan() {
-                let f = (self.factor)(x);
-                k[x - a] = if f.is_nan() { 0.0 } else { f };
-                out[x] = (self.radiance)(x, f);
+        // The exact factor and transmittance of each column of [a, b) evaluated so far (factor
+        // NaN: not yet; a NaN factor is kept as 0, and its radiance as the exact shading gives
+        // it).
+        let mut w: Vec<Weights> = vec![(f64::NAN, [0.0; 3]); b - a];
+        let exact = |x: usize, w: &mut [Weights], out: &mut [[f64; 3]]| {
+            if w[x - a].0.is_nan() {
+                let (f, t) = (self.exact)(x);
+                w[x - a] = (if f.is_nan() { 0.0 } else { f }, t);
+                out[x] = (self.radiance)(f, t);
             }
         };
         for &x in &nodes {
-            exact(x, &mut k, out);
+            exact(x, &mut w, out);
         }
         let mut open: Vec<(usize, usize)> = nodes.windows(2).map(|w| (w[0], w[1])).collect();
         while let Some((i, j)) = open.pop() {
@@ -281,16 +287,16 @@ impl<F: Fn(usize) -> f64, R: Fn(usize, f64) -> [f64; 3]> Smooth<F, R> {
             let m = (i + j) / 2;
             let tests =
                 [(i + m) / 2, (m + j) / 2].map(|t| (t > i && t < m || t > m && t < j).then_some(t));
-            exact(m, &mut k, out);
+            exact(m, &mut w, out);
             for t in tests.into_iter().flatten() {
-                exact(t, &mut k, out);
+                exact(t, &mut w, out);
             }
-            let fit = LogQuadratic::through([i, m, j].map(|x| (x, k[x - a])));
-            let factor = |x: usize| k[x - a];
-            match fit.filter(|fit| self.accepts(fit, (i, j), tests, factor, background, out)) {
-                Some(fit) => fit.for_each(i, j, |x, f| {
-                    if k[x - a].is_nan() {
-                        out[x] = (self.radiance)(x, f);
+            let fit = Fit::through([i, m, j].map(|x| (x, w[x - a])));
+            let weights = |x: usize| w[x - a];
+            match fit.filter(|fit| self.accepts(fit, (i, j), tests, weights, background, out)) {
+                Some(fit) => fit.for_each(i, j, |x, k, t| {
+                    if w[x - a].0.is_nan() {
+                        out[x] = (self.radiance)(k, t);
                     }
                 }),
                 None => open.extend([(i, m), (m, j)]),
@@ -298,59 +304,115 @@ impl<F: Fn(usize) -> f64, R: Fn(usize, f64) -> [f64; 3]> Smooth<F, R> {
         }
     }
 
-    /// Whether `fit`, through the exact factors at the ends and middle of (`i`, `j`), may fill
-    /// that interval: at the test points `tests` (its quarter points, evaluated exactly with
-    /// their radiance in `out`) it predicts the pixel's radiance within [`TOLERANCE`] (plus
-    /// [`FLOOR`]) as [`fill_columns`] tests its middle; and its largest error in the logarithm
-    /// there, E (the interpolation error of a quadratic is a cubic in the column, about as
-    /// large at the quarter points as anywhere in the interval), taken as 1.5 E anywhere,
-    /// keeps the radiance within the same tolerance of the pixel however large the factor gets
-    /// in the interval (up to the fit's maximum or an exact value, times that error). A
+    /// Whether `fit`, through the exact factors and transmittances at the ends and middle of
+    /// (`i`, `j`), may fill that interval: at the test points `tests` (its quarter points,
+    /// evaluated exactly with their radiance in `out`) it predicts the pixel's radiance within
+    /// [`TOLERANCE`] (plus [`FLOOR`]) as [`fill_columns`] tests its middle; and its largest
+    /// error in the logarithm there, E (the factor's plus the worst channel's transmittance's:
+    /// the interpolation error of a quadratic is a cubic in the column, about as large at the
+    /// quarter points as anywhere in the interval), taken as 1.5 E anywhere, keeps the radiance
+    /// within the same tolerance of the pixel however large the factor and the transmittance
+    /// get in the interval (up to the fits' maxima or an exact value, times that error). A
     /// quadratic's error relative to values far below the pixel says nothing about the values
     /// near a peak: without the second test a steep peak at an interval's end was filled from
     /// its tail.
     fn accepts(
         &self,
-        fit: &LogQuadratic,
+        fit: &Fit,
         (i, j): (usize, usize),
         tests: [Option<usize>; 2],
-        exact: impl Fn(usize) -> f64,
+        exact: impl Fn(usize) -> Weights,
         background: [f64; 3],
         out: &[[f64; 3]],
     ) -> bool {
         let mut log_error = 0.0f64;
-        let mut largest = fit.max_over(i, j);
+        let (mut largest, mut clearest) = fit.max_over(i, j);
+        let mut widen = |(k, t): Weights| {
+            largest = largest.max(k);
+            (0..3).for_each(|c| clearest[c] = clearest[c].max(t[c]));
+        };
         for x in [i, (i + j) / 2, j] {
-            largest = largest.max(exact(x));
+            widen(exact(x));
         }
-        for t in tests.into_iter().flatten() {
-            let (want, got) = (exact(t), fit.at(t));
-            largest = largest.max(want);
-            if !within((self.radiance)(t, got), out[t], background) {
+        for x in tests.into_iter().flatten() {
+            let (want, got) = (exact(x), fit.at(x));
+            widen(want);
+            if !within((self.radiance)(got.0, got.1), out[x], background) {
                 return false;
             }
-            if want == got {
-                continue;
-            }
-            if !(want > 0.0 && got > 0.0) {
+            let errors = [0, 1, 2].map(|c| log_ratio(want.1[c], got.1[c]));
+            let (Some(k), [Some(t0), Some(t1), Some(t2)]) = (log_ratio(want.0, got.0), errors)
+            else {
                 return false;
-            }
-            log_error = log_error.max((got.ln() - want.ln()).abs());
+            };
+            log_error = log_error.max(k + t0.max(t1).max(t2));
         }
-        // A factor off by at most a ratio λ gives a radiance (linear in the factor, or capped)
-        // off by at most (λ − 1) v, v the exact radiance: within the tolerance wherever
-        // (λ − 1 − TOLERANCE) v ≤ TOLERANCE · background + FLOOR, so everywhere when it holds
-        // at the largest v the interval may hold.
+        // A factor and a transmittance off by ratios whose product is at most λ give a
+        // radiance (linear in both, or capped in the factor) off by at most (λ − 1) v, v the
+        // exact radiance: within the tolerance wherever (λ − 1 − TOLERANCE) v ≤ TOLERANCE ·
+        // background + FLOOR, so everywhere when it holds at the largest v the interval may
+        // hold.
         let growth = (1.5 * log_error).exp();
         let excess = growth - 1.0 - TOLERANCE;
         if excess <= 0.0 {
             return true;
         }
-        // The columns' own weights at the interval's ends and middle bound those between.
-        [i, (i + j) / 2, j].into_iter().all(|x| {
-            let v = (self.radiance)(x, largest * growth);
-            (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
+        let v = (self.radiance)(largest * growth, clearest.map(|t| t * growth));
+        (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
+    }
+}
+
+/// |ln(`got` / `want`)| (0 when they are equal); `None` when they differ and not both are
+/// positive.
+fn log_ratio(want: f64, got: f64) -> Option<f64> {
+    if want == got {
+        return Some(0.0);
+    }
+    (want > 0.0 && got > 0.0).then(|| (got.ln() - want.ln()).abs())
+}
+
+/// Quadratics in the logarithms of a column's factor and of each channel of its
+/// transmittance, through three columns ([`LogQuadratic`]).
+struct Fit {
+    factor: LogQuadratic,
+    transmittance: [LogQuadratic; 3],
+}
+
+impl Fit {
+    /// Through `points` (column, weights; columns increasing): `None` where some but not all
+    /// factors, or values of one channel's transmittance, are zero.
+    fn through(points: [(usize, Weights); 3]) -> Option<Self> {
+        let factor = LogQuadratic::through(points.map(|(x, w)| (x, w.0)))?;
+        let [t0, t1, t2] =
+            [0, 1, 2].map(|c| LogQuadratic::through(points.map(|(x, w)| (x, w.1[c]))));
+        Some(Fit {
+            factor,
+            transmittance: [t0?, t1?, t2?],
         })
+    }
+
+    /// The weights at column `x`.
+    fn at(&self, x: usize) -> Weights {
+        (self.factor.at(x), self.transmittance.map(|t| t.at(x)))
+    }
+
+    /// The largest factor and transmittance per channel over columns [`i`, `j`]
+    /// ([`LogQuadratic::max_over`]).
+    fn max_over(&self, i: usize, j: usize) -> Weights {
+        (
+            self.factor.max_over(i, j),
+            self.transmittance.map(|t| t.max_over(i, j)),
+        )
+    }
+
+    /// Call `each(x, factor, transmittance)` for the columns x of (`start`, `end`) in order
+    /// (`start` is the quadratics' first column), by [`LogQuadratic::steps`].
+    fn for_each(&self, start: usize, end: usize, mut each: impl FnMut(usize, f64, [f64; 3])) {
+        let mut k = self.factor.steps(start);
+        let mut t = self.transmittance.map(|q| q.steps(start));
+        for x in start + 1..end {
+            each(x, k.next(), [t[0].next(), t[1].next(), t[2].next()]);
+        }
     }
 }
 
@@ -366,6 +428,27 @@ enum LogQuadratic {
         beta: f64,
         gamma: f64,
     },
+}
+
+/// The values of a [`LogQuadratic`] at successive columns, by recurrence: each is the
+/// previous times a ratio that itself grows by the constant exp(2γ) — three exponentials per
+/// interval instead of one per column; the rounding this accumulates over an interval is far
+/// below [`TOLERANCE`].
+struct Steps {
+    value: f64,
+    ratio: f64,
+    growth: f64,
+}
+
+impl Steps {
+    /// The value at the next column.
+    #[inline]
+    fn next(&mut self) -> f64 {
+        let value = self.value;
+        self.value *= self.ratio;
+        self.ratio *= self.growth;
+        value
+    }
 }
 
 impl LogQuadratic {
@@ -427,12 +510,8 @@ impl LogQuadratic {
         (alpha + u * (beta + u * gamma)).exp()
     }
 
-    /// Call `each(x, factor)` for the columns x of (`start`, `end`) in order (`start` is the
-    /// quadratic's first column): the exponential of
-    /// the quadratic by its recurrence (each factor is the previous times a ratio that itself
-    /// grows by the constant exp(2γ)), three exponentials per interval instead of one per
-    /// column; the rounding this accumulates over an interval is far below [`TOLERANCE`].
-    fn for_each(&self, start: usize, end: usize, mut each: impl FnMut(usize, f64)) {
+    /// The values at the columns after `start` (the quadratic's first column), in order.
+    fn steps(&self, start: usize) -> Steps {
         let LogQuadratic::Quadratic {
             x0,
             alpha,
@@ -440,17 +519,17 @@ impl LogQuadratic {
             gamma,
         } = *self
         else {
-            (start + 1..end).for_each(|x| each(x, 0.0));
-            return;
+            return Steps {
+                value: 0.0,
+                ratio: 0.0,
+                growth: 0.0,
+            };
         };
         debug_assert_eq!(x0, start);
-        let mut k = (alpha + beta + gamma).exp();
-        let mut ratio = (beta + 3.0 * gamma).exp();
-        let growth = (2.0 * gamma).exp();
-        for x in start + 1..end {
-            each(x, k);
-            k *= ratio;
-            ratio *= growth;
+        Steps {
+            value: (alpha + beta + gamma).exp(),
+            ratio: (beta + 3.0 * gamma).exp(),
+            growth: (2.0 * gamma).exp(),
         }
     }
 }
@@ -544,39 +623,39 @@ mod tests {
     /// The worst error of [`Smooth::fill`] over 400 columns for the factor `k` and a capped
     /// radiance, in units of the tolerance; and how many factors it evaluated.
     fn worst_smooth(k: impl Fn(usize) -> f64, centre: usize, background: [f64; 3]) -> (f64, usize) {
-        worst_attenuated(k, |_| 1.0, centre, background)
+        worst_attenuated(k, |_| [1.0; 3], centre, background)
     }
 
-    /// [`worst_smooth`] with the radiance of column x weighted by `weight(x)`.
+    /// [`worst_smooth`] with the radiance of column x weighted by its transmittance per
+    /// channel `weight(x)`.
     fn worst_attenuated(
         k: impl Fn(usize) -> f64,
-        weight: impl Fn(usize) -> f64,
+        weight: impl Fn(usize) -> [f64; 3],
         centre: usize,
         background: [f64; 3],
     ) -> (f64, usize) {
         let calls = std::cell::Cell::new(0);
-        let radiance = |x: usize, k: f64| {
+        let radiance = |k: f64, w: [f64; 3]| {
             if k <= 0.0 {
                 return [0.0; 3];
             }
-            let w = weight(x);
             [
-                (k * 2.0).min(900.0) * w,
-                k * 0.6 * w,
-                (k * 0.02).min(0.5) * w,
+                (k * 2.0).min(900.0) * w[0],
+                k * 0.6 * w[1],
+                (k * 0.02).min(0.5) * w[2],
             ]
         };
         let glitter = Smooth {
-            factor: |x: usize| {
+            exact: |x: usize| {
                 calls.set(calls.get() + 1);
-                k(x)
+                (k(x), weight(x))
             },
             radiance,
         };
         let mut out = vec![[f64::NAN; 3]; 400];
         glitter.fill((0, 400), Some(centre), background, &mut out);
         (
-            worst_error(&out, |x| radiance(x, k(x)), background),
+            worst_error(&out, |x| radiance(k(x), weight(x)), background),
             calls.get(),
         )
     }
@@ -647,9 +726,32 @@ mod tests {
         // The sun's own attenuation to each column's sea point, falling by a factor of 3
         // across the row, weights the radiance per column.
         let wide = |x: usize| cox_munk(x, 180.0, 30.0, 3e4);
-        let fading = |x: usize| (-(x as f64) / 360.0).exp();
+        let fading = |x: usize| [(-(x as f64) / 360.0).exp(); 3];
         let (err, _) = worst_attenuated(wide, fading, 180, sea);
         assert!(err <= 1.0, "attenuated: {err}");
+        // The sun low over the sea's horizon: each channel's optical depth grows with the air
+        // mass, 1 / sin of an elevation falling across the row, steeply and differently per
+        // channel (the attenuation is interpolated too); and a sun that sets at a column (the
+        // transmittance drops to zero there).
+        let airmass = |x: usize| 1.0 / (0.004 + 0.02 * (1.0 - x as f64 / 400.0)).sin();
+        let low = |x: usize| [0.02, 0.05, 0.11].map(|tau| (-tau * airmass(x)).exp());
+        let (err, calls) = worst_attenuated(wide, low, 180, sea);
+        assert!(err <= 1.0, "low sun: {err} ({calls} columns)");
+        // A broad peak under a sun lower still, whose transmittance a log-quadratic fits
+        // worse than the quarter points show: the fill needs the transmittance's error in its
+        // bound (without it this errs by 3.5 times the tolerance).
+        let lower = |x: usize| {
+            let airmass = 1.0 / (0.001 + 0.01 * (1.0 - x as f64 / 400.0)).sin();
+            [0.02, 0.04, 0.08].map(|tau| (-tau * airmass).exp())
+        };
+        let broad = |x: usize| cox_munk(x, 250.0, 300.0, 100.0);
+        let (err, _) = worst_attenuated(broad, lower, 250, sea);
+        assert!(err <= 1.0, "lower sun: {err}");
+        let setting = |x: usize| {
+            if x < 310 { low(x) } else { [0.0; 3] }
+        };
+        let (err, _) = worst_attenuated(|x| cox_munk(x, 300.0, 60.0, 3e4), setting, 300, sea);
+        assert!(err <= 1.0, "setting sun: {err}");
     }
 
     #[test]

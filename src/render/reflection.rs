@@ -1062,51 +1062,47 @@ pub(super) enum SeaSunAt {
 }
 
 impl SeaSunAt {
-    /// A rough sea's glitter towards absolute azimuth `azimuth_rad` per unit irradiance from
-    /// the sun ([`GlintGeometry::per_irradiance`]): a smooth function of the azimuth, which
-    /// [`Self::glint_radiance`] turns into radiance. `None` when this is not glitter.
+    /// A rough sea's glitter towards absolute azimuth `azimuth_rad`: its factor per unit
+    /// irradiance from the sun ([`GlintGeometry::per_irradiance`], a smooth function of the
+    /// azimuth), and the transmittance per channel of the sun's light to the sea point along its
+    /// own curved ray from there (zero where the sun is below the sea's apparent horizon there),
+    /// which [`Self::glint_radiance`] turns into radiance. `None` when this is not glitter.
     #[inline]
-    pub(super) fn glint_factor(&self, refl: &Reflection, azimuth_rad: f64) -> Option<f64> {
+    pub(super) fn glint_factor_and_transmittance(
+        &self,
+        refl: &Reflection,
+        azimuth_rad: f64,
+    ) -> Option<(f64, [f64; 3])> {
         let (SeaSunAt::Glint { geometry, tilt, .. }, Some(g)) = (self, &refl.glint) else {
             return None;
         };
-        // The sun's true elevation above the local horizontal of the sea point (tilted by the
-        // Earth's curvature), its apparent one there (the sea-level refraction of that
-        // elevation), and its azimuth relative to the ray there.
         let phi = g.sun.azimuth_rad - azimuth_rad;
-        let e = g
-            .at_sea
-            .apparent_rad(g.sun.elevation_rad + tilt * phi.cos());
-        Some(geometry.per_irradiance(e, phi))
+        let (e, depth) = g.at_sea.at(g.sun.elevation_rad + tilt * phi.cos());
+        Some((
+            geometry.per_irradiance(e, phi),
+            depth.map(|tau| (-tau).exp()),
+        ))
     }
 
-    /// The transmittance per channel of the sun's light to the sea point along its own curved
-    /// ray from there, for the ray towards absolute azimuth `azimuth_rad` (zero where the sun
-    /// is below the sea's apparent horizon there, or when this is not glitter).
+    /// The solar irradiance per channel and the Fresnel-reflected disc's radiance per channel
+    /// of [`Self::glint_radiance`] (`None` when this is not glitter), for evaluating it many
+    /// times.
     #[inline]
-    pub(super) fn glint_transmittance(&self, refl: &Reflection, azimuth_rad: f64) -> [f64; 3] {
-        let (SeaSunAt::Glint { tilt, .. }, Some(g)) = (self, &refl.glint) else {
-            return [0.0; 3];
+    pub(super) fn glint_scales(&self, refl: &Reflection) -> Option<([f64; 3], [f64; 3])> {
+        let (SeaSunAt::Glint { rho, .. }, Some(g)) = (self, &refl.glint) else {
+            return None;
         };
-        let phi = g.sun.azimuth_rad - azimuth_rad;
-        g.at_sea
-            .depth(g.sun.elevation_rad + tilt * phi.cos())
-            .map(|tau| (-tau).exp())
+        Some((g.irradiance, g.radiance_cap.map(|c| rho * c)))
     }
 
-    /// The glitter's radiance for the factor `k` of [`Self::glint_factor`] and the
-    /// transmittance `t` of [`Self::glint_transmittance`]: the sun's irradiance times `k`,
+    /// The glitter's radiance for the factor `k` and the transmittance `t` of
+    /// [`Self::glint_factor_and_transmittance`]: the sun's irradiance times `k`,
     /// capped by the Fresnel-reflected disc, times `t` (zero where `k` ≤ 0, or when this is not
     /// glitter).
     #[inline]
     pub(super) fn glint_radiance(&self, refl: &Reflection, k: f64, t: [f64; 3]) -> [f64; 3] {
-        let (SeaSunAt::Glint { rho, .. }, Some(g)) = (self, &refl.glint) else {
-            return [0.0; 3];
-        };
-        if k <= 0.0 {
-            return [0.0; 3];
-        }
-        [0, 1, 2].map(|c| (k * g.irradiance[c]).min(rho * g.radiance_cap[c]) * t[c])
+        self.glint_scales(refl)
+            .map_or([0.0; 3], |scales| glint_radiance(k, t, scales))
     }
 
     /// [`Reflection::sun`] towards absolute azimuth `azimuth_rad`.
@@ -1116,7 +1112,7 @@ impl SeaSunAt {
                 let Some(g) = &refl.glint else {
                     return [0.0; 3];
                 };
-                // As glint_factor and glint_transmittance, from one look-up of the sun.
+                // As glint_factor_and_transmittance.
                 let phi = g.sun.azimuth_rad - azimuth_rad;
                 let (e, depth) = g.at_sea.at(g.sun.elevation_rad + tilt * phi.cos());
                 let k = geometry.per_irradiance(e, phi);
@@ -1142,6 +1138,19 @@ impl SeaSunAt {
             SeaSunAt::Nothing => [0.0; 3],
         }
     }
+}
+
+/// [`SeaSunAt::glint_radiance`] with its [`SeaSunAt::glint_scales`].
+#[inline]
+pub(super) fn glint_radiance(
+    k: f64,
+    t: [f64; 3],
+    (irradiance, cap): ([f64; 3], [f64; 3]),
+) -> [f64; 3] {
+    if k <= 0.0 {
+        return [0.0; 3];
+    }
+    [0, 1, 2].map(|c| (k * irradiance[c]).min(cap[c]) * t[c])
 }
 
 impl Shader<'_> {

@@ -243,11 +243,6 @@ impl SeaSunTable {
         c[0] + u * (c[1] + u * (c[2] + u * c[3]))
     }
 
-    /// The optical depth of [`Self::at`] alone.
-    pub(super) fn depth(&self, true_rad: f64) -> [f64; 3] {
-        self.at(true_rad).1
-    }
-
     /// Bounds (lo, hi) on the apparent elevation [`Self::at`] gives for every true elevation in
     /// `true_rad` (lo, hi), padded for rounding: the ends' values and the bounds of the cubics
     /// of every interval the range meets (whether or not the map is monotone). `None` when the

@@ -311,15 +311,18 @@ fn render_on_base<'a>(
         return Ok((render_scene(scene, tracer, options)?, scene.camera.height));
     };
     let (width, height) = plan.size();
-    let mut pixels = base.film.pixels.clone();
+    // Each row is either copied from the base or shaded: neither reads what it starts as.
+    let mut pixels = vec![[0.0f32; 4]; base.film.pixels.len()];
     let (shaded, non_finite) = pixels
         .par_chunks_mut(width as usize)
+        .zip(base.film.pixels.par_chunks(width as usize))
         .zip(&base.rows)
         .enumerate()
         .map_init(
             || plan.scratch(),
-            |scratch, (y, (row, &(elevations, base_bad)))| {
+            |scratch, (y, ((row, base_row), &(elevations, base_bad)))| {
                 if plan.copies_base_row(&reads, &base.plan, &base.reads, elevations) {
+                    row.copy_from_slice(base_row);
                     (0, base_bad)
                 } else {
                     (1, plan.shade_row(y as u32, row, scratch))
