@@ -29,7 +29,7 @@ use crate::scene::camera::CameraFrame;
 pub const STRIDE: usize = 8;
 
 /// Node spacing (columns) of the glitter before refinement (it is smooth: [`Smooth`]).
-pub const SMOOTH_STRIDE: usize = 64;
+pub const SMOOTH_STRIDE: usize = 128;
 
 /// Relative error (per channel) at which linear interpolation closes an interval.
 pub const TOLERANCE: f64 = 1e-3;
