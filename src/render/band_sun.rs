@@ -17,8 +17,10 @@
 //!
 //! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
 //! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated
-//! instead by a quadratic in its logarithm (nodes [`SMOOTH_STRIDE`] apart; [`Smooth`]), with a
-//! test that bounds the error at every column of an accepted interval, not only at its middle.
+//! instead by a quadratic in its logarithm (nodes [`SMOOTH_STRIDE`] apart; [`Smooth`]), and so
+//! is each channel's transmittance of the sun's light to the column's sea point (slowly varying
+//! with the azimuth), with a test that bounds their combined error at every column of an
+//! accepted interval, not only at its middle.
 
 use super::ray_model::FanEnd;
 use super::reflection::{SeaSunAt, glint_radiance};
@@ -29,7 +31,7 @@ use crate::scene::camera::CameraFrame;
 pub const STRIDE: usize = 8;
 
 /// Node spacing (columns) of the glitter before refinement (it is smooth: [`Smooth`]).
-pub const SMOOTH_STRIDE: usize = 64;
+pub const SMOOTH_STRIDE: usize = 128;
 
 /// Relative error (per channel) at which linear interpolation closes an interval.
 pub const TOLERANCE: f64 = 1e-3;
