@@ -248,6 +248,8 @@ pub(super) struct TerrainView<'a> {
     max_top_m: Vec<f64>,
     /// The highest ground in the frame (m).
     max_height_m: f64,
+    /// The palette's [`crate::scene::terrain::Palette::ice_tan_below`].
+    ice_tan_below: f64,
     /// Where the rays are traced: the fan's (or in exact mode every sample's).
     pub(super) traced: TracedGrid,
     /// The terrain fan (None in exact mode: rays are traced per sample).
@@ -266,6 +268,8 @@ pub(super) struct TerrainView<'a> {
     candidates: Vec<u32>,
     /// Where each profile's candidates start in `candidates` (and where the last ends).
     candidate_start: Vec<usize>,
+    /// Per candidate, the highest ground at it and the profile's candidates after it.
+    candidate_tops: Vec<f32>,
 }
 
 /// [`TerrainView::reflected_cover`]'s ray: the lowest reflected ray not yet known to meet the
@@ -378,6 +382,7 @@ impl<'a> TerrainView<'a> {
                 .collect(),
             max_height_m: max_top_m.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             max_top_m,
+            ice_tan_below: terrain.palette.ice_tan_below(),
             fan: None,
             ray_grid_heights: Vec::new(),
             ray_block_min: Vec::new(),
@@ -385,6 +390,7 @@ impl<'a> TerrainView<'a> {
             may_hit_rad: frame.elevation_range_rad,
             candidates: Vec::new(),
             candidate_start: vec![0; n_profiles + 1],
+            candidate_tops: Vec::new(),
             frame,
         };
         if !exact {
@@ -713,11 +719,20 @@ impl<'a> TerrainView<'a> {
         let candidates = &self.candidates[self.candidate_start[p]..self.candidate_start[p + 1]];
         match candidates.first() {
             Some(&first) if d[first as usize] > from_m => {
-                for &j in candidates {
+                let tops = &self.candidate_tops[self.candidate_start[p]..self.candidate_start[p + 1]];
+                let mut moved = true;
+                for (&j, &top) in candidates.iter().zip(tops) {
                     let j = j as usize;
+                    // Once the ray stays above every candidate left (at the start and after
+                    // each rise), each would be cleared as it is: the answer stands.
+                    if moved && fan.min_height_beyond(low.e, d[j] - from_m) > f64::from(top) {
+                        break;
+                    }
+                    let e = low.e;
                     if !low.clear(d[j], z[j])? {
                         break;
                     }
+                    moved = low.e != e;
                 }
             }
             _ => {
@@ -793,7 +808,16 @@ impl<'a> TerrainView<'a> {
         self.candidate_start = Vec::with_capacity(lists.len() + 1);
         self.candidate_start.push(0);
         self.candidates.clear();
-        for list in lists {
+        self.candidate_tops.clear();
+        let n = self.distances_m.len();
+        for (p, list) in lists.into_iter().enumerate() {
+            let z = &self.profiles[p * n..(p + 1) * n];
+            let start = self.candidate_tops.len();
+            self.candidate_tops.extend(list.iter().map(|&j| z[j as usize]));
+            let tops = &mut self.candidate_tops[start..];
+            for k in (0..tops.len().saturating_sub(1)).rev() {
+                tops[k] = tops[k].max(tops[k + 1]);
+            }
             self.candidates.extend(list);
             self.candidate_start.push(self.candidates.len());
         }
@@ -909,14 +933,23 @@ impl<'a> TerrainView<'a> {
         let lat_lon = self
             .profile(offset_rad)
             .map(|p| self.circles[p].lat_lon_deg(hit.distance_m, radius));
-        let (slope, normal) = lat_lon
+        let (tan_slope, normal) = lat_lon
             .and_then(|(lat, lon)| t.dem.grid_position(lat, t.wrap_lon(lon)))
-            .map_or((0.0, [0.0, 0.0, 1.0]), |(r, c)| {
-                t.slope_at_grid(r, c, radius)
-            });
+            .and_then(|(r, c)| t.dem.tan_slope_at_grid(&t.gradients, r, c, radius))
+            .unwrap_or((0.0, [0.0, 0.0, 1.0]));
+        // The palette's albedo (Palette::albedo), the slope's angle taken only near the ice
+        // slope.
+        let palette = &t.palette;
+        let albedo = if palette.is_ice(tan_slope, self.ice_tan_below) {
+            palette.ice_rgb
+        } else if hit.height_m >= palette.snow_line_m {
+            palette.snow_rgb
+        } else {
+            palette.rock_rgb
+        };
         // The normal is in the hit point's east/north/up; the light's direction is taken in the
         // same local frame (the model spans a few degrees at most).
-        let lit = t.palette.colour(hit.height_m, slope, normal);
+        let lit = palette.lit(albedo, normal);
         let ground = match (&t.orthophoto, lat_lon) {
             (Some(photo), Some((lat, lon))) => {
                 let [r, g, b, a] = photo.rgba_at(lat, lon).map(f64::from);

@@ -93,10 +93,38 @@ impl Palette {
     /// Lit colour of ground at `height_m` with slope `slope_rad` and upward unit normal
     /// `normal_enu`.
     pub fn colour(&self, height_m: f64, slope_rad: f64, normal_enu: [f64; 3]) -> [f64; 3] {
+        self.lit(self.albedo(height_m, slope_rad), normal_enu)
+    }
+
+    /// `albedo` lit as [`Self::colour`] lights it, on ground with upward unit normal
+    /// `normal_enu`.
+    #[inline]
+    pub fn lit(&self, albedo: [f64; 3], normal_enu: [f64; 3]) -> [f64; 3] {
         let l = self.light_enu;
         let lambert = (normal_enu[0] * l[0] + normal_enu[1] * l[1] + normal_enu[2] * l[2]).max(0.0);
         let light = Self::AMBIENT + (1.0 - Self::AMBIENT) * lambert;
-        self.albedo(height_m, slope_rad).map(|c| c * light)
+        albedo.map(|c| c * light)
+    }
+
+    /// A slope tangent below which every slope is below the ice slope: tan(ice slope − 1e-9
+    /// rad) less a relative 1e-12, so that arctan of a smaller tangent is certainly below the
+    /// ice slope despite rounding (0 when the ice slope is not in (1e-9, π/2]: the angle is then
+    /// always computed). See [`Self::is_ice`].
+    pub fn ice_tan_below(&self) -> f64 {
+        let s = self.ice_slope_rad;
+        if s > 1e-9 && s <= std::f64::consts::FRAC_PI_2 {
+            (s - 1e-9).tan() * (1.0 - 1e-12)
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether ground whose slope has tangent `tan_slope` is ice (slope ≥ the ice slope, as
+    /// [`Self::albedo`] decides it), the arctangent taken only at or above `ice_tan_below`
+    /// ([`Self::ice_tan_below`]).
+    #[inline]
+    pub fn is_ice(&self, tan_slope: f64, ice_tan_below: f64) -> bool {
+        tan_slope >= ice_tan_below && tan_slope.atan() >= self.ice_slope_rad
     }
 }
 
