@@ -297,7 +297,10 @@ impl Dem {
         let gy = -south / (self.lat_step_deg * m_per_deg);
         let gx = east / (self.lon_step_deg * m_per_deg * lat.to_radians().cos().max(1e-6));
         let norm = (gx * gx + gy * gy + 1.0).sqrt();
-        Some(((gx * gx + gy * gy).sqrt(), [-gx / norm, -gy / norm, 1.0 / norm]))
+        Some((
+            (gx * gx + gy * gy).sqrt(),
+            [-gx / norm, -gy / norm, 1.0 / norm],
+        ))
     }
 
     /// Slope (rad from the horizontal) and the upward unit normal (east, north, up) at a point,
