@@ -274,8 +274,6 @@ pub(super) struct TerrainView<'a> {
     candidates: Vec<u32>,
     /// Where each profile's candidates start in `candidates` (and where the last ends).
     candidate_start: Vec<usize>,
-    /// Per candidate, the highest ground at it and the profile's candidates after it.
-    candidate_tops: Vec<f32>,
 }
 
 /// [`TerrainView::reflected_cover`]'s ray: the lowest reflected ray not yet known to meet the
@@ -399,7 +397,6 @@ impl<'a> TerrainView<'a> {
             may_hit_rad: frame.elevation_range_rad,
             candidates: Vec::new(),
             candidate_start: vec![0; n_profiles + 1],
-            candidate_tops: Vec::new(),
             frame,
         };
         if !exact {
@@ -728,21 +725,11 @@ impl<'a> TerrainView<'a> {
         let candidates = &self.candidates[self.candidate_start[p]..self.candidate_start[p + 1]];
         match candidates.first() {
             Some(&first) if d[first as usize] > from_m => {
-                let tops =
-                    &self.candidate_tops[self.candidate_start[p]..self.candidate_start[p + 1]];
-                let mut moved = true;
-                for (&j, &top) in candidates.iter().zip(tops) {
+                for &j in candidates {
                     let j = j as usize;
-                    // Once the ray stays above every candidate left (at the start and after
-                    // each rise), each would be cleared as it is: the answer stands.
-                    if moved && fan.min_height_beyond(low.e, d[j] - from_m) > f64::from(top) {
-                        break;
-                    }
-                    let e = low.e;
                     if !low.clear(d[j], z[j])? {
                         break;
                     }
-                    moved = low.e != e;
                 }
             }
             _ => {
@@ -818,17 +805,7 @@ impl<'a> TerrainView<'a> {
         self.candidate_start = Vec::with_capacity(lists.len() + 1);
         self.candidate_start.push(0);
         self.candidates.clear();
-        self.candidate_tops.clear();
-        let n = self.distances_m.len();
-        for (p, list) in lists.into_iter().enumerate() {
-            let z = &self.profiles[p * n..(p + 1) * n];
-            let start = self.candidate_tops.len();
-            self.candidate_tops
-                .extend(list.iter().map(|&j| z[j as usize]));
-            let tops = &mut self.candidate_tops[start..];
-            for k in (0..tops.len().saturating_sub(1)).rev() {
-                tops[k] = tops[k].max(tops[k + 1]);
-            }
+        for list in lists {
             self.candidates.extend(list);
             self.candidate_start.push(self.candidates.len());
         }
