@@ -62,7 +62,7 @@ pub const MAX_TERRAIN_DISTANCES: usize = 2048;
 /// Most azimuth profiles per frame.
 pub const MAX_TERRAIN_PROFILES: usize = 8192;
 /// Grid intervals per skip block.
-pub const BLOCK: usize = 16;
+pub const BLOCK: usize = 8;
 /// Longest step (m) between the traced distances from the camera to the land (they carry only
 /// the air along the way: a ray's sag between them, κd²/8, is centimetres there).
 pub const MAX_APPROACH_STEP_M: f64 = 2_000.0;
