@@ -682,7 +682,7 @@ impl<'a> TerrainView<'a> {
             p,
             from,
             |j| sea_ray.height(d[j] - from_m),
-            |b| fan.min_height_beyond(elevation_rad, d[b * BLOCK] - from_m) as f32,
+            |b| sea_ray.min_height_beyond(d[b * BLOCK] - from_m) as f32,
             FanEnd::Lost,
         )
     }
@@ -736,7 +736,7 @@ impl<'a> TerrainView<'a> {
                 let zmax = &self.block_max[p * self.n_blocks..(p + 1) * self.n_blocks];
                 let from = d.partition_point(|&x| x <= from_m);
                 'blocks: for (b, &block_top) in zmax.iter().enumerate().skip(from / BLOCK) {
-                    if fan.min_height_beyond(low.e, d[b * BLOCK] - from_m) as f32 > block_top {
+                    if low.ray.min_height_beyond(d[b * BLOCK] - from_m) as f32 > block_top {
                         continue;
                     }
                     for j in (b * BLOCK).max(from)..=((b + 1) * BLOCK).min(n - 1) {
@@ -768,17 +768,19 @@ impl<'a> TerrainView<'a> {
         };
         let radius = self.frame.earth_radius_m;
         let mut out = vec![first as u32];
+        // The hull's vertices, with their points.
+        let mut hull: Vec<(usize, (f64, f64))> = Vec::new();
         for scale in [1.0, 4.0 / 3.0, 2.0] {
             let r = scale * radius;
             let point = |j: usize| {
                 let d = self.distances_m[j];
                 (d, f64::from(z[j]) - d * d / (2.0 * r))
             };
-            let mut hull: Vec<usize> = Vec::new();
+            hull.clear();
             for &j in &land {
                 let c = point(j);
                 while hull.len() >= 2 {
-                    let (a, b) = (point(hull[hull.len() - 2]), point(hull[hull.len() - 1]));
+                    let (a, b) = (hull[hull.len() - 2].1, hull[hull.len() - 1].1);
                     // Drop b unless a → b → c turns clockwise (b above the chord a–c).
                     if (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0) >= 0.0 {
                         hull.pop();
@@ -786,9 +788,9 @@ impl<'a> TerrainView<'a> {
                         break;
                     }
                 }
-                hull.push(j);
+                hull.push((j, c));
             }
-            out.extend(hull.iter().map(|&j| j as u32));
+            out.extend(hull.iter().map(|&(j, _)| j as u32));
         }
         out.sort_unstable();
         out.dedup();

@@ -28,6 +28,7 @@ pub mod ortho;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 pub use dem::{Dem, DemError};
@@ -359,22 +360,30 @@ impl Terrain {
             .sqrt()
             .ceil()
             .max(1.0) as usize;
-        let mut lo = f64::INFINITY;
-        let mut hi = 0.0f64;
-        for r in (0..dem.rows).step_by(stride) {
-            for c in (0..dem.cols).step_by(stride) {
-                let rr = (r + stride).min(dem.rows);
-                let cc = (c + stride).min(dem.cols);
-                let land = (r..rr).any(|i| (c..cc).any(|j| dem.sample(i, j) > 0.0));
-                if !land {
-                    continue;
+        // Rows of cells in parallel (the minimum and maximum do not depend on the order).
+        let (lo, hi) = (0..dem.rows)
+            .into_par_iter()
+            .step_by(stride)
+            .map(|r| {
+                let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+                for c in (0..dem.cols).step_by(stride) {
+                    let rr = (r + stride).min(dem.rows);
+                    let cc = (c + stride).min(dem.cols);
+                    let land = (r..rr).any(|i| (c..cc).any(|j| dem.sample(i, j) > 0.0));
+                    if !land {
+                        continue;
+                    }
+                    let (lat, lon) = dem.lat_lon_deg(r, c);
+                    let d = self.distance_to_m(lat, lon, radius_m);
+                    lo = lo.min(d);
+                    hi = hi.max(d);
                 }
-                let (lat, lon) = dem.lat_lon_deg(r, c);
-                let d = self.distance_to_m(lat, lon, radius_m);
-                lo = lo.min(d);
-                hi = hi.max(d);
-            }
-        }
+                (lo, hi)
+            })
+            .reduce(
+                || (f64::INFINITY, 0.0f64),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
         if !lo.is_finite() {
             return None;
         }
