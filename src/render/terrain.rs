@@ -840,7 +840,9 @@ impl<'a> TerrainView<'a> {
         let zmax = &self.block_max[p * self.n_blocks..(p + 1) * self.n_blocks];
         let mut prev: Option<(f64, f64)> = None; // (h, z) at the previous grid point
         for (b, &block_top) in zmax.iter().enumerate().skip(from / BLOCK) {
-            if block_min(b) > block_top {
+            // A block without ground holds no hit; a ray that ends in it has no height at the
+            // next block's first point either, so the march ends there as it would here.
+            if block_top == f32::NEG_INFINITY || block_min(b) > block_top {
                 prev = None; // the block's last point is above ground: restart there
                 continue;
             }
