@@ -398,6 +398,36 @@ mod tests {
     use super::*;
 
     #[test]
+    fn is_ice_decides_as_the_slope_angle_does() {
+        let mut palette = Palette::default_palette();
+        for ice_deg in [0.0, 1e-9, 5.0, 20.0, 35.0, 60.0, 89.9, 90.0, 95.0] {
+            palette.ice_slope_rad = f64::to_radians(ice_deg);
+            let below = palette.ice_tan_below();
+            let t = palette.ice_slope_rad.tan().abs();
+            // Tangents around the threshold (a few ulps and relative steps each side), spread
+            // over [0, 1e20], and the extremes.
+            let mut tangents = vec![0.0, 1e-300, f64::MAX, 1e16, 1.633e16, 1e20];
+            tangents.extend((0..2000).map(|k| 10f64.powf(-6.0 + 26.0 * k as f64 / 2000.0)));
+            for rel in [1e-15, 1e-12, 1e-10, 1e-9, 1e-6, 1e-3] {
+                tangents.extend([t * (1.0 - rel), t * (1.0 + rel)]);
+            }
+            for ulps in 0..64u64 {
+                tangents.extend([
+                    f64::from_bits(t.to_bits() - ulps),
+                    f64::from_bits(t.to_bits() + ulps),
+                ]);
+            }
+            for &x in &tangents {
+                assert_eq!(
+                    palette.is_ice(x, below),
+                    x.atan() >= palette.ice_slope_rad,
+                    "ice slope {ice_deg}°, tangent {x:e}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn great_circle_points_are_the_destinations() {
         let dem = Dem::new(2, 2, (80.0, 10.0), (1.0, 1.0), vec![0.0; 4]).unwrap();
         let t = Terrain::new(
