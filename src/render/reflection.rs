@@ -197,9 +197,14 @@ impl SeaFan {
     #[inline]
     pub(super) fn ray(&self, elevation_rad: f64) -> Option<SeaRay<'_>> {
         let (i, t) = Self::cell(elevation_rad * self.inv_step_e, self.n_e)?;
+        let rows = i * self.n_r..(i + 2) * self.n_r;
+        let (low, high) = self.heights[rows.clone()].split_at(self.n_r);
+        let (low_min, high_min) = self.min_beyond[rows].split_at(self.n_r);
         Some(SeaRay {
-            low: &self.heights[i * self.n_r..(i + 1) * self.n_r],
-            high: &self.heights[(i + 1) * self.n_r..(i + 2) * self.n_r],
+            low,
+            high,
+            low_min,
+            high_min,
             t,
             inv_step_r: self.inv_step_r,
         })
@@ -510,6 +515,9 @@ fn height_bounds(heights: &[f32], n_e: usize, n_r: usize) -> (Vec<[f32; 2]>, usi
 pub(super) struct SeaRay<'f> {
     low: &'f [f32],
     high: &'f [f32],
+    /// The two rays' lowest heights from each range on ([`SeaFan`]'s `min_beyond`).
+    low_min: &'f [f32],
+    high_min: &'f [f32],
     t: f64,
     inv_step_r: f64,
 }
@@ -526,6 +534,18 @@ impl SeaRay<'_> {
         let high = c + (d - c) * u;
         let h = low + (high - low) * self.t;
         h.is_finite().then_some(h)
+    }
+
+    /// [`SeaFan::min_height_beyond`] of this ray: a lower bound (m) on its height at every
+    /// range from `range_m` on.
+    #[inline(always)]
+    pub(super) fn min_height_beyond(&self, range_m: f64) -> f64 {
+        let x = (range_m * self.inv_step_r).max(0.0);
+        if x > (self.low_min.len() - 1) as u32 as f64 {
+            return f64::INFINITY;
+        }
+        let m = x as u32 as usize;
+        f64::from(self.low_min[m].min(self.high_min[m]))
     }
 }
 

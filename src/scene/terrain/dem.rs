@@ -273,6 +273,21 @@ impl Dem {
         c: f64,
         radius_m: f64,
     ) -> Option<(f64, [f64; 3])> {
+        self.tan_slope_at_grid(gradients, r, c, radius_m)
+            .map(|(tan_slope, normal)| (tan_slope.atan(), normal))
+    }
+
+    /// [`Self::gradient_at_grid`] with the slope's tangent (|∇h|) in place of the slope: the
+    /// same arithmetic up to the arctangent, for callers that compare the slope with a
+    /// threshold and rarely need the angle itself.
+    #[inline]
+    pub fn tan_slope_at_grid(
+        &self,
+        gradients: &[[f32; 2]],
+        r: f64,
+        c: f64,
+        radius_m: f64,
+    ) -> Option<(f64, [f64; 3])> {
         let [south, east] = bilinear_pair(self.rows, self.cols, r, c, gradients);
         if !(south.is_finite() && east.is_finite()) {
             return None;
@@ -283,7 +298,7 @@ impl Dem {
         let gx = east / (self.lon_step_deg * m_per_deg * lat.to_radians().cos().max(1e-6));
         let norm = (gx * gx + gy * gy + 1.0).sqrt();
         Some((
-            (gx * gx + gy * gy).sqrt().atan(),
+            (gx * gx + gy * gy).sqrt(),
             [-gx / norm, -gy / norm, 1.0 / norm],
         ))
     }

@@ -28,6 +28,7 @@ pub mod ortho;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 pub use dem::{Dem, DemError};
@@ -93,10 +94,38 @@ impl Palette {
     /// Lit colour of ground at `height_m` with slope `slope_rad` and upward unit normal
     /// `normal_enu`.
     pub fn colour(&self, height_m: f64, slope_rad: f64, normal_enu: [f64; 3]) -> [f64; 3] {
+        self.lit(self.albedo(height_m, slope_rad), normal_enu)
+    }
+
+    /// `albedo` lit as [`Self::colour`] lights it, on ground with upward unit normal
+    /// `normal_enu`.
+    #[inline]
+    pub fn lit(&self, albedo: [f64; 3], normal_enu: [f64; 3]) -> [f64; 3] {
         let l = self.light_enu;
         let lambert = (normal_enu[0] * l[0] + normal_enu[1] * l[1] + normal_enu[2] * l[2]).max(0.0);
         let light = Self::AMBIENT + (1.0 - Self::AMBIENT) * lambert;
-        self.albedo(height_m, slope_rad).map(|c| c * light)
+        albedo.map(|c| c * light)
+    }
+
+    /// A slope tangent below which every slope is below the ice slope: tan(ice slope − 1e-9
+    /// rad) less a relative 1e-12, so that arctan of a smaller tangent is certainly below the
+    /// ice slope despite rounding (0 when the ice slope is not in (1e-9, π/2]: the angle is then
+    /// always computed). See [`Self::is_ice`].
+    pub fn ice_tan_below(&self) -> f64 {
+        let s = self.ice_slope_rad;
+        if s > 1e-9 && s <= std::f64::consts::FRAC_PI_2 {
+            (s - 1e-9).tan() * (1.0 - 1e-12)
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether ground whose slope has tangent `tan_slope` is ice (slope ≥ the ice slope, as
+    /// [`Self::albedo`] decides it), the arctangent taken only at or above `ice_tan_below`
+    /// ([`Self::ice_tan_below`]).
+    #[inline]
+    pub fn is_ice(&self, tan_slope: f64, ice_tan_below: f64) -> bool {
+        tan_slope >= ice_tan_below && tan_slope.atan() >= self.ice_slope_rad
     }
 }
 
@@ -331,22 +360,30 @@ impl Terrain {
             .sqrt()
             .ceil()
             .max(1.0) as usize;
-        let mut lo = f64::INFINITY;
-        let mut hi = 0.0f64;
-        for r in (0..dem.rows).step_by(stride) {
-            for c in (0..dem.cols).step_by(stride) {
-                let rr = (r + stride).min(dem.rows);
-                let cc = (c + stride).min(dem.cols);
-                let land = (r..rr).any(|i| (c..cc).any(|j| dem.sample(i, j) > 0.0));
-                if !land {
-                    continue;
+        // Rows of cells in parallel (the minimum and maximum do not depend on the order).
+        let (lo, hi) = (0..dem.rows)
+            .into_par_iter()
+            .step_by(stride)
+            .map(|r| {
+                let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+                for c in (0..dem.cols).step_by(stride) {
+                    let rr = (r + stride).min(dem.rows);
+                    let cc = (c + stride).min(dem.cols);
+                    let land = (r..rr).any(|i| (c..cc).any(|j| dem.sample(i, j) > 0.0));
+                    if !land {
+                        continue;
+                    }
+                    let (lat, lon) = dem.lat_lon_deg(r, c);
+                    let d = self.distance_to_m(lat, lon, radius_m);
+                    lo = lo.min(d);
+                    hi = hi.max(d);
                 }
-                let (lat, lon) = dem.lat_lon_deg(r, c);
-                let d = self.distance_to_m(lat, lon, radius_m);
-                lo = lo.min(d);
-                hi = hi.max(d);
-            }
-        }
+                (lo, hi)
+            })
+            .reduce(
+                || (f64::INFINITY, 0.0f64),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
         if !lo.is_finite() {
             return None;
         }
@@ -359,6 +396,36 @@ impl Terrain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn is_ice_decides_as_the_slope_angle_does() {
+        let mut palette = Palette::default_palette();
+        for ice_deg in [0.0, 1e-9, 5.0, 20.0, 35.0, 60.0, 89.9, 90.0, 95.0] {
+            palette.ice_slope_rad = f64::to_radians(ice_deg);
+            let below = palette.ice_tan_below();
+            let t = palette.ice_slope_rad.tan().abs();
+            // Tangents around the threshold (a few ulps and relative steps each side), spread
+            // over [0, 1e20], and the extremes.
+            let mut tangents = vec![0.0, 1e-300, f64::MAX, 1e16, 1.633e16, 1e20];
+            tangents.extend((0..2000).map(|k| 10f64.powf(-6.0 + 26.0 * k as f64 / 2000.0)));
+            for rel in [1e-15, 1e-12, 1e-10, 1e-9, 1e-6, 1e-3] {
+                tangents.extend([t * (1.0 - rel), t * (1.0 + rel)]);
+            }
+            for ulps in 0..64u64 {
+                tangents.extend([
+                    f64::from_bits(t.to_bits() - ulps),
+                    f64::from_bits(t.to_bits() + ulps),
+                ]);
+            }
+            for &x in &tangents {
+                assert_eq!(
+                    palette.is_ice(x, below),
+                    x.atan() >= palette.ice_slope_rad,
+                    "ice slope {ice_deg}°, tangent {x:e}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn great_circle_points_are_the_destinations() {
