@@ -122,6 +122,26 @@ impl Fates {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FateWatch<'_> {
+        self.watch_all_distances(
+            index,
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        )
+        .clear_above(self.cards_top_m)
+    }
+
+    /// [`Self::watch`] for a ray followed through all of `distances_m`
+    /// ([`RayTracer::trace_all_distances`]): it climbs out or stops only past the last one.
+    fn watch_all_distances<S: StratifiedIndex + ?Sized>(
+        &self,
+        index: &S,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FateWatch<'_> {
         let watch = FateWatch::new(
             &self.envelope,
             index,
@@ -130,7 +150,6 @@ impl Fates {
             elevation_rad,
             distances_m.last().copied().unwrap_or(0.0),
         );
-        let watch = watch.clear_above(self.cards_top_m);
         if need_sky_direction {
             watch
         } else {
@@ -363,6 +382,34 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         heights.resize(distances_m.len(), None);
         heights
     }
+
+    fn trace_all_distances(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        let mut watch = self.fates.watch_all_distances(
+            self.tracer.field(),
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        );
+        let mut record = RayRecord::default();
+        match self.tracer.trace_into(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            &mut watch,
+            &mut record,
+            None,
+        ) {
+            Ok(()) => fan_ray(&record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
 }
 
 /// The paper's method as a renderer back-end: every ray integrated in 3-D through the field
@@ -410,18 +457,46 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> Result<RayRecord, TracerError> {
+        self.trace_record_with(
+            (camera_height_m, elevation_rad, azimuth_rad),
+            distances_m,
+            need_sky_direction,
+            true,
+        )
+    }
+
+    /// [`Self::trace_record`] from (height, elevation, azimuth); `stop_above_cards`: whether a
+    /// ray climbing clear of every card may stop before the last distance.
+    fn trace_record_with(
+        &self,
+        (camera_height_m, elevation_rad, azimuth_rad): (f64, f64, f64),
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        stop_above_cards: bool,
+    ) -> Result<RayRecord, TracerError> {
         let radius = self.config.earth_radius_m;
         let origin = DVec3::new(0.0, 0.0, radius + camera_height_m);
         let (sin_e, cos_e) = elevation_rad.sin_cos();
         let (sin_a, cos_a) = azimuth_rad.sin_cos();
         let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
-        let mut watch = self.fates.watch(
-            self.field.field.index,
-            camera_height_m,
-            elevation_rad,
-            distances_m,
-            need_sky_direction,
-        );
+        let index = self.field.field.index;
+        let mut watch = if stop_above_cards {
+            self.fates.watch(
+                index,
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        } else {
+            self.fates.watch_all_distances(
+                index,
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        };
         trace_field(
             &self.field,
             Ground::Sphere { radius_m: radius },
@@ -472,6 +547,24 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
             0.0,
             distances_m,
             need_sky_direction,
+        ) {
+            Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
+
+    fn trace_all_distances(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        match self.trace_record_with(
+            (camera_height_m, elevation_rad, 0.0),
+            distances_m,
+            need_sky_direction,
+            false,
         ) {
             Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
             Err(_) => lost(elevation_rad, distances_m.len()),

@@ -115,6 +115,30 @@ impl RayTracer for MemoRays<'_> {
         })
     }
 
+    fn trace_all_distances(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        // Flags 2, 3: not the rays of `trace` (0, 1), which may stop above the cards.
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            2 + u64::from(need_sky_direction),
+        );
+        remembered(&self.traces, key, || {
+            self.inner.trace_all_distances(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        })
+    }
+
     fn density_paths_m(
         &self,
         camera_height_m: f64,

@@ -77,6 +77,11 @@ pub(super) struct SeaFan {
     n_bounds: usize,
 }
 
+/// Fractions of a sea fan's elevation step below this are rounding of an elevation on a ray
+/// (computed as (i + t)·step and scaled back by 1/step, it is within a few ulps of i): the
+/// neighbour's weight is dropped there, which moves a height by under 1e-12 of the step's.
+const ON_RAY: f64 = 1e-12;
+
 /// Rays per block of [`SeaFan`]'s height bounds.
 const BOUND_BLOCK: usize = 8;
 
@@ -106,7 +111,13 @@ impl SeaFan {
         let rays: Vec<(Vec<f32>, f64)> = (0..n_e)
             .into_par_iter()
             .map(|i| {
-                let ray = tracer.trace(0.0, i as f64 * step_e, &ranges, need_sky_direction);
+                // Followed through every range: a ray stopped once it has climbed above the
+                // cards (as `trace` may) would leave no heights where its neighbour below is
+                // still within a card's height range, and the image between them (up to a fan
+                // cell's heights, the card's top) would be lost, by how the stop falls between
+                // range nodes.
+                let ray =
+                    tracer.trace_all_distances(0.0, i as f64 * step_e, &ranges, need_sky_direction);
                 let mut h: Vec<f32> = ray
                     .heights_m
                     .iter()
@@ -216,8 +227,22 @@ impl SeaFan {
         let (c, d) = (at(i + 1, m), at(i + 1, m + 1));
         let low = a + (b - a) * u;
         let high = c + (d - c) * u;
-        let h = low + (high - low) * t;
+        let h = Self::between(low, high, t);
         h.is_finite().then_some(h)
+    }
+
+    /// `low` + (`high` − `low`)·`t`, but `low` itself for `t` < [`ON_RAY`]: an elevation on a
+    /// fan ray up to rounding (as the ends of [`Self::elevations_within`]'s intervals are) has
+    /// the ray's own height whether or not the ray above had ended. (NaN · t would make it
+    /// vanish there, while the same elevation rounded into the cell below, at t ≈ 1, has it:
+    /// rounding would decide whether an image reaches its end.)
+    #[inline(always)]
+    fn between(low: f64, high: f64, t: f64) -> f64 {
+        if t < ON_RAY {
+            low
+        } else {
+            low + (high - low) * t
+        }
     }
 
     /// The density-weighted path lengths [D_R, D_A] (m) from the sea along the ray launched at
@@ -328,10 +353,14 @@ impl SeaFan {
                     let (x, y) = ((h_lo - h0) / (h1 - h0), (h_hi - h0) / (h1 - h0));
                     (x.min(y).max(0.0), x.max(y).min(1.0))
                 };
-                let e0 = i as f64 * self.step_e;
+                // (i + t)·step: the end of one ray pair's interval (t = 1) is then bit for bit
+                // the start of the next one's (t = 0), so the card's intervals join into one
+                // ([`Spans::push`]); i·step + t·step can differ from (i + 1)·step by an ulp,
+                // leaving a gap that cuts the image into parts at fan rays or not by rounding.
+                let i = i as f64;
                 let (a, b) = (
-                    (e0 + t0 * self.step_e).max(e_a),
-                    (e0 + t1 * self.step_e).min(e_b),
+                    ((i + t0) * self.step_e).max(e_a),
+                    ((i + t1) * self.step_e).min(e_b),
                 );
                 if a <= b {
                     out.push(a, b);
@@ -524,7 +553,7 @@ impl SeaRay<'_> {
         let (c, d) = (high[0] as f64, high[1] as f64);
         let low = a + (b - a) * u;
         let high = c + (d - c) * u;
-        let h = low + (high - low) * self.t;
+        let h = SeaFan::between(low, high, self.t);
         h.is_finite().then_some(h)
     }
 }

@@ -485,6 +485,28 @@ impl RayTracer for Counting<'_> {
             distances_m,
             need_sky_direction,
         );
+        self.count(ray)
+    }
+
+    fn trace_all_distances(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        self.count(self.inner.trace_all_distances(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        ))
+    }
+}
+
+impl Counting<'_> {
+    /// `ray`, counted as a call (and as trapped or lost).
+    fn count(&self, ray: FanRay) -> FanRay {
         self.calls.fetch_add(1, Ordering::Relaxed);
         match ray.end {
             FanEnd::Trapped => self.trapped.fetch_add(1, Ordering::Relaxed),
@@ -690,6 +712,25 @@ impl RayTracer for Recording<'_> {
             });
         }
         ray
+    }
+
+    /// Passed on and timed with the traces; not recorded (a re-trace with
+    /// [`RayTracer::trace`]'s fate rule would stop it above the cards).
+    fn trace_all_distances(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+    ) -> FanRay {
+        self.timed(|| {
+            self.inner.trace_all_distances(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+            )
+        })
     }
 }
 
