@@ -24,7 +24,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::objects::{Composed, Meet, PartAtCard, RayAlong, SampleRay, SceneObject};
-use super::ray_model::{FanEnd, RayTracer};
+use super::ray_model::{FanEnd, FanRay, RayTracer};
 use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
 use super::terrain::{TerrainView, piece_density};
@@ -82,6 +82,72 @@ pub(super) struct SeaFan {
 /// neighbour's weight is dropped there, which moves a height by under 1e-12 of the step's.
 const ON_RAY: f64 = 1e-12;
 
+/// The sea fan's `n_e` rays (elevations i·`step_e`) traced from the sea to `ranges`: each
+/// ray's heights there (f32, NaN where it has none) and its final sky elevation (NaN unless it
+/// left into the sky).
+///
+/// A tracer may stop a ray once it has climbed clear above every card ([`RayTracer::trace`]),
+/// but the fan interpolates heights between neighbouring rays and ranges, so a cell whose
+/// corner lies past such a stop would be lost while its other rays are still within a card's
+/// heights: the image up to the card's top would be cut off by how the stop fell between
+/// range nodes (a discontinuity in the camera). So a ray that stopped in the sky is traced
+/// again without the stop ([`RayTracer::trace_all_distances`]) as far as the fan's cells
+/// need it: one range node past its own last height or its neighbours' last one (where those
+/// stopped in the sky; where they ended at the sea, their last height), beyond which every
+/// cell it bounds lies above the cards or past a ray that has ended.
+fn trace_sea_rays(
+    tracer: &dyn RayTracer,
+    n_e: usize,
+    step_e: f64,
+    ranges: &[f64],
+    need_sky_direction: bool,
+) -> Vec<(Vec<f32>, f64)> {
+    let n_r = ranges.len();
+    let as_f32 = |ray: &FanRay| -> Vec<f32> {
+        let mut h: Vec<f32> = ray
+            .heights_m
+            .iter()
+            .map(|h| h.map_or(f32::NAN, |v| v as f32))
+            .collect();
+        h.resize(n_r, f32::NAN);
+        h
+    };
+    let first: Vec<(Vec<f32>, f64)> = (0..n_e)
+        .into_par_iter()
+        .map(|i| {
+            let ray = tracer.trace(0.0, i as f64 * step_e, ranges, need_sky_direction);
+            let sky = match ray.end {
+                FanEnd::Sky { elevation_rad } => elevation_rad,
+                _ => f64::NAN,
+            };
+            (as_f32(&ray), sky)
+        })
+        .collect();
+    // Leading heights of each ray, and how far its cells need its neighbours' (and its own).
+    let count = |h: &[f32]| h.iter().position(|v| v.is_nan()).unwrap_or(n_r);
+    let reach: Vec<usize> = first
+        .iter()
+        .map(|(h, sky)| (count(h) + usize::from(!sky.is_nan())).min(n_r))
+        .collect();
+    (0..n_e)
+        .into_par_iter()
+        .map(|i| {
+            let (h, sky) = &first[i];
+            let need = reach[i.saturating_sub(1)..(i + 2).min(n_e)]
+                .iter()
+                .copied()
+                .max()
+                .unwrap_or(0);
+            if sky.is_nan() || count(h) >= need {
+                return (h.clone(), *sky);
+            }
+            let e = i as f64 * step_e;
+            let again = tracer.trace_all_distances(0.0, e, &ranges[..need], need_sky_direction);
+            (as_f32(&again), *sky)
+        })
+        .collect()
+}
+
 /// Rays per block of [`SeaFan`]'s height bounds.
 const BOUND_BLOCK: usize = 8;
 
@@ -108,29 +174,7 @@ impl SeaFan {
         let step_r = max_range_m / (n_r - 1) as f64;
         let mut ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
         ranges[n_r - 1] = max_range_m;
-        let rays: Vec<(Vec<f32>, f64)> = (0..n_e)
-            .into_par_iter()
-            .map(|i| {
-                // Followed through every range: a ray stopped once it has climbed above the
-                // cards (as `trace` may) would leave no heights where its neighbour below is
-                // still within a card's height range, and the image between them (up to a fan
-                // cell's heights, the card's top) would be lost, by how the stop falls between
-                // range nodes.
-                let ray =
-                    tracer.trace_all_distances(0.0, i as f64 * step_e, &ranges, need_sky_direction);
-                let mut h: Vec<f32> = ray
-                    .heights_m
-                    .iter()
-                    .map(|h| h.map_or(f32::NAN, |v| v as f32))
-                    .collect();
-                h.resize(n_r, f32::NAN);
-                let sky = match ray.end {
-                    FanEnd::Sky { elevation_rad } => elevation_rad,
-                    _ => f64::NAN,
-                };
-                (h, sky)
-            })
-            .collect();
+        let rays = trace_sea_rays(tracer, n_e, step_e, &ranges, need_sky_direction);
         let mut heights = Vec::with_capacity(n_e * n_r);
         let mut sky_elevation = Vec::with_capacity(n_e);
         for (h, s) in rays {
