@@ -122,25 +122,24 @@ impl Fates {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FateWatch<'_> {
-        self.watch_all_distances(
+        self.watch_above(
             index,
             camera_height_m,
             elevation_rad,
             distances_m,
-            need_sky_direction,
+            (need_sky_direction, 0.0),
         )
-        .clear_above(self.cards_top_m)
     }
 
-    /// [`Self::watch`] for a ray followed through all of `distances_m`
-    /// ([`RayTracer::trace_all_distances`]): it climbs out or stops only past the last one.
-    fn watch_all_distances<S: StratifiedIndex + ?Sized>(
+    /// [`Self::watch`] for a ray that may stop early only `margin_m` above the cards
+    /// ([`RayTracer::trace_with_margin`]; +∞: only past the last distance).
+    fn watch_above<S: StratifiedIndex + ?Sized>(
         &self,
         index: &S,
         camera_height_m: f64,
         elevation_rad: f64,
         distances_m: &[f64],
-        need_sky_direction: bool,
+        (need_sky_direction, margin_m): (bool, f64),
     ) -> FateWatch<'_> {
         let watch = FateWatch::new(
             &self.envelope,
@@ -149,7 +148,8 @@ impl Fates {
             camera_height_m,
             elevation_rad,
             distances_m.last().copied().unwrap_or(0.0),
-        );
+        )
+        .clear_above(self.cards_top_m + margin_m);
         if need_sky_direction {
             watch
         } else {
@@ -383,19 +383,20 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         heights
     }
 
-    fn trace_all_distances(
+    fn trace_with_margin(
         &self,
         camera_height_m: f64,
         elevation_rad: f64,
         distances_m: &[f64],
         need_sky_direction: bool,
+        margin_m: f64,
     ) -> FanRay {
-        let mut watch = self.fates.watch_all_distances(
+        let mut watch = self.fates.watch_above(
             self.tracer.field(),
             camera_height_m,
             elevation_rad,
             distances_m,
-            need_sky_direction,
+            (need_sky_direction, margin_m),
         );
         let mut record = RayRecord::default();
         match self.tracer.trace_into(
@@ -460,43 +461,30 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         self.trace_record_with(
             (camera_height_m, elevation_rad, azimuth_rad),
             distances_m,
-            need_sky_direction,
-            true,
+            (need_sky_direction, 0.0),
         )
     }
 
-    /// [`Self::trace_record`] from (height, elevation, azimuth); `stop_above_cards`: whether a
-    /// ray climbing clear of every card may stop before the last distance.
+    /// [`Self::trace_record`] from (height, elevation, azimuth); `margin_m`: how far above
+    /// the cards a ray climbing clear of them may stop ([`RayTracer::trace_with_margin`]).
     fn trace_record_with(
         &self,
         (camera_height_m, elevation_rad, azimuth_rad): (f64, f64, f64),
         distances_m: &[f64],
-        need_sky_direction: bool,
-        stop_above_cards: bool,
+        (need_sky_direction, margin_m): (bool, f64),
     ) -> Result<RayRecord, TracerError> {
         let radius = self.config.earth_radius_m;
         let origin = DVec3::new(0.0, 0.0, radius + camera_height_m);
         let (sin_e, cos_e) = elevation_rad.sin_cos();
         let (sin_a, cos_a) = azimuth_rad.sin_cos();
         let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
-        let index = self.field.field.index;
-        let mut watch = if stop_above_cards {
-            self.fates.watch(
-                index,
-                camera_height_m,
-                elevation_rad,
-                distances_m,
-                need_sky_direction,
-            )
-        } else {
-            self.fates.watch_all_distances(
-                index,
-                camera_height_m,
-                elevation_rad,
-                distances_m,
-                need_sky_direction,
-            )
-        };
+        let mut watch = self.fates.watch_above(
+            self.field.field.index,
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            (need_sky_direction, margin_m),
+        );
         trace_field(
             &self.field,
             Ground::Sphere { radius_m: radius },
@@ -553,18 +541,18 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
         }
     }
 
-    fn trace_all_distances(
+    fn trace_with_margin(
         &self,
         camera_height_m: f64,
         elevation_rad: f64,
         distances_m: &[f64],
         need_sky_direction: bool,
+        margin_m: f64,
     ) -> FanRay {
         match self.trace_record_with(
             (camera_height_m, elevation_rad, 0.0),
             distances_m,
-            need_sky_direction,
-            false,
+            (need_sky_direction, margin_m),
         ) {
             Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
             Err(_) => lost(elevation_rad, distances_m.len()),

@@ -84,25 +84,29 @@ const ON_RAY: f64 = 1e-12;
 
 /// The sea fan's `n_e` rays (elevations i·`step_e`) traced from the sea to `ranges`: each
 /// ray's heights there (f32, NaN where it has none) and its final sky elevation (NaN unless it
-/// left into the sky).
+/// left into the sky). `top_m`: the highest card or terrain top (m), above which a ray meets
+/// nothing.
 ///
-/// A tracer may stop a ray once it has climbed clear above every card ([`RayTracer::trace`]),
-/// but the fan interpolates heights between neighbouring rays and ranges, so a cell whose
-/// corner lies past such a stop would be lost while its other rays are still within a card's
-/// heights: the image up to the card's top would be cut off by how the stop fell between
-/// range nodes (a discontinuity in the camera). So a ray that stopped in the sky is traced
-/// again without the stop ([`RayTracer::trace_all_distances`]) as far as the fan's cells
-/// need it: one range node past its own last height or its neighbours' last one (where those
-/// stopped in the sky; where they ended at the sea, their last height), beyond which every
-/// cell it bounds lies above the cards or past a ray that has ended.
+/// The fan interpolates heights between neighbouring rays and ranges, so every cell with a
+/// corner at or below `top_m` needs all four corners: a ray stopped as soon as it climbs clear
+/// above the cards ([`RayTracer::trace`]) leaves cells without a corner where its neighbour
+/// below is still within a card's heights, and the image up to the card's top would be cut
+/// off there, by how the stop fell between range nodes (a discontinuity in the camera). So each
+/// ray may stop only a margin above `top_m` ([`RayTracer::trace_with_margin`]): the height two
+/// neighbouring rays part by at the fan's last range (step × range: h ≈ r·e + r²(1 − k)/2R
+/// parts by r·Δe whatever the refraction coefficient k), enough for most rays; then every ray
+/// that the cells need further (one range node past where it or a neighbour was last at or
+/// below `top_m`, as far as that one's heights go) and that stopped in the sky is traced again
+/// without a stop that far (in a duct, say).
 fn trace_sea_rays(
     tracer: &dyn RayTracer,
-    n_e: usize,
-    step_e: f64,
+    (n_e, step_e): (usize, f64),
     ranges: &[f64],
+    top_m: f64,
     need_sky_direction: bool,
 ) -> Vec<(Vec<f32>, f64)> {
     let n_r = ranges.len();
+    let margin_m = step_e * ranges[n_r - 1];
     let as_f32 = |ray: &FanRay| -> Vec<f32> {
         let mut h: Vec<f32> = ray
             .heights_m
@@ -112,10 +116,14 @@ fn trace_sea_rays(
         h.resize(n_r, f32::NAN);
         h
     };
+    let trace = |i: usize, upto: usize, margin_m: f64| {
+        let e = i as f64 * step_e;
+        tracer.trace_with_margin(0.0, e, &ranges[..upto], need_sky_direction, margin_m)
+    };
     let first: Vec<(Vec<f32>, f64)> = (0..n_e)
         .into_par_iter()
         .map(|i| {
-            let ray = tracer.trace(0.0, i as f64 * step_e, ranges, need_sky_direction);
+            let ray = trace(i, n_r, margin_m);
             let sky = match ray.end {
                 FanEnd::Sky { elevation_rad } => elevation_rad,
                 _ => f64::NAN,
@@ -123,27 +131,33 @@ fn trace_sea_rays(
             (as_f32(&ray), sky)
         })
         .collect();
-    // Leading heights of each ray, and how far its cells need its neighbours' (and its own).
+    // Leading heights of each ray, and how far the cells it bounds need their rays' heights.
     let count = |h: &[f32]| h.iter().position(|v| v.is_nan()).unwrap_or(n_r);
     let reach: Vec<usize> = first
         .iter()
-        .map(|(h, sky)| (count(h) + usize::from(!sky.is_nan())).min(n_r))
+        .map(|(h, sky)| {
+            let below = h.iter().rposition(|&v| f64::from(v) <= top_m);
+            let reach = below.map_or(0, |m| m + 2).min(n_r);
+            if sky.is_nan() {
+                reach.min(count(h))
+            } else {
+                reach
+            }
+        })
         .collect();
-    (0..n_e)
+    first
         .into_par_iter()
-        .map(|i| {
-            let (h, sky) = &first[i];
+        .enumerate()
+        .map(|(i, (h, sky))| {
             let need = reach[i.saturating_sub(1)..(i + 2).min(n_e)]
                 .iter()
                 .copied()
                 .max()
                 .unwrap_or(0);
-            if sky.is_nan() || count(h) >= need {
-                return (h.clone(), *sky);
+            if sky.is_nan() || count(&h) >= need {
+                return (h, sky);
             }
-            let e = i as f64 * step_e;
-            let again = tracer.trace_all_distances(0.0, e, &ranges[..need], need_sky_direction);
-            (as_f32(&again), *sky)
+            (as_f32(&trace(i, need, f64::INFINITY)), sky)
         })
         .collect()
 }
@@ -153,14 +167,15 @@ const BOUND_BLOCK: usize = 8;
 
 impl SeaFan {
     /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
-    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is nothing to
-    /// cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
+    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`], its rays followed as long as
+    /// some cell they bound is at or below `top_m` (the highest card or terrain,
+    /// [`trace_sea_rays`]); `None` if there is nothing to cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
     /// density-weighted path lengths with ([`Self::density_paths_m`]).
     pub(super) fn build(
         tracer: &dyn RayTracer,
         e_hi: f64,
         step_rad: f64,
-        max_range_m: f64,
+        (max_range_m, top_m): (f64, f64),
         need_sky_direction: bool,
         density: Option<([f64; 2], f64)>,
     ) -> Option<Self> {
@@ -174,7 +189,7 @@ impl SeaFan {
         let step_r = max_range_m / (n_r - 1) as f64;
         let mut ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
         ranges[n_r - 1] = max_range_m;
-        let rays = trace_sea_rays(tracer, n_e, step_e, &ranges, need_sky_direction);
+        let rays = trace_sea_rays(tracer, (n_e, step_e), &ranges, top_m, need_sky_direction);
         let mut heights = Vec::with_capacity(n_e * n_r);
         let mut sky_elevation = Vec::with_capacity(n_e);
         for (h, s) in rays {
@@ -1918,7 +1933,7 @@ mod tests {
     #[test]
     fn elevations_within_a_height_range_are_those_the_fan_interpolates_there() {
         let tracer = StraightRays::new(crate::units::EARTH_RADIUS_M).unwrap();
-        let fan = SeaFan::build(&tracer, 0.3, 0.004, 20_000.0, false, None).unwrap();
+        let fan = SeaFan::build(&tracer, 0.3, 0.004, (20_000.0, 30.0), false, None).unwrap();
         for (range_m, lo, hi) in [
             (3_000.0, 0.0, 300.0),
             (7_777.0, 20.0, 25.0),

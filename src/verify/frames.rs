@@ -488,18 +488,20 @@ impl RayTracer for Counting<'_> {
         self.count(ray)
     }
 
-    fn trace_all_distances(
+    fn trace_with_margin(
         &self,
         camera_height_m: f64,
         elevation_rad: f64,
         distances_m: &[f64],
         need_sky_direction: bool,
+        margin_m: f64,
     ) -> FanRay {
-        self.count(self.inner.trace_all_distances(
+        self.count(self.inner.trace_with_margin(
             camera_height_m,
             elevation_rad,
             distances_m,
             need_sky_direction,
+            margin_m,
         ))
     }
 }
@@ -716,19 +718,21 @@ impl RayTracer for Recording<'_> {
 
     /// Passed on and timed with the traces; not recorded (a re-trace with
     /// [`RayTracer::trace`]'s fate rule would stop it above the cards).
-    fn trace_all_distances(
+    fn trace_with_margin(
         &self,
         camera_height_m: f64,
         elevation_rad: f64,
         distances_m: &[f64],
         need_sky_direction: bool,
+        margin_m: f64,
     ) -> FanRay {
         self.timed(|| {
-            self.inner.trace_all_distances(
+            self.inner.trace_with_margin(
                 camera_height_m,
                 elevation_rad,
                 distances_m,
                 need_sky_direction,
+                margin_m,
             )
         })
     }
