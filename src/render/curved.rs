@@ -122,6 +122,25 @@ impl Fates {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> FateWatch<'_> {
+        self.watch_above(
+            index,
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            (need_sky_direction, 0.0),
+        )
+    }
+
+    /// [`Self::watch`] for a ray that may stop early only `margin_m` above the cards
+    /// ([`RayTracer::trace_with_margin`]; +∞: only past the last distance).
+    fn watch_above<S: StratifiedIndex + ?Sized>(
+        &self,
+        index: &S,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        (need_sky_direction, margin_m): (bool, f64),
+    ) -> FateWatch<'_> {
         let watch = FateWatch::new(
             &self.envelope,
             index,
@@ -129,8 +148,8 @@ impl Fates {
             camera_height_m,
             elevation_rad,
             distances_m.last().copied().unwrap_or(0.0),
-        );
-        let watch = watch.clear_above(self.cards_top_m);
+        )
+        .clear_above(self.cards_top_m + margin_m);
         if need_sky_direction {
             watch
         } else {
@@ -363,6 +382,35 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         heights.resize(distances_m.len(), None);
         heights
     }
+
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        margin_m: f64,
+    ) -> FanRay {
+        let mut watch = self.fates.watch_above(
+            self.tracer.field(),
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            (need_sky_direction, margin_m),
+        );
+        let mut record = RayRecord::default();
+        match self.tracer.trace_into(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            &mut watch,
+            &mut record,
+            None,
+        ) {
+            Ok(()) => fan_ray(&record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
 }
 
 /// The paper's method as a renderer back-end: every ray integrated in 3-D through the field
@@ -410,17 +458,32 @@ impl<'a, S: StratifiedIndex + ?Sized> ExactRays<'a, S> {
         distances_m: &[f64],
         need_sky_direction: bool,
     ) -> Result<RayRecord, TracerError> {
+        self.trace_record_with(
+            (camera_height_m, elevation_rad, azimuth_rad),
+            distances_m,
+            (need_sky_direction, 0.0),
+        )
+    }
+
+    /// [`Self::trace_record`] from (height, elevation, azimuth); `margin_m`: how far above
+    /// the cards a ray climbing clear of them may stop ([`RayTracer::trace_with_margin`]).
+    fn trace_record_with(
+        &self,
+        (camera_height_m, elevation_rad, azimuth_rad): (f64, f64, f64),
+        distances_m: &[f64],
+        (need_sky_direction, margin_m): (bool, f64),
+    ) -> Result<RayRecord, TracerError> {
         let radius = self.config.earth_radius_m;
         let origin = DVec3::new(0.0, 0.0, radius + camera_height_m);
         let (sin_e, cos_e) = elevation_rad.sin_cos();
         let (sin_a, cos_a) = azimuth_rad.sin_cos();
         let direction = DVec3::new(cos_e * cos_a, cos_e * sin_a, sin_e);
-        let mut watch = self.fates.watch(
+        let mut watch = self.fates.watch_above(
             self.field.field.index,
             camera_height_m,
             elevation_rad,
             distances_m,
-            need_sky_direction,
+            (need_sky_direction, margin_m),
         );
         trace_field(
             &self.field,
@@ -472,6 +535,24 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for ExactRays<'_, S> {
             0.0,
             distances_m,
             need_sky_direction,
+        ) {
+            Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
+            Err(_) => lost(elevation_rad, distances_m.len()),
+        }
+    }
+
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        margin_m: f64,
+    ) -> FanRay {
+        match self.trace_record_with(
+            (camera_height_m, elevation_rad, 0.0),
+            distances_m,
+            (need_sky_direction, margin_m),
         ) {
             Ok(record) => fan_ray(&record, elevation_rad, distances_m.len()),
             Err(_) => lost(elevation_rad, distances_m.len()),

@@ -115,6 +115,34 @@ impl RayTracer for MemoRays<'_> {
         })
     }
 
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        margin_m: f64,
+    ) -> FanRay {
+        // Flags 2, 3: not the rays of `trace` (0, 1); the margin keyed after the distances.
+        let mut keyed = distances_m.to_vec();
+        keyed.push(margin_m);
+        let key = Key::new(
+            camera_height_m,
+            elevation_rad,
+            &keyed,
+            2 + u64::from(need_sky_direction),
+        );
+        remembered(&self.traces, key, || {
+            self.inner.trace_with_margin(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+                margin_m,
+            )
+        })
+    }
+
     fn density_paths_m(
         &self,
         camera_height_m: f64,

@@ -321,7 +321,10 @@ fn sea_fan_and_facets(
         .and(scene.sky.extinction())
         .map(|e| (e.scale_heights_m(), scene.earth_radius_m));
     let fan = max_range_m
-        .and_then(|d| SeaFan::build(inp.tracer, e_hi, step_rad, d, need_sky, density))
+        .and_then(|d| {
+            let top_m = super::curved::cards_top_m(scene);
+            SeaFan::build(inp.tracer, e_hi, step_rad, (d, top_m), need_sky, density)
+        })
         .map(Arc::new);
     let facets = if mirror {
         Facets::Mirror(FacetTable::new(&sea, max_grazing))

@@ -86,6 +86,28 @@ pub trait RayTracer: Sync {
         need_sky_direction: bool,
     ) -> FanRay;
 
+    /// [`Self::trace`], but a ray climbing clear of every card may stop early only once it is
+    /// `margin_m` above them (`f64::INFINITY`: followed through every distance it reaches, up
+    /// to where it meets the ground or leaves the atmosphere). A fan whose heights are
+    /// interpolated between neighbouring rays needs this (the sea fan): a ray stopped just
+    /// above the cards has no heights where its neighbour below is still within a card's
+    /// height range. Default: [`Self::trace`] (right for a model that never stops early).
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        _margin_m: f64,
+    ) -> FanRay {
+        self.trace(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+        )
+    }
+
     /// The density-weighted path lengths ∫ exp(−h/H_k) ds (m) of the ray launched from
     /// `camera_height_m` at `elevation_rad`, from the camera to where it leaves the atmosphere,
     /// for the scale heights `scale_heights_m` (Rayleigh, aerosol): an exponential extinction

@@ -24,7 +24,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::objects::{Composed, Meet, PartAtCard, RayAlong, SampleRay, SceneObject};
-use super::ray_model::{FanEnd, RayTracer};
+use super::ray_model::{FanEnd, FanRay, RayTracer};
 use super::sea_sun::SeaSunTable;
 use super::shade::{AngleTable, Shader, ViewCard};
 use super::terrain::{TerrainView, piece_density};
@@ -77,19 +77,105 @@ pub(super) struct SeaFan {
     n_bounds: usize,
 }
 
+/// Fractions of a sea fan's elevation step below this are rounding of an elevation on a ray
+/// (computed as (i + t)·step and scaled back by 1/step, it is within a few ulps of i): the
+/// neighbour's weight is dropped there, which moves a height by under 1e-12 of the step's.
+const ON_RAY: f64 = 1e-12;
+
+/// The sea fan's `n_e` rays (elevations i·`step_e`) traced from the sea to `ranges`: each
+/// ray's heights there (f32, NaN where it has none) and its final sky elevation (NaN unless it
+/// left into the sky). `top_m`: the highest card or terrain top (m), above which a ray meets
+/// nothing.
+///
+/// The fan interpolates heights between neighbouring rays and ranges, so every cell with a
+/// corner at or below `top_m` needs all four corners: a ray stopped as soon as it climbs clear
+/// above the cards ([`RayTracer::trace`]) leaves cells without a corner where its neighbour
+/// below is still within a card's heights, and the image up to the card's top would be cut
+/// off there, by how the stop fell between range nodes (a discontinuity in the camera). So each
+/// ray may stop only a margin above `top_m` ([`RayTracer::trace_with_margin`]): the height two
+/// neighbouring rays part by at the fan's last range (step × range: h ≈ r·e + r²(1 − k)/2R
+/// parts by r·Δe whatever the refraction coefficient k), enough for most rays; then every ray
+/// that the cells need further (one range node past where it or a neighbour was last at or
+/// below `top_m`, as far as that one's heights go) and that stopped in the sky is traced again
+/// without a stop that far (in a duct, say).
+fn trace_sea_rays(
+    tracer: &dyn RayTracer,
+    (n_e, step_e): (usize, f64),
+    ranges: &[f64],
+    top_m: f64,
+    need_sky_direction: bool,
+) -> Vec<(Vec<f32>, f64)> {
+    let n_r = ranges.len();
+    let margin_m = step_e * ranges[n_r - 1];
+    let as_f32 = |ray: &FanRay| -> Vec<f32> {
+        let mut h: Vec<f32> = ray
+            .heights_m
+            .iter()
+            .map(|h| h.map_or(f32::NAN, |v| v as f32))
+            .collect();
+        h.resize(n_r, f32::NAN);
+        h
+    };
+    let trace = |i: usize, upto: usize, margin_m: f64| {
+        let e = i as f64 * step_e;
+        tracer.trace_with_margin(0.0, e, &ranges[..upto], need_sky_direction, margin_m)
+    };
+    let first: Vec<(Vec<f32>, f64)> = (0..n_e)
+        .into_par_iter()
+        .map(|i| {
+            let ray = trace(i, n_r, margin_m);
+            let sky = match ray.end {
+                FanEnd::Sky { elevation_rad } => elevation_rad,
+                _ => f64::NAN,
+            };
+            (as_f32(&ray), sky)
+        })
+        .collect();
+    // Leading heights of each ray, and how far the cells it bounds need their rays' heights.
+    let count = |h: &[f32]| h.iter().position(|v| v.is_nan()).unwrap_or(n_r);
+    let reach: Vec<usize> = first
+        .iter()
+        .map(|(h, sky)| {
+            let below = h.iter().rposition(|&v| f64::from(v) <= top_m);
+            let reach = below.map_or(0, |m| m + 2).min(n_r);
+            if sky.is_nan() {
+                reach.min(count(h))
+            } else {
+                reach
+            }
+        })
+        .collect();
+    first
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, (h, sky))| {
+            let need = reach[i.saturating_sub(1)..(i + 2).min(n_e)]
+                .iter()
+                .copied()
+                .max()
+                .unwrap_or(0);
+            if sky.is_nan() || count(&h) >= need {
+                return (h, sky);
+            }
+            (as_f32(&trace(i, need, f64::INFINITY)), sky)
+        })
+        .collect()
+}
+
 /// Rays per block of [`SeaFan`]'s height bounds.
 const BOUND_BLOCK: usize = 8;
 
 impl SeaFan {
     /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
-    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`]; `None` if there is nothing to
-    /// cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
+    /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`], its rays followed as long as
+    /// some cell they bound is at or below `top_m` (the highest card or terrain,
+    /// [`trace_sea_rays`]); `None` if there is nothing to cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
     /// density-weighted path lengths with ([`Self::density_paths_m`]).
     pub(super) fn build(
         tracer: &dyn RayTracer,
         e_hi: f64,
         step_rad: f64,
-        max_range_m: f64,
+        (max_range_m, top_m): (f64, f64),
         need_sky_direction: bool,
         density: Option<([f64; 2], f64)>,
     ) -> Option<Self> {
@@ -103,23 +189,7 @@ impl SeaFan {
         let step_r = max_range_m / (n_r - 1) as f64;
         let mut ranges: Vec<f64> = (0..n_r).map(|m| m as f64 * step_r).collect();
         ranges[n_r - 1] = max_range_m;
-        let rays: Vec<(Vec<f32>, f64)> = (0..n_e)
-            .into_par_iter()
-            .map(|i| {
-                let ray = tracer.trace(0.0, i as f64 * step_e, &ranges, need_sky_direction);
-                let mut h: Vec<f32> = ray
-                    .heights_m
-                    .iter()
-                    .map(|h| h.map_or(f32::NAN, |v| v as f32))
-                    .collect();
-                h.resize(n_r, f32::NAN);
-                let sky = match ray.end {
-                    FanEnd::Sky { elevation_rad } => elevation_rad,
-                    _ => f64::NAN,
-                };
-                (h, sky)
-            })
-            .collect();
+        let rays = trace_sea_rays(tracer, (n_e, step_e), &ranges, top_m, need_sky_direction);
         let mut heights = Vec::with_capacity(n_e * n_r);
         let mut sky_elevation = Vec::with_capacity(n_e);
         for (h, s) in rays {
@@ -221,8 +291,22 @@ impl SeaFan {
         let (c, d) = (at(i + 1, m), at(i + 1, m + 1));
         let low = a + (b - a) * u;
         let high = c + (d - c) * u;
-        let h = low + (high - low) * t;
+        let h = Self::between(low, high, t);
         h.is_finite().then_some(h)
+    }
+
+    /// `low` + (`high` − `low`)·`t`, but `low` itself for `t` < [`ON_RAY`]: an elevation on a
+    /// fan ray up to rounding (as the ends of [`Self::elevations_within`]'s intervals are) has
+    /// the ray's own height whether or not the ray above had ended. (NaN · t would make it
+    /// vanish there, while the same elevation rounded into the cell below, at t ≈ 1, has it:
+    /// rounding would decide whether an image reaches its end.)
+    #[inline(always)]
+    fn between(low: f64, high: f64, t: f64) -> f64 {
+        if t < ON_RAY {
+            low
+        } else {
+            low + (high - low) * t
+        }
     }
 
     /// The density-weighted path lengths [D_R, D_A] (m) from the sea along the ray launched at
@@ -333,10 +417,14 @@ impl SeaFan {
                     let (x, y) = ((h_lo - h0) / (h1 - h0), (h_hi - h0) / (h1 - h0));
                     (x.min(y).max(0.0), x.max(y).min(1.0))
                 };
-                let e0 = i as f64 * self.step_e;
+                // (i + t)·step: the end of one ray pair's interval (t = 1) is then bit for bit
+                // the start of the next one's (t = 0), so the card's intervals join into one
+                // ([`Spans::push`]); i·step + t·step can differ from (i + 1)·step by an ulp,
+                // leaving a gap that cuts the image into parts at fan rays or not by rounding.
+                let i = i as f64;
                 let (a, b) = (
-                    (e0 + t0 * self.step_e).max(e_a),
-                    (e0 + t1 * self.step_e).min(e_b),
+                    ((i + t0) * self.step_e).max(e_a),
+                    ((i + t1) * self.step_e).min(e_b),
                 );
                 if a <= b {
                     out.push(a, b);
@@ -532,7 +620,7 @@ impl SeaRay<'_> {
         let (c, d) = (high[0] as f64, high[1] as f64);
         let low = a + (b - a) * u;
         let high = c + (d - c) * u;
-        let h = low + (high - low) * self.t;
+        let h = SeaFan::between(low, high, self.t);
         h.is_finite().then_some(h)
     }
 
@@ -1865,7 +1953,7 @@ mod tests {
     #[test]
     fn elevations_within_a_height_range_are_those_the_fan_interpolates_there() {
         let tracer = StraightRays::new(crate::units::EARTH_RADIUS_M).unwrap();
-        let fan = SeaFan::build(&tracer, 0.3, 0.004, 20_000.0, false, None).unwrap();
+        let fan = SeaFan::build(&tracer, 0.3, 0.004, (20_000.0, 30.0), false, None).unwrap();
         for (range_m, lo, hi) in [
             (3_000.0, 0.0, 300.0),
             (7_777.0, 20.0, 25.0),

@@ -485,6 +485,30 @@ impl RayTracer for Counting<'_> {
             distances_m,
             need_sky_direction,
         );
+        self.count(ray)
+    }
+
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        margin_m: f64,
+    ) -> FanRay {
+        self.count(self.inner.trace_with_margin(
+            camera_height_m,
+            elevation_rad,
+            distances_m,
+            need_sky_direction,
+            margin_m,
+        ))
+    }
+}
+
+impl Counting<'_> {
+    /// `ray`, counted as a call (and as trapped or lost).
+    fn count(&self, ray: FanRay) -> FanRay {
         self.calls.fetch_add(1, Ordering::Relaxed);
         match ray.end {
             FanEnd::Trapped => self.trapped.fetch_add(1, Ordering::Relaxed),
@@ -690,6 +714,27 @@ impl RayTracer for Recording<'_> {
             });
         }
         ray
+    }
+
+    /// Passed on and timed with the traces; not recorded (a re-trace with
+    /// [`RayTracer::trace`]'s fate rule would stop it above the cards).
+    fn trace_with_margin(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        distances_m: &[f64],
+        need_sky_direction: bool,
+        margin_m: f64,
+    ) -> FanRay {
+        self.timed(|| {
+            self.inner.trace_with_margin(
+                camera_height_m,
+                elevation_rad,
+                distances_m,
+                need_sky_direction,
+                margin_m,
+            )
+        })
     }
 }
 

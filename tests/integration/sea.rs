@@ -535,3 +535,63 @@ fn a_rough_sea_blurs_a_cards_mirror_image_as_the_slope_distribution_does() {
         );
     }
 }
+
+/// The rough sea's blurred mirror images are continuous in the camera: fig01b's scene (US 1976,
+/// two ships on the default Cox–Munk sea) at 200×100, 1 spp, rendered from camera heights
+/// 10.0 m, 10.00005 m, … 10.0005 m. A 50 µm move shifts every point in view by under 0.001
+/// pixel (dh/d at the nearest sea point, ≈ 2 km, is 3e-8 rad; a pixel is 8.7e-5 rad), and the
+/// fan places features to `RenderOptions::tolerance_px` = 0.1 pixel, so between neighbouring
+/// heights no pixel may change by more than 0.1 of its contrast to its four neighbours (its
+/// change were the image to move a whole pixel). The blurred images used to jump by up to a
+/// third of their value between such heights (the sea fan's rays stopped once above the
+/// ships, and whether a blurred part ending on such a ray still saw the ship's top depended on
+/// rounding).
+#[test]
+fn rough_sea_mirror_images_change_continuously_with_the_camera_height() {
+    use crate::support::data::data_file;
+    use crate::support::films::neighbour_contrast;
+    use ghostship::render::prepare_tracer;
+    let path = data_file("scenes/fig01b_horizon_curved.toml");
+    let films: Vec<Film> = (0..=10)
+        .map(|k| {
+            let mut scene = Scene::from_file(&path).unwrap();
+            assert!(scene.sea.wave_slope_rad > 0.0, "fig01b has a rough sea");
+            scene.camera.height_m = 10.0 + 5e-5 * f64::from(k);
+            (scene.camera.width, scene.camera.height) = (200, 100);
+            let atmosphere = scene.atmosphere.load().unwrap();
+            let options = RenderOptions {
+                quiet: true,
+                samples_per_pixel: Some(1),
+                ..RenderOptions::default()
+            };
+            let refractive = atmosphere.as_ref().map(|a| &a.refractive);
+            let tracer = prepare_tracer(&scene, refractive, &options).unwrap();
+            let film = render_scene(&scene, tracer.as_ref(), &options).unwrap();
+            assert_eq!(film.stats.non_finite_samples, 0);
+            film
+        })
+        .collect();
+    let mut worst: Option<(f32, u32, u32, usize)> = None;
+    for (k, pair) in films.windows(2).enumerate() {
+        let (a, b) = (&pair[0], &pair[1]);
+        for y in 0..a.height {
+            for x in 0..a.width {
+                let (p, q) = (a.pixel(x, y), b.pixel(x, y));
+                let change = (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max);
+                // (1e-6: the film's f32 rounding.)
+                let excess = change - 0.1 * neighbour_contrast(a, x, y) - 1e-6;
+                if excess > worst.map_or(0.0, |w| w.0) {
+                    worst = Some((excess, x, y, k));
+                }
+            }
+        }
+    }
+    if let Some((excess, x, y, k)) = worst {
+        panic!(
+            "pixel ({x}, {y}) changed by {excess} more than 0.1 of its contrast between camera \
+             heights {} and {} m",
+            10.0 + 5e-5 * k as f64,
+            10.0 + 5e-5 * (k + 1) as f64
+        );
+    }
+}

@@ -55,3 +55,19 @@ pub fn differing_and_edge_pixels(a: &Film, b: &Film, threshold: f32) -> (usize, 
     }
     (diff, edges)
 }
+
+/// The largest difference, in any colour channel, between pixel (`x`, `y`) of `film` and its
+/// four neighbours (those inside the film): how much the pixel changes when the image moves by
+/// a whole pixel.
+pub fn neighbour_contrast(film: &Film, x: u32, y: u32) -> f32 {
+    let p = film.pixel(x, y);
+    [(0i32, -1i32), (0, 1), (-1, 0), (1, 0)]
+        .iter()
+        .filter_map(|(dx, dy)| {
+            let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+            (nx >= 0 && ny >= 0 && (nx as u32) < film.width && (ny as u32) < film.height)
+                .then(|| film.pixel(nx as u32, ny as u32))
+        })
+        .flat_map(|q| (0..3).map(move |c| (p[c] - q[c]).abs()))
+        .fold(0.0, f32::max)
+}
