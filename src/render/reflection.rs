@@ -169,8 +169,9 @@ impl SeaFan {
     /// Trace the sea fan over elevations [0, `e_hi`] with spacing `step_rad` (at most
     /// [`MAX_SEA_FAN_RAYS`] rays) and ranges [0, `max_range_m`], its rays followed as long as
     /// some cell they bound is at or below `top_m` (the highest card or terrain,
-    /// [`trace_sea_rays`]); `None` if there is nothing to cover. `density`: the scale heights (m) and the sphere's radius (m) to sum each ray's
-    /// density-weighted path lengths with ([`Self::density_paths_m`]).
+    /// [`trace_sea_rays`]); `None` if there is nothing to cover. `density`: the scale heights
+    /// (m) and the sphere's radius (m) to sum each ray's density-weighted path lengths with
+    /// ([`Self::density_paths_m`]).
     pub(super) fn build(
         tracer: &dyn RayTracer,
         e_hi: f64,
