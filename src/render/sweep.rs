@@ -23,12 +23,14 @@
 //! when the sun's azimuth is outside the frame: a row *shows the sun* when its ray leaves the
 //! atmosphere in a direction inside the sun's disc (cards, terrain and extinction are not
 //! considered: a sun dimmed to nothing still counts). Strips are the maximal runs of
-//! consecutive rows that show it. [`CardFacts`] likewise, along the column through the card's
+//! consecutive rows that show it. Those rays do not depend on the sun ([`ColumnSky`]), so the
+//! frames of a sweep that share the first frame's camera trace each such column once.
+//! [`CardFacts`] likewise, along the column through the card's
 //! centre (none when that is outside the frame): a row *shows the card* when its ray passes the
 //! card's distance between its base and top (nearer cards and terrain not considered); each
 //! maximal run of such rows is one image.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use rayon::prelude::*;
 
@@ -154,24 +156,66 @@ fn runs_along(
     (runs, low, high)
 }
 
+/// The rays through the pixel centres of one column, top row first: each one's apparent
+/// elevation (rad), azimuth (rad) and, when it leaves into the sky, its final elevation (rad).
+/// Everything [`SunFacts`] reads of a frame that does not depend on the sun, so the frames of a
+/// sun sweep share it ([`render_shared`]).
+pub struct ColumnSky {
+    rows: Vec<(f64, f64, Option<f64>)>,
+}
+
+impl ColumnSky {
+    /// Column `x` of `scene`'s camera, its rays traced through `tracer` (need_sky_direction:
+    /// their final directions).
+    pub fn trace(scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Self {
+        let cam = &scene.camera;
+        let frame = cam.frame();
+        let rows = (0..cam.height)
+            .map(|y| {
+                let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
+                let alpha = frame.view_direction(fx, fy).elevation_rad;
+                let azimuth = frame.direction(fx, fy).0;
+                let sky = match tracer.trace(cam.height_m, alpha, &[], true).end {
+                    FanEnd::Sky { elevation_rad } => Some(elevation_rad),
+                    _ => None,
+                };
+                (alpha, azimuth, sky)
+            })
+            .collect();
+        Self { rows }
+    }
+
+    /// The facts of `sun` along this column: a row shows it when its ray leaves in a direction
+    /// inside the sun's disc.
+    pub fn sun_facts(&self, sun: &Sun) -> SunFacts {
+        let radius = 0.5 * sun.angular_diameter_rad;
+        let (mut strips, mut low, mut high) = (0, None, None);
+        let mut previous = false;
+        for &(alpha, azimuth, sky) in &self.rows {
+            let now = sky.is_some_and(|e| {
+                angle_between(azimuth, e, sun.azimuth_rad, sun.elevation_rad) <= radius
+            });
+            if now {
+                high.get_or_insert(alpha);
+                low = Some(alpha);
+                if !previous {
+                    strips += 1;
+                }
+            }
+            previous = now;
+        }
+        SunFacts {
+            apparent_low_rad: low,
+            apparent_high_rad: high,
+            strips,
+        }
+    }
+}
+
 /// The sun's facts in `scene` (which has `sun`) along column `x`, from rays traced through
 /// `tracer` (need_sky_direction: their final directions).
 pub fn sun_facts(scene: &Scene, sun: &Sun, tracer: &dyn RayTracer, x: u32) -> SunFacts {
-    let radius = 0.5 * sun.angular_diameter_rad;
-    let height_m = scene.camera.height_m;
-    let (strips, low, high) = runs_along(scene, x, |alpha, azimuth| {
-        match tracer.trace(height_m, alpha, &[], true).end {
-            FanEnd::Sky { elevation_rad } => {
-                angle_between(azimuth, elevation_rad, sun.azimuth_rad, sun.elevation_rad) <= radius
-            }
-            _ => false,
-        }
-    });
-    SunFacts {
-        apparent_low_rad: low,
-        apparent_high_rad: high,
-        strips,
-    }
+    ColumnSky::trace(scene, tracer, x).sun_facts(sun)
 }
 
 /// `card`'s facts in `scene` along column `x`, from rays traced through `tracer` to the card's
@@ -201,15 +245,44 @@ pub fn farthest_card(scene: &Scene) -> Option<&Card> {
 
 /// The facts of `scene` from rays traced through `tracer`.
 pub fn frame_facts(scene: &Scene, tracer: &dyn RayTracer) -> FrameFacts {
+    frame_facts_with(scene, tracer, &|x| {
+        Arc::new(ColumnSky::trace(scene, tracer, x))
+    })
+}
+
+/// [`frame_facts`], the sun's column from `column` (the rays of a column of `scene`'s camera).
+fn frame_facts_with(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    column: &dyn Fn(u32) -> Arc<ColumnSky>,
+) -> FrameFacts {
     let sun = scene
         .sun
-        .map(|sun| sun_facts(scene, &sun, tracer, sun_column(scene, &sun)));
+        .map(|sun| column(sun_column(scene, &sun)).sun_facts(&sun));
     let cards = scene
         .cards
         .iter()
         .map(|card| card_column(scene, card).map(|x| card_facts(scene, card, tracer, x)))
         .collect();
     FrameFacts { sun, cards }
+}
+
+/// The sun's columns of a sweep's frames that share the first frame's camera, each traced
+/// once ([`ColumnSky`] does not depend on the sun). Two threads may trace the same column at
+/// once; they find the same rays, and either copy is kept.
+#[derive(Default)]
+struct SharedColumns(Mutex<Vec<(u32, Arc<ColumnSky>)>>);
+
+impl SharedColumns {
+    fn get(&self, scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Arc<ColumnSky> {
+        let lock = || self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((_, column)) = lock().iter().find(|(k, _)| *k == x) {
+            return Arc::clone(column);
+        }
+        let column = Arc::new(ColumnSky::trace(scene, tracer, x));
+        lock().push((x, Arc::clone(&column)));
+        column
+    }
 }
 
 /// Heights at `card`'s distance of the rays through the pixel centres of its column
@@ -381,20 +454,30 @@ pub fn render_shared(
     transfer: bool,
 ) -> Result<Vec<SweepFrame>, RenderError> {
     let memo = MemoRays::new(tracer);
-    let finish = |scene: &Scene, film: Film, rows_shaded: u32| SweepFrame {
-        film,
-        facts: frame_facts(scene, &memo),
-        transfer: farthest_card(scene)
-            .filter(|_| transfer)
-            .map(|card| transfer_samples(scene, &memo, card)),
-        rows_shaded,
+    let columns = SharedColumns::default();
+    // `first_camera`: the frame has the first frame's camera (it differs from it only in its
+    // sun), so it shares the first frame's sun columns.
+    let finish = |scene: &Scene, film: Film, rows_shaded: u32, first_camera: bool| {
+        let facts = if first_camera {
+            frame_facts_with(scene, &memo, &|x| columns.get(scene, &memo, x))
+        } else {
+            frame_facts(scene, &memo)
+        };
+        SweepFrame {
+            film,
+            facts,
+            transfer: farthest_card(scene)
+                .filter(|_| transfer)
+                .map(|card| transfer_samples(scene, &memo, card)),
+            rows_shaded,
+        }
     };
     let Some((first, rest)) = scenes.split_first() else {
         return Ok(Vec::new());
     };
     let on_base: Vec<bool> = rest.iter().map(|s| differ_only_in_sun(first, s)).collect();
     let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
-    let mut frames = vec![finish(first, film, first.camera.height)];
+    let mut frames = vec![finish(first, film, first.camera.height, true)];
     let rest: Vec<SweepFrame> = rest
         .par_iter()
         .zip(&on_base)
@@ -403,7 +486,7 @@ pub fn render_shared(
                 Some(base) if on_base => render_on_base(base, scene, &memo, options)?,
                 _ => (render_scene(scene, &memo, options)?, scene.camera.height),
             };
-            Ok(finish(scene, film, rows))
+            Ok(finish(scene, film, rows, on_base))
         })
         .collect::<Result<_, RenderError>>()?;
     frames.extend(rest);

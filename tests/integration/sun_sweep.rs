@@ -1,10 +1,12 @@
 //! Sun sweeps shade only the rows their sun can change: every frame of `render_sun_sweep` is
-//! `render_scene` of its scene (pixels and counters), with 1 thread and with 2, over scenes that
+//! `render_scene` of its scene (pixels and counters; its facts those `frame_facts` reads from the
+//! scene's own rays, although the sweep traces the sun's column once), with 1 thread and with 2,
+//! over scenes that
 //! exercise each table a frame shares with the sweep's first frame (strips through a
 //! near-critical duct, a rough sea's glitter under haze with a card, a mirror sea's sun image
 //! with two cards, terrain), and the strips sweep of the render bench shades few of its rows.
 
-use ghostship::render::sweep::{SweepFrame, render_sun_sweep};
+use ghostship::render::sweep::{SweepFrame, frame_facts, render_sun_sweep};
 use ghostship::render::{RenderOptions, prepare_tracer, render_scene};
 use ghostship::scene::Scene;
 
@@ -66,6 +68,8 @@ fn sweep_equals_single_renders(
             "sun {deg:.3}°, {threads} threads: {} rows shaded, pixels differ",
             frame.rows_shaded
         );
+        let facts = frame_facts(&single, tracer.as_ref());
+        assert_eq!(frame.facts, facts, "sun {deg:.3}°, {threads} threads");
     }
     let width = scene.camera.width as usize;
     let first = &frames[0].film.pixels;
