@@ -539,7 +539,8 @@ fn a_rough_sea_blurs_a_cards_mirror_image_as_the_slope_distribution_does() {
 /// The rough sea's blurred mirror images are continuous in the camera: fig01b's scene (US 1976,
 /// two ships on the default Cox–Munk sea) at 200×100, 1 spp, rendered from camera heights
 /// 10.0 m, 10.00005 m, … 10.0005 m. A 50 µm move shifts every point in view by under 0.001
-/// pixel (dh/d at the nearest sea point, ≈ 2 km, is 3e-8 rad; a pixel is 8.7e-5 rad), and the
+/// pixel (50 µm seen from the nearest sea point in view, ≈ 2 km away, subtends 2.5e-8 rad; a
+/// pixel is 8.7e-5 rad), and the
 /// fan places features to `RenderOptions::tolerance_px` = 0.1 pixel, so between neighbouring
 /// heights no pixel may change by more than 0.1 of its contrast to its four neighbours (its
 /// change were the image to move a whole pixel). The blurred images used to jump by up to a
