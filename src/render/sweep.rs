@@ -128,22 +128,24 @@ pub fn card_column(scene: &Scene, card: &Card) -> Option<u32> {
     column_at_azimuth(scene, card.azimuth_rad)
 }
 
-/// Runs of consecutive rows (top row first) for which `shows(alpha)` holds, with the apparent
-/// elevations of the lowest and highest such rows, along column `x`.
-fn runs_along(
-    scene: &Scene,
-    x: u32,
-    shows: impl Fn(f64, f64) -> bool,
-) -> (usize, Option<f64>, Option<f64>) {
-    let cam = &scene.camera;
-    let frame = cam.frame();
+/// The apparent elevation and azimuth (rad) of the pixel centres of column `x`, top row first.
+fn column_directions(scene: &Scene, x: u32) -> impl Iterator<Item = (f64, f64)> {
+    let frame = scene.camera.frame();
+    (0..scene.camera.height).map(move |y| {
+        let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
+        (
+            frame.view_direction(fx, fy).elevation_rad,
+            frame.direction(fx, fy).0,
+        )
+    })
+}
+
+/// Runs of consecutive `rows` (apparent elevation, whether the row shows the object; top row
+/// first) that show it, with the apparent elevations of the lowest and highest such rows.
+fn runs(rows: impl IntoIterator<Item = (f64, bool)>) -> (usize, Option<f64>, Option<f64>) {
     let (mut runs, mut low, mut high) = (0, None, None);
     let mut previous = false;
-    for y in 0..cam.height {
-        let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
-        let alpha = frame.view_direction(fx, fy).elevation_rad;
-        let azimuth = frame.direction(fx, fy).0;
-        let now = shows(alpha, azimuth);
+    for (alpha, now) in rows {
         if now {
             high.get_or_insert(alpha);
             low = Some(alpha);
@@ -154,6 +156,15 @@ fn runs_along(
         previous = now;
     }
     (runs, low, high)
+}
+
+/// [`runs`] of the rows of column `x` for which `shows(alpha, azimuth)` holds.
+fn runs_along(
+    scene: &Scene,
+    x: u32,
+    shows: impl Fn(f64, f64) -> bool,
+) -> (usize, Option<f64>, Option<f64>) {
+    runs(column_directions(scene, x).map(|(alpha, azimuth)| (alpha, shows(alpha, azimuth))))
 }
 
 /// The rays through the pixel centres of one column, top row first: each one's apparent
@@ -168,14 +179,10 @@ impl ColumnSky {
     /// Column `x` of `scene`'s camera, its rays traced through `tracer` (need_sky_direction:
     /// their final directions).
     pub fn trace(scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Self {
-        let cam = &scene.camera;
-        let frame = cam.frame();
-        let rows = (0..cam.height)
-            .map(|y| {
-                let (fx, fy) = (x as f64 + 0.5, y as f64 + 0.5);
-                let alpha = frame.view_direction(fx, fy).elevation_rad;
-                let azimuth = frame.direction(fx, fy).0;
-                let sky = match tracer.trace(cam.height_m, alpha, &[], true).end {
+        let height_m = scene.camera.height_m;
+        let rows = column_directions(scene, x)
+            .map(|(alpha, azimuth)| {
+                let sky = match tracer.trace(height_m, alpha, &[], true).end {
                     FanEnd::Sky { elevation_rad } => Some(elevation_rad),
                     _ => None,
                 };
@@ -189,21 +196,12 @@ impl ColumnSky {
     /// inside the sun's disc.
     pub fn sun_facts(&self, sun: &Sun) -> SunFacts {
         let radius = 0.5 * sun.angular_diameter_rad;
-        let (mut strips, mut low, mut high) = (0, None, None);
-        let mut previous = false;
-        for &(alpha, azimuth, sky) in &self.rows {
-            let now = sky.is_some_and(|e| {
+        let (strips, low, high) = runs(self.rows.iter().map(|&(alpha, azimuth, sky)| {
+            let shows = sky.is_some_and(|e| {
                 angle_between(azimuth, e, sun.azimuth_rad, sun.elevation_rad) <= radius
             });
-            if now {
-                high.get_or_insert(alpha);
-                low = Some(alpha);
-                if !previous {
-                    strips += 1;
-                }
-            }
-            previous = now;
-        }
+            (alpha, shows)
+        }));
         SunFacts {
             apparent_low_rad: low,
             apparent_high_rad: high,
