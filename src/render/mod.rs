@@ -491,8 +491,10 @@ fn shade_flat_row(
     true
 }
 
-/// Fill `row` from its flat bands: the band's background, or the cards over it in the columns
-/// (`columns`: band index, column range) where the band's ray meets a card.
+/// Fill `row` from its flat bands: the band's background (plus the sun's part, `sun_added`,
+/// where the band may show the sun), or the cards over it in the columns (`columns`: band
+/// index, column range) where the band's ray meets a card. Band by band, each band's two runs
+/// of columns (its right-half columns and their mirror images) at a time.
 fn shade_bands(
     ctx: &FlatRow<'_>,
     row: &mut [[f32; 4]],
@@ -505,70 +507,111 @@ fn shade_bands(
     let width = row.len();
     let n_dist = band_heights.len() / bands.len().max(1);
     let film_y = ctx.y as f64 + 0.5;
-    // A colour that is not finite becomes the fallback (counted per sample).
-    let finite = |c: [f64; 3]| {
-        if c.iter().all(|v| v.is_finite()) {
-            c
-        } else {
-            non_finite.fetch_add(1, Ordering::Relaxed);
-            ctx.shader.fallback
-        }
-    };
-    let pixel = |c: [f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 1.0];
     // A rough sea's parts of the slopes, found once per band and set of mirrored cards.
     let mut parts = reflection::PartsCache::default();
-    // Each band's fill, and whether its background was not finite (then the fallback).
-    let fills: Vec<([f32; 4], bool)> = bands
-        .iter()
-        .map(|b| {
-            let c = b.background;
-            let finite = c.iter().all(|v| v.is_finite());
-            (pixel(if finite { c } else { ctx.shader.fallback }), !finite)
-        })
-        .collect();
-    let mut k = 0;
-    for (x, px) in row.iter_mut().enumerate() {
-        k = band_of(bands, x.max(width - 1 - x), k);
-        let band = &bands[k];
-        let in_card = !band.clear_sky
-            && columns
-                .iter()
-                .any(|&(j, (a, b))| j == k && (a..b).contains(&x));
-        *px = if in_card {
+    for (k, band) in bands.iter().enumerate() {
+        let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
+        // The card columns of this band (none over a clear sky).
+        let cards = columns
+            .iter()
+            .filter(|&&(j, _)| j == k && !band.clear_sky)
+            .map(|&(_, range)| range);
+        let in_card = |x: usize| cards.clone().any(|(a, b)| (a..b).contains(&x));
+        let mut composite = |x: usize| {
             let dir = ctx
                 .frame
                 .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha);
-            let heights = &band_heights[k * n_dist..(k + 1) * n_dist];
             let background = if band.reflects || band.sun {
                 ctx.shader
                     .band_background(&dir, band.fan_end, k, &mut parts)
             } else {
                 band.background
             };
-            pixel(finite(ctx.shader.composite(&dir, heights, background)))
-        } else if band.sun {
-            let (c, add) = (band.background, sun_added[x]);
-            pixel(finite([c[0] + add[0], c[1] + add[1], c[2] + add[2]]))
-        } else {
-            let (fill, bad) = fills[k];
-            if bad {
-                non_finite.fetch_add(1, Ordering::Relaxed);
-            }
-            fill
+            ctx.shader.composite(&dir, heights, background)
         };
+        for (a, b) in band_runs(band.start, band.end, width) {
+            if b <= a {
+                continue;
+            }
+            if cards.clone().next().is_none() {
+                fill_run(ctx, &mut row[a..b], band, sun_added, a, non_finite);
+                continue;
+            }
+            let mut x = a;
+            while x < b {
+                if in_card(x) {
+                    row[x] = pixel(finite_or_fallback(composite(x), ctx, non_finite));
+                    x += 1;
+                    continue;
+                }
+                let end = (x + 1..b).find(|&e| in_card(e)).unwrap_or(b);
+                fill_run(ctx, &mut row[x..end], band, sun_added, x, non_finite);
+                x = end;
+            }
+        }
     }
 }
 
-/// The band holding right-half column `mirrored` (0 if none): `hint` when it holds it (a row's
-/// neighbouring columns mostly share a band), else found by search. The bands are disjoint
-/// (each ends where the next begins), so the one holding it is the only one.
+/// A film pixel of a colour.
 #[inline]
-fn band_of(bands: &[FlatBand], mirrored: usize, hint: usize) -> usize {
-    let holds = |b: &FlatBand| (b.start..b.end).contains(&mirrored);
-    if bands.get(hint).is_some_and(holds) {
-        return hint;
+fn pixel(c: [f64; 3]) -> [f32; 4] {
+    [c[0] as f32, c[1] as f32, c[2] as f32, 1.0]
+}
+
+/// `c`, or the shader's fallback colour when a channel is not finite (counted in
+/// `non_finite`, per sample).
+#[inline]
+fn finite_or_fallback(c: [f64; 3], ctx: &FlatRow<'_>, non_finite: &AtomicU64) -> [f64; 3] {
+    if c.iter().all(|v| v.is_finite()) {
+        c
+    } else {
+        non_finite.fetch_add(1, Ordering::Relaxed);
+        ctx.shader.fallback
     }
-    bands.iter().position(holds).unwrap_or(0)
+}
+
+/// Fill `run`, the columns from `first` on of one band of a row that meet no card: the band's
+/// background, plus the sun's part per column (`sun_added`) where the band may show the sun.
+fn fill_run(
+    ctx: &FlatRow<'_>,
+    run: &mut [[f32; 4]],
+    band: &FlatBand,
+    sun_added: &[[f64; 3]],
+    first: usize,
+    non_finite: &AtomicU64,
+) {
+    let c = band.background;
+    if band.sun {
+        let sums = run.iter_mut().zip(&sun_added[first..]);
+        let mut all_finite = true;
+        for (px, add) in sums {
+            let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
+            // Without a branch per pixel (the loop vectorises); a run with a colour that is
+            // not finite is done again below, pixel by pixel.
+            all_finite &= sum[0].is_finite() & sum[1].is_finite() & sum[2].is_finite();
+            *px = pixel(sum);
+        }
+        if !all_finite {
+            for (px, add) in run.iter_mut().zip(&sun_added[first..]) {
+                let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
+                *px = pixel(finite_or_fallback(sum, ctx, non_finite));
+            }
+        }
+    } else {
+        let fill = pixel(finite_or_fallback(c, ctx, non_finite));
+        run.fill(fill);
+        if !c.iter().all(|v| v.is_finite()) {
+            // Counted once above; once per further pixel.
+            non_finite.fetch_add(run.len() as u64 - 1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The two runs of columns of a row `width` wide that a band of right-half columns [`start`,
+/// `end`) covers: those, and the left-half columns at the same distance from the centre (the
+/// centre column of an odd width is in the first run only).
+fn band_runs(start: usize, end: usize, width: usize) -> [(usize, usize); 2] {
+    [(start, end), (width - end, (width - start).min(width / 2))]
 }
 
 /// Pixel columns [a, b) of row `y` whose samples may see `card`, given that their elevations lie
@@ -808,26 +851,30 @@ mod tests {
     }
 
     #[test]
-    fn the_band_of_a_column_is_found_from_any_hint() {
-        let band = |start: usize, end: usize| FlatBand {
-            start,
-            end,
-            alpha: 0.0,
-            background: [0.0; 3],
-            clear_sky: false,
-            fan_end: FanEnd::Lost,
-            reflects: false,
-            sun: false,
-        };
-        let bands = [band(50, 61), band(61, 62), band(62, 90), band(90, 100)];
-        for mirrored in 40..110 {
-            let want = bands
-                .iter()
-                .position(|b| (b.start..b.end).contains(&mirrored))
-                .unwrap_or(0);
-            for hint in 0..6 {
-                assert_eq!(band_of(&bands, mirrored, hint), want, "{mirrored} {hint}");
+    fn the_bands_runs_cover_every_column_of_a_row_once() {
+        for width in [1u32, 2, 7, 8, 400, 401] {
+            // Bands as flat_bands cuts them: from the centre column to the right edge.
+            let cam = crate::scene::camera::Camera {
+                height_m: 10.0,
+                heading_rad: 0.3,
+                pitch_rad: 0.005,
+                hfov_rad: 0.019,
+                width,
+                height: 200,
+                samples_per_pixel: 1,
+            };
+            let frame = cam.frame();
+            let limit_rad = FLAT_ROW_FRACTION * 0.25 * cam.min_pixel_angle_rad();
+            let starts = flat_bands(&frame, 3, width, limit_rad).expect("few bands");
+            let w = width as usize;
+            let mut covered = vec![0u32; w];
+            for (k, &(start, _)) in starts.iter().enumerate() {
+                let end = starts.get(k + 1).map_or(w, |b| b.0);
+                for (a, b) in band_runs(start, end, w) {
+                    (a..b).for_each(|x| covered[x] += 1);
+                }
             }
+            assert!(covered.iter().all(|&c| c == 1), "w{width}: {covered:?}");
         }
     }
 
