@@ -1,7 +1,11 @@
 //! The render bench's sun sequence (`cargo bench --bench render -- sun_sequence_400x200`) as one
 //! process per side, for an instruction counter: the Novaya Zemlya strips scene at 400×200, one
-//! sample per pixel, its atmosphere loaded and its tracer prepared, then nothing more (`load`),
-//! one frame (`one`) or the 100 frames of the sunrise −3° … +0.96° in steps of 0.04° (`sweep`).
+//! sample per pixel, its atmosphere loaded and one frame rendered to warm what the atmosphere
+//! builds on first use (its n(h) table is filled lazily, as the bench's warm-up iterations do),
+//! then nothing more (`load`), a tracer prepared and one frame (`one`), a tracer prepared and the
+//! 100 frames of the sunrise −3° … +0.96° in steps of 0.04° (`sweep`), or a tracer prepared and
+//! the sweep's first frame with the frame at `X` degrees (`pairX`) or with it and the next one,
+//! 0.04° higher (`pairX+`: the difference of the two is the cost of one later frame there).
 //! `valgrind --tool=callgrind target/release/examples/sun_sweep_cost MODE` for each mode: the
 //! sweep costs (sweep − load) / (one − load) frames, a count that does not depend on the load of
 //! a shared machine.
@@ -19,27 +23,45 @@ fn main() -> anyhow::Result<()> {
     let mut scene = Scene::from_file(&path)?;
     (scene.camera.width, scene.camera.height) = (400, 200);
     let atm = scene.atmosphere.load()?;
+    let refractive = atm.as_ref().map(|a| &a.refractive);
     let options = RenderOptions {
         samples_per_pixel: Some(1),
         quiet: true,
         ..RenderOptions::default()
     };
-    let tracer = prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &options)?;
-    match mode.as_str() {
-        "load" => println!("loaded"),
-        "one" => {
-            let film = render_scene(&scene, tracer.as_ref(), &options)?;
-            println!("one frame: {:?}", film.stats);
+    let warm_up = prepare_tracer(&scene, refractive, &options)?;
+    render_scene(&scene, warm_up.as_ref(), &options)?;
+    if mode == "load" {
+        println!("loaded");
+        return Ok(());
+    }
+    let tracer = prepare_tracer(&scene, refractive, &options)?;
+    let sweep = |elevations_deg: &[f64]| {
+        let elevations: Vec<f64> = elevations_deg.iter().map(|e| e.to_radians()).collect();
+        render_sun_sweep(&scene, tracer.as_ref(), &options, &elevations)
+    };
+    if mode == "one" {
+        let film = render_scene(&scene, tracer.as_ref(), &options)?;
+        println!("one frame: {:?}", film.stats);
+    } else if mode == "sweep" {
+        let elevations: Vec<f64> = (0..100).map(|i| -3.0 + 0.04 * f64::from(i)).collect();
+        let frames = sweep(&elevations)?;
+        let rows: u32 = frames.iter().map(|f| f.rows_shaded).sum();
+        println!("{} frames, {rows} rows shaded", frames.len());
+    } else if let Some(at) = mode.strip_prefix("pair") {
+        let (at, next) = at.strip_suffix('+').map_or((at, false), |a| (a, true));
+        let x: f64 = at.parse()?;
+        let mut elevations = vec![-3.0, x];
+        if next {
+            elevations.push(x + 0.04);
         }
-        "sweep" => {
-            let elevations: Vec<f64> = (0..100)
-                .map(|i| (-3.0 + 0.04 * f64::from(i)).to_radians())
-                .collect();
-            let frames = render_sun_sweep(&scene, tracer.as_ref(), &options, &elevations)?;
-            let rows: u32 = frames.iter().map(|f| f.rows_shaded).sum();
-            println!("{} frames, {rows} rows shaded", frames.len());
-        }
-        other => anyhow::bail!("unknown mode {other:?}: use `load`, `one` or `sweep`"),
+        let frames = sweep(&elevations)?;
+        println!(
+            "rows shaded: {:?}",
+            frames.iter().map(|f| f.rows_shaded).collect::<Vec<_>>()
+        );
+    } else {
+        anyhow::bail!("unknown mode {mode:?}: use `load`, `one`, `sweep`, `pairX` or `pairX+`");
     }
     Ok(())
 }

@@ -180,7 +180,9 @@ impl ColumnSky {
     /// their final directions).
     pub fn trace(scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Self {
         let height_m = scene.camera.height_m;
-        let rows = column_directions(scene, x)
+        let directions: Vec<(f64, f64)> = column_directions(scene, x).collect();
+        let rows = directions
+            .into_par_iter()
             .map(|(alpha, azimuth)| {
                 let sky = match tracer.trace(height_m, alpha, &[], true).end {
                     FanEnd::Sky { elevation_rad } => Some(elevation_rad),
