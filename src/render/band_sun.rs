@@ -13,7 +13,9 @@
 //! band's colour plus the addition, per channel, plus [`FLOOR`]) or the nodes are neighbours.
 //! So the sharp edges of the disc and of its mirror image are resolved to single columns (the
 //! test fails across them), and inside them the addition is within about that tolerance of the
-//! exact shading.
+//! exact shading. The disc's terms that depend on the elevation alone are worked out once per
+//! band ([`DiscChord`]), and a column whose azimuth is outside the chord's half-width is dark
+//! without evaluating it (the same 0 the exact shading gives).
 //!
 //! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
 //! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated
@@ -22,10 +24,13 @@
 //! with the azimuth), with a test that bounds their combined error at every column of an
 //! accepted interval, not only at its middle.
 
+use std::cell::RefCell;
+
 use super::ray_model::FanEnd;
 use super::reflection::{SeaSunAt, glint_radiance};
 use super::shade::{Shader, wrap_pi};
 use crate::scene::camera::CameraFrame;
+use crate::scene::sky::DiscChord;
 
 /// Node spacing (columns) before refinement.
 pub const STRIDE: usize = 8;
@@ -73,23 +78,6 @@ impl BandSun {
                 transmittance: shader.sea_transmittance(alpha, distance_m),
             }),
             _ => None,
-        }
-    }
-
-    /// The addition towards azimuth offset `azimuth_offset_rad` (from the camera's heading).
-    fn at(&self, shader: &Shader<'_>, azimuth_offset_rad: f64) -> [f64; 3] {
-        match *self {
-            BandSun::Disc {
-                elevation_rad,
-                transmittance,
-            } => shader.sun_disc(elevation_rad, azimuth_offset_rad, transmittance),
-            BandSun::Sea { sun, transmittance } => match &shader.reflection {
-                Some(refl) => {
-                    let sun = sun.at(refl, shader.heading_rad + azimuth_offset_rad);
-                    [0, 1, 2].map(|c| sun[c] * transmittance[c])
-                }
-                None => [0.0; 3],
-            },
         }
     }
 }
@@ -142,12 +130,14 @@ impl BandColumns<'_> {
         width: usize,
         out: &mut [[f64; 3]],
     ) {
-        self.fill((start, end), out);
-        self.fill((width - end, (width - start).min(width / 2)), out);
+        SCRATCH.with_borrow_mut(|scratch| {
+            self.fill((start, end), out, scratch);
+            self.fill((width - end, (width - start).min(width / 2)), out, scratch);
+        });
     }
 
     /// Fill `out[x]` for the columns x of [`a`, `b`) (module docs).
-    fn fill(&self, (a, b): (usize, usize), out: &mut [[f64; 3]]) {
+    fn fill(&self, (a, b): (usize, usize), out: &mut [[f64; 3]], scratch: &mut Scratch) {
         let centre = self.sun_column((a, b));
         if let BandSun::Sea {
             sun: sun @ SeaSunAt::Glint { .. },
@@ -166,12 +156,117 @@ impl BandColumns<'_> {
                 [0, 1, 2].map(|c| sun[c] * transmittance[c])
             };
             let glitter = Smooth { exact, radiance };
-            glitter.fill((a, b), centre, self.background, out);
+            glitter.fill((a, b), centre, self.background, out, scratch);
             return;
         }
-        let value = |x: usize| self.sun.at(self.shader, self.azimuth_offset(x));
-        fill_columns((a, b), centre, self.background, value, out);
+        let Some((chord, weight)) = self.disc_along() else {
+            out[a..b.max(a)].fill([0.0; 3]);
+            return;
+        };
+        let heading = self.shader.heading_rad;
+        // Columns whose azimuth is at least the chord's half-width from the disc centre's are
+        // outside the disc ([`DiscChord::half_width_rad`]: offsets within ±π/2 and a target
+        // within ±π differ by at most 3π/2, below 2π less a half-width under π/3).
+        let target = wrap_pi(chord.azimuth_rad() - heading);
+        let half_width = chord.half_width_rad();
+        let value = |x: usize| {
+            let offset = self.azimuth_offset(x);
+            if offset.abs() <= std::f64::consts::FRAC_PI_2 && (offset - target).abs() >= half_width
+            {
+                return [0.0; 3];
+            }
+            weight.apply(chord.radiance(heading + offset))
+        };
+        fill_columns((a, b), centre, self.background, value, out, scratch);
     }
+
+    /// The disc (or a mirror sea's image of it) along the band's elevation and what weights its
+    /// radiance, when the band's sun is one; `None` where neither shows in any column.
+    fn disc_along(&self) -> Option<(DiscChord, DiscWeight)> {
+        match self.sun {
+            BandSun::Disc {
+                elevation_rad,
+                transmittance,
+            } => Some((
+                self.shader.sun.as_ref()?.along(elevation_rad)?,
+                DiscWeight::Sky(transmittance),
+            )),
+            BandSun::Sea {
+                sun:
+                    SeaSunAt::Mirror {
+                        elevation_rad,
+                        reflectance,
+                        transmittance: sky,
+                    },
+                transmittance,
+            } => {
+                let (_, disc) = self.shader.reflection.as_ref()?.mirror_sun.as_ref()?;
+                Some((
+                    disc.along(elevation_rad)?,
+                    DiscWeight::Mirror {
+                        reflectance,
+                        sky,
+                        air: transmittance,
+                    },
+                ))
+            }
+            BandSun::Sea { .. } => None,
+        }
+    }
+}
+
+/// What a band's disc radiance is weighted by, with the arithmetic of the shading per sample
+/// (the sky's disc, [`Shader::with_sun`]; its mirror image, [`SeaSunAt`]).
+#[derive(Clone, Copy)]
+enum DiscWeight {
+    /// The disc itself, through the air's transmittance per channel towards the sun.
+    Sky([f64; 3]),
+    /// A mirror sea's image of it: its reflectance, the sky's transmittance at the grazing
+    /// angle and the air's from the sea to the camera.
+    Mirror {
+        reflectance: f64,
+        sky: [f64; 3],
+        air: [f64; 3],
+    },
+}
+
+impl DiscWeight {
+    /// The addition of a disc radiance `disc`.
+    #[inline]
+    fn apply(&self, disc: f64) -> [f64; 3] {
+        match *self {
+            DiscWeight::Sky(transmittance) => {
+                if disc > 0.0 {
+                    transmittance.map(|t| disc * t)
+                } else {
+                    [0.0; 3]
+                }
+            }
+            DiscWeight::Mirror {
+                reflectance,
+                sky,
+                air,
+            } => {
+                if disc <= 0.0 {
+                    return [0.0; 3];
+                }
+                let sun = sky.map(|t| reflectance * disc * t);
+                [0, 1, 2].map(|c| sun[c] * air[c])
+            }
+        }
+    }
+}
+
+/// Work space of [`fill_columns`] and [`Smooth::fill`], reused across the bands a thread fills.
+#[derive(Default)]
+struct Scratch {
+    nodes: Vec<usize>,
+    open: Vec<(usize, usize)>,
+    weights: Vec<Weights>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
 /// Fill `out[x]` for the columns x of [`a`, `b`) with `value(x)` at the nodes (every
@@ -184,15 +279,18 @@ fn fill_columns(
     background: [f64; 3],
     value: impl Fn(usize) -> [f64; 3],
     out: &mut [[f64; 3]],
+    scratch: &mut Scratch,
 ) {
     if b <= a {
         return;
     }
-    let nodes = nodes((a, b), STRIDE, centre);
-    for &x in &nodes {
+    let Scratch { nodes, open, .. } = scratch;
+    node_columns((a, b), STRIDE, centre, nodes);
+    for &x in nodes.iter() {
         out[x] = value(x);
     }
-    let mut open: Vec<(usize, usize)> = nodes.windows(2).map(|w| (w[0], w[1])).collect();
+    open.clear();
+    open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
     while let Some((i, j)) = open.pop() {
         if j <= i + 1 {
             continue;
@@ -208,17 +306,22 @@ fn fill_columns(
     }
 }
 
-/// The node columns of [`a`, `b`) (not empty): every `stride`th column, the last, and `centre`
-/// with its neighbours when it lies in the run; ascending.
-fn nodes((a, b): (usize, usize), stride: usize, centre: Option<usize>) -> Vec<usize> {
-    let mut nodes: Vec<usize> = (a..b).step_by(stride).collect();
+/// The node columns of [`a`, `b`) (not empty) into `nodes`: every `stride`th column, the last,
+/// and `centre` with its neighbours when it lies in the run; ascending.
+fn node_columns(
+    (a, b): (usize, usize),
+    stride: usize,
+    centre: Option<usize>,
+    nodes: &mut Vec<usize>,
+) {
+    nodes.clear();
+    nodes.extend((a..b).step_by(stride));
     nodes.push(b - 1);
     if let Some(c) = centre.filter(|c| (a..b).contains(c)) {
         nodes.extend([c.saturating_sub(1).max(a), c, (c + 1).min(b - 1)]);
     }
     nodes.sort_unstable();
     nodes.dedup();
-    nodes
 }
 
 /// Whether linear interpolation between columns `i` and `j` of `out` predicts column `m`
@@ -262,15 +365,22 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         centre: Option<usize>,
         background: [f64; 3],
         out: &mut [[f64; 3]],
+        scratch: &mut Scratch,
     ) {
         if b <= a {
             return;
         }
-        let nodes = nodes((a, b), SMOOTH_STRIDE, centre);
+        let Scratch {
+            nodes,
+            open,
+            weights: w,
+        } = scratch;
+        node_columns((a, b), SMOOTH_STRIDE, centre, nodes);
         // The exact factor and transmittance of each column of [a, b) evaluated so far (factor
         // NaN: not yet; a NaN factor is kept as 0, and its radiance as the exact shading gives
         // it).
-        let mut w: Vec<Weights> = vec![(f64::NAN, [0.0; 3]); b - a];
+        w.clear();
+        w.resize(b - a, (f64::NAN, [0.0; 3]));
         let exact = |x: usize, w: &mut [Weights], out: &mut [[f64; 3]]| {
             if w[x - a].0.is_nan() {
                 let (f, t) = (self.exact)(x);
@@ -278,10 +388,11 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
                 out[x] = (self.radiance)(f, t);
             }
         };
-        for &x in &nodes {
-            exact(x, &mut w, out);
+        for &x in nodes.iter() {
+            exact(x, w, out);
         }
-        let mut open: Vec<(usize, usize)> = nodes.windows(2).map(|w| (w[0], w[1])).collect();
+        open.clear();
+        open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
         while let Some((i, j)) = open.pop() {
             if j <= i + 1 {
                 continue;
@@ -289,9 +400,9 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             let m = (i + j) / 2;
             let tests =
                 [(i + m) / 2, (m + j) / 2].map(|t| (t > i && t < m || t > m && t < j).then_some(t));
-            exact(m, &mut w, out);
+            exact(m, w, out);
             for t in tests.into_iter().flatten() {
-                exact(t, &mut w, out);
+                exact(t, w, out);
             }
             let fit = Fit::through([i, m, j].map(|x| (x, w[x - a])));
             let weights = |x: usize| w[x - a];
@@ -570,7 +681,14 @@ mod tests {
             exact(x)
         };
         let mut out = vec![[f64::NAN; 3]; 400];
-        fill_columns((0, 400), Some(centre), background, value, &mut out);
+        fill_columns(
+            (0, 400),
+            Some(centre),
+            background,
+            value,
+            &mut out,
+            &mut Scratch::default(),
+        );
         (worst_error(&out, exact, background), calls.get())
     }
 
@@ -655,7 +773,13 @@ mod tests {
             radiance,
         };
         let mut out = vec![[f64::NAN; 3]; 400];
-        glitter.fill((0, 400), Some(centre), background, &mut out);
+        glitter.fill(
+            (0, 400),
+            Some(centre),
+            background,
+            &mut out,
+            &mut Scratch::default(),
+        );
         (
             worst_error(&out, |x| radiance(k(x), weight(x)), background),
             calls.get(),
