@@ -262,7 +262,35 @@ impl DiscWeight {
 struct Scratch {
     nodes: Vec<usize>,
     open: Vec<(usize, usize)>,
-    weights: Vec<Weights>,
+    /// Per column of the row, the exact weights [`Smooth::fill`] evaluated there; an entry
+    /// holds for the call whose stamp it bears.
+    exact: Vec<Exact>,
+    /// The stamp of the latest call of [`Smooth::fill`].
+    stamp: u32,
+}
+
+/// A column's exact weights in a call of [`Smooth::fill`], and once asked for their
+/// logarithms.
+#[derive(Clone, Copy, Default)]
+struct Exact {
+    /// The call's stamp ([`Scratch::stamp`]; 0: none).
+    stamp: u32,
+    weights: Weights,
+    /// ln of the factor and of each channel's transmittance, when `logged`.
+    logs: [f64; 4],
+    logged: bool,
+}
+
+impl Exact {
+    /// The logarithms of the weights (computed on the first call).
+    fn logs(&mut self) -> [f64; 4] {
+        if !self.logged {
+            let (k, t) = self.weights;
+            self.logs = [k.ln(), t[0].ln(), t[1].ln(), t[2].ln()];
+            self.logged = true;
+        }
+        self.logs
+    }
 }
 
 thread_local! {
@@ -373,18 +401,30 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         let Scratch {
             nodes,
             open,
-            weights: w,
+            exact: w,
+            stamp,
         } = scratch;
         node_columns((a, b), SMOOTH_STRIDE, centre, nodes);
-        // The exact factor and transmittance of each column of [a, b) evaluated so far (factor
-        // NaN: not yet; a NaN factor is kept as 0, and its radiance as the exact shading gives
-        // it).
-        w.clear();
-        w.resize(b - a, (f64::NAN, [0.0; 3]));
-        let exact = |x: usize, w: &mut [Weights], out: &mut [[f64; 3]]| {
-            if w[x - a].0.is_nan() {
+        // The exact factor and transmittance of the columns evaluated so far, those entries of
+        // `w` with this call's stamp (a NaN factor is kept as 0, and its radiance as the exact
+        // shading gives it).
+        *stamp = stamp.wrapping_add(1);
+        if *stamp == 0 {
+            w.iter_mut().for_each(|e| e.stamp = 0);
+            *stamp = 1;
+        }
+        let stamp = *stamp;
+        if w.len() < b {
+            w.resize(b, Exact::default());
+        }
+        let exact = |x: usize, w: &mut [Exact], out: &mut [[f64; 3]]| {
+            if w[x].stamp != stamp {
                 let (f, t) = (self.exact)(x);
-                w[x - a] = (if f.is_nan() { 0.0 } else { f }, t);
+                w[x] = Exact {
+                    stamp,
+                    weights: (if f.is_nan() { 0.0 } else { f }, t),
+                    ..Exact::default()
+                };
                 out[x] = (self.radiance)(f, t);
             }
         };
@@ -404,14 +444,19 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             for t in tests.into_iter().flatten() {
                 exact(t, w, out);
             }
-            let fit = Fit::through([i, m, j].map(|x| (x, w[x - a])));
-            let weights = |x: usize| w[x - a];
-            match fit.filter(|fit| self.accepts(fit, (i, j), tests, weights, background, out)) {
-                Some(fit) => fit.for_each(i, j, |x, k, t| {
-                    if w[x - a].0.is_nan() {
-                        out[x] = (self.radiance)(k, t);
+            let fit = Fit::through([i, m, j].map(|x| (x, w[x].weights)), |x| w[x].logs());
+            match fit.filter(|fit| self.accepts(fit, (i, j), tests, w, background, out)) {
+                Some(fit) => {
+                    // The interval's columns evaluated exactly keep their radiance: its middle
+                    // and test points, no others (an interval holds no other points its
+                    // ancestors evaluated: their middles are ends of their halves, their test
+                    // points the middles of those halves).
+                    let kept = [Some(m), tests[0], tests[1]].map(|x| x.map(|x| (x, out[x])));
+                    fit.fill(i, j, &self.radiance, out);
+                    for (x, v) in kept.into_iter().flatten() {
+                        out[x] = v;
                     }
-                }),
+                }
                 None => open.extend([(i, m), (m, j)]),
             }
         }
@@ -434,7 +479,7 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         fit: &Fit,
         (i, j): (usize, usize),
         tests: [Option<usize>; 2],
-        exact: impl Fn(usize) -> Weights,
+        exact: &mut [Exact],
         background: [f64; 3],
         out: &[[f64; 3]],
     ) -> bool {
@@ -445,16 +490,18 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             (0..3).for_each(|c| clearest[c] = clearest[c].max(t[c]));
         };
         for x in [i, (i + j) / 2, j] {
-            widen(exact(x));
+            widen(exact[x].weights);
         }
         for x in tests.into_iter().flatten() {
-            let (want, got) = (exact(x), fit.at(x));
+            let (want, got) = (exact[x].weights, fit.at(x));
             widen(want);
             if !within((self.radiance)(got.0, got.1), out[x], background) {
                 return false;
             }
-            let errors = [0, 1, 2].map(|c| log_ratio(want.1[c], got.1[c]));
-            let (Some(k), [Some(t0), Some(t1), Some(t2)]) = (log_ratio(want.0, got.0), errors)
+            let mut logs = || exact[x].logs();
+            let errors = [0, 1, 2].map(|c| log_ratio(want.1[c], got.1[c], || logs()[c + 1]));
+            let (Some(k), [Some(t0), Some(t1), Some(t2)]) =
+                (log_ratio(want.0, got.0, || logs()[0]), errors)
             else {
                 return false;
             };
@@ -475,13 +522,13 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
     }
 }
 
-/// |ln(`got` / `want`)| (0 when they are equal); `None` when they differ and not both are
-/// positive.
-fn log_ratio(want: f64, got: f64) -> Option<f64> {
+/// |ln(`got` / `want`)| (0 when they are equal), `ln_want` giving ln `want`; `None` when they
+/// differ and not both are positive.
+fn log_ratio(want: f64, got: f64, ln_want: impl FnOnce() -> f64) -> Option<f64> {
     if want == got {
         return Some(0.0);
     }
-    (want > 0.0 && got > 0.0).then(|| (got.ln() - want.ln()).abs())
+    (want > 0.0 && got > 0.0).then(|| (got.ln() - ln_want()).abs())
 }
 
 /// Quadratics in the logarithms of a column's factor and of each channel of its
@@ -492,12 +539,17 @@ struct Fit {
 }
 
 impl Fit {
-    /// Through `points` (column, weights; columns increasing): `None` where some but not all
+    /// Through `points` (column, weights; columns increasing), `logs(x)` giving the
+    /// logarithms of column x's factor and transmittances: `None` where some but not all
     /// factors, or values of one channel's transmittance, are zero.
-    fn through(points: [(usize, Weights); 3]) -> Option<Self> {
-        let factor = LogQuadratic::through(points.map(|(x, w)| (x, w.0)))?;
-        let [t0, t1, t2] =
-            [0, 1, 2].map(|c| LogQuadratic::through(points.map(|(x, w)| (x, w.1[c]))));
+    fn through(
+        points: [(usize, Weights); 3],
+        mut logs: impl FnMut(usize) -> [f64; 4],
+    ) -> Option<Self> {
+        let mut logs_of = |n: usize| points.map(|(x, _)| logs(x)[n]);
+        let factor = LogQuadratic::through(points.map(|(x, w)| (x, w.0)), || logs_of(0))?;
+        let [t0, t1, t2] = [0, 1, 2]
+            .map(|c| LogQuadratic::through(points.map(|(x, w)| (x, w.1[c])), || logs_of(c + 1)));
         Some(Fit {
             factor,
             transmittance: [t0?, t1?, t2?],
@@ -518,13 +570,30 @@ impl Fit {
         )
     }
 
-    /// Call `each(x, factor, transmittance)` for the columns x of (`start`, `end`) in order
+    /// Set `out[x]` to `radiance(factor, transmittance)` for the columns x of (`start`, `end`)
     /// (`start` is the quadratics' first column), by [`LogQuadratic::steps`].
-    fn for_each(&self, start: usize, end: usize, mut each: impl FnMut(usize, f64, [f64; 3])) {
-        let mut k = self.factor.steps(start);
-        let mut t = self.transmittance.map(|q| q.steps(start));
-        for x in start + 1..end {
-            each(x, k.next(), [t[0].next(), t[1].next(), t[2].next()]);
+    fn fill(
+        &self,
+        start: usize,
+        end: usize,
+        radiance: impl Fn(f64, [f64; 3]) -> [f64; 3],
+        out: &mut [[f64; 3]],
+    ) {
+        let [k, t0, t1, t2] = [
+            self.factor,
+            self.transmittance[0],
+            self.transmittance[1],
+            self.transmittance[2],
+        ]
+        .map(|q| q.steps(start));
+        let mut steps = Steps4 {
+            value: [k.value, t0.value, t1.value, t2.value],
+            ratio: [k.ratio, t0.ratio, t1.ratio, t2.ratio],
+            growth: [k.growth, t0.growth, t1.growth, t2.growth],
+        };
+        for v in &mut out[start + 1..end] {
+            let [k, t0, t1, t2] = steps.next();
+            *v = radiance(k, [t0, t1, t2]);
         }
     }
 }
@@ -553,30 +622,39 @@ struct Steps {
     growth: f64,
 }
 
-impl Steps {
-    /// The value at the next column.
+/// Four [`Steps`] side by side (the factor's and the transmittances'), the same values.
+struct Steps4 {
+    value: [f64; 4],
+    ratio: [f64; 4],
+    growth: [f64; 4],
+}
+
+impl Steps4 {
+    /// The values at the next column.
     #[inline]
-    fn next(&mut self) -> f64 {
+    fn next(&mut self) -> [f64; 4] {
         let value = self.value;
-        self.value *= self.ratio;
-        self.ratio *= self.growth;
+        for n in 0..4 {
+            self.value[n] *= self.ratio[n];
+            self.ratio[n] *= self.growth[n];
+        }
         value
     }
 }
 
 impl LogQuadratic {
-    /// Through `points` (column, factor; columns increasing): `None` where some but not all
-    /// factors are zero.
-    fn through(points: [(usize, f64); 3]) -> Option<Self> {
+    /// Through `points` (column, factor; columns increasing), `logs` giving their logarithms:
+    /// `None` where some but not all factors are zero.
+    fn through(points: [(usize, f64); 3], logs: impl FnOnce() -> [f64; 3]) -> Option<Self> {
         if points.iter().all(|&(_, k)| k == 0.0) {
             return Some(LogQuadratic::Zero);
         }
         if !points.iter().all(|&(_, k)| k > 0.0 && k.is_finite()) {
             return None;
         }
-        let [(x0, k0), (x1, k1), (x2, k2)] = points;
+        let [(x0, _), (x1, _), (x2, _)] = points;
         let (u1, u2) = ((x1 - x0) as f64, (x2 - x0) as f64);
-        let (y0, y1, y2) = (k0.ln(), k1.ln(), k2.ln());
+        let [y0, y1, y2] = logs();
         // Newton's divided differences.
         let d1 = (y1 - y0) / u1;
         let gamma = ((y2 - y1) / (u2 - u1) - d1) / u2;
