@@ -150,10 +150,9 @@ impl BandColumns<'_> {
                 sun.glint_factor_and_transmittance(refl, heading + self.azimuth_offset(x))
                     .unwrap_or((0.0, [0.0; 3]))
             };
-            let scales = sun.glint_scales(refl).unwrap_or(([0.0; 3], [0.0; 3]));
-            let radiance = |k: f64, t: [f64; 3]| {
-                let sun = glint_radiance(k, t, scales);
-                [0, 1, 2].map(|c| sun[c] * transmittance[c])
+            let radiance = Glitter {
+                scales: sun.glint_scales(refl).unwrap_or(([0.0; 3], [0.0; 3])),
+                air: transmittance,
             };
             let glitter = Smooth { exact, radiance };
             glitter.fill((a, b), centre, self.background, out, scratch);
@@ -282,14 +281,17 @@ struct Exact {
 }
 
 impl Exact {
-    /// The logarithms of the weights (computed on the first call).
-    fn logs(&mut self) -> [f64; 4] {
+    /// The logarithm of weight `n` (0: the factor, 1 + c: channel c's transmittance); the
+    /// first call computes all four (a fit or a test asks for all of them but where they are
+    /// zero or equal).
+    #[inline]
+    fn log(&mut self, n: usize) -> f64 {
         if !self.logged {
             let (k, t) = self.weights;
             self.logs = [k.ln(), t[0].ln(), t[1].ln(), t[2].ln()];
             self.logged = true;
         }
-        self.logs
+        self.logs[n]
     }
 }
 
@@ -380,7 +382,69 @@ struct Smooth<E, R> {
 /// A column's factor and transmittance per channel.
 type Weights = (f64, [f64; 3]);
 
-impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
+/// The radiance of a factor and a transmittance per channel ([`Smooth`]), and of runs of them.
+trait Radiance {
+    /// The radiance of factor `k` and transmittance `t`.
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3];
+
+    /// Set each `out[n]` to the radiance of the next values of `steps` in turn.
+    fn run(&self, steps: &mut Steps4, out: &mut [[f64; 3]]) {
+        for v in out {
+            let [k, t0, t1, t2] = steps.next();
+            *v = self.of(k, [t0, t1, t2]);
+        }
+    }
+}
+
+impl<F: Fn(f64, [f64; 3]) -> [f64; 3]> Radiance for F {
+    #[inline]
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3] {
+        self(k, t)
+    }
+}
+
+/// The glitter seen through the air: [`glint_radiance`] with `scales`, times the air's
+/// transmittance `air` per channel.
+struct Glitter {
+    scales: ([f64; 3], [f64; 3]),
+    air: [f64; 3],
+}
+
+impl Radiance for Glitter {
+    #[inline]
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3] {
+        let sun = glint_radiance(k, t, self.scales);
+        [0, 1, 2].map(|c| sun[c] * self.air[c])
+    }
+
+    /// The same values as [`Self::of`] in turn, the cap taken by a comparison: the same as
+    /// `f64::min` wherever the cap is not NaN (a NaN capped value gives the cap).
+    fn run(&self, steps: &mut Steps4, out: &mut [[f64; 3]]) {
+        let (irradiance, cap) = self.scales;
+        if cap.iter().any(|c| c.is_nan()) {
+            for v in out {
+                let [k, t0, t1, t2] = steps.next();
+                *v = self.of(k, [t0, t1, t2]);
+            }
+            return;
+        }
+        for v in out {
+            let [k, t0, t1, t2] = steps.next();
+            if k <= 0.0 {
+                *v = [0.0; 3];
+                continue;
+            }
+            let channel = |c: usize, t: f64| {
+                let x = k * irradiance[c];
+                let capped = if x < cap[c] { x } else { cap[c] };
+                capped * t * self.air[c]
+            };
+            *v = [channel(0, t0), channel(1, t1), channel(2, t2)];
+        }
+    }
+}
+
+impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
     /// Fill `out[x]` for the columns x of [`a`, `b`): the radiance of the exact factor and
     /// transmittance at nodes ([`SMOOTH_STRIDE`] apart, the last column, `centre` and its
     /// neighbours) and at the points refinement evaluates; elsewhere of the factor and each
@@ -425,7 +489,7 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
                     weights: (if f.is_nan() { 0.0 } else { f }, t),
                     ..Exact::default()
                 };
-                out[x] = (self.radiance)(f, t);
+                out[x] = self.radiance.of(f, t);
             }
         };
         for &x in nodes.iter() {
@@ -444,7 +508,8 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             for t in tests.into_iter().flatten() {
                 exact(t, w, out);
             }
-            let fit = Fit::through([i, m, j].map(|x| (x, w[x].weights)), |x| w[x].logs());
+            let points = [(i, w[i].weights), (m, w[m].weights), (j, w[j].weights)];
+            let fit = Fit::through(points, |x, n| w[x].log(n));
             match fit.filter(|fit| self.accepts(fit, (i, j), tests, w, background, out)) {
                 Some(fit) => {
                     // The interval's columns evaluated exactly keep their radiance: its middle
@@ -495,14 +560,18 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         for x in tests.into_iter().flatten() {
             let (want, got) = (exact[x].weights, fit.at(x));
             widen(want);
-            if !within((self.radiance)(got.0, got.1), out[x], background) {
+            if !within(self.radiance.of(got.0, got.1), out[x], background) {
                 return false;
             }
-            let mut logs = || exact[x].logs();
-            let errors = [0, 1, 2].map(|c| log_ratio(want.1[c], got.1[c], || logs()[c + 1]));
-            let (Some(k), [Some(t0), Some(t1), Some(t2)]) =
-                (log_ratio(want.0, got.0, || logs()[0]), errors)
-            else {
+            let mut error =
+                |n: usize, want: f64, got: f64| log_ratio(want, got, || exact[x].log(n));
+            let errors = [
+                error(0, want.0, got.0),
+                error(1, want.1[0], got.1[0]),
+                error(2, want.1[1], got.1[1]),
+                error(3, want.1[2], got.1[2]),
+            ];
+            let [Some(k), Some(t0), Some(t1), Some(t2)] = errors else {
                 return false;
             };
             log_error = log_error.max(k + t0.max(t1).max(t2));
@@ -517,7 +586,9 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         if excess <= 0.0 {
             return true;
         }
-        let v = (self.radiance)(largest * growth, clearest.map(|t| t * growth));
+        let v = self
+            .radiance
+            .of(largest * growth, clearest.map(|t| t * growth));
         (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
     }
 }
@@ -539,46 +610,50 @@ struct Fit {
 }
 
 impl Fit {
-    /// Through `points` (column, weights; columns increasing), `logs(x)` giving the
-    /// logarithms of column x's factor and transmittances: `None` where some but not all
+    /// Through `points` (column, weights; columns increasing), `log(x, n)` giving the
+    /// logarithm of column x's weight n ([`Exact::log`]): `None` where some but not all
     /// factors, or values of one channel's transmittance, are zero.
     fn through(
         points: [(usize, Weights); 3],
-        mut logs: impl FnMut(usize) -> [f64; 4],
+        mut log: impl FnMut(usize, usize) -> f64,
     ) -> Option<Self> {
-        let mut logs_of = |n: usize| points.map(|(x, _)| logs(x)[n]);
-        let factor = LogQuadratic::through(points.map(|(x, w)| (x, w.0)), || logs_of(0))?;
-        let [t0, t1, t2] = [0, 1, 2]
-            .map(|c| LogQuadratic::through(points.map(|(x, w)| (x, w.1[c])), || logs_of(c + 1)));
+        let [(x0, w0), (x1, w1), (x2, w2)] = points;
+        let mut logs_of = |n: usize| [log(x0, n), log(x1, n), log(x2, n)];
+        let factor = LogQuadratic::through([(x0, w0.0), (x1, w1.0), (x2, w2.0)], || logs_of(0))?;
+        let mut channel = |c: usize| {
+            let values = [(x0, w0.1[c]), (x1, w1.1[c]), (x2, w2.1[c])];
+            LogQuadratic::through(values, || logs_of(c + 1))
+        };
+        let transmittance = [channel(0)?, channel(1)?, channel(2)?];
         Some(Fit {
             factor,
-            transmittance: [t0?, t1?, t2?],
+            transmittance,
         })
     }
 
     /// The weights at column `x`.
     fn at(&self, x: usize) -> Weights {
-        (self.factor.at(x), self.transmittance.map(|t| t.at(x)))
+        let t = &self.transmittance;
+        (self.factor.at(x), [t[0].at(x), t[1].at(x), t[2].at(x)])
     }
 
     /// The largest factor and transmittance per channel over columns [`i`, `j`]
     /// ([`LogQuadratic::max_over`]).
     fn max_over(&self, i: usize, j: usize) -> Weights {
+        let t = &self.transmittance;
         (
             self.factor.max_over(i, j),
-            self.transmittance.map(|t| t.max_over(i, j)),
+            [
+                t[0].max_over(i, j),
+                t[1].max_over(i, j),
+                t[2].max_over(i, j),
+            ],
         )
     }
 
     /// Set `out[x]` to `radiance(factor, transmittance)` for the columns x of (`start`, `end`)
     /// (`start` is the quadratics' first column), by [`LogQuadratic::steps`].
-    fn fill(
-        &self,
-        start: usize,
-        end: usize,
-        radiance: impl Fn(f64, [f64; 3]) -> [f64; 3],
-        out: &mut [[f64; 3]],
-    ) {
+    fn fill(&self, start: usize, end: usize, radiance: &impl Radiance, out: &mut [[f64; 3]]) {
         let [k, t0, t1, t2] = [
             self.factor,
             self.transmittance[0],
@@ -591,10 +666,7 @@ impl Fit {
             ratio: [k.ratio, t0.ratio, t1.ratio, t2.ratio],
             growth: [k.growth, t0.growth, t1.growth, t2.growth],
         };
-        for v in &mut out[start + 1..end] {
-            let [k, t0, t1, t2] = steps.next();
-            *v = radiance(k, [t0, t1, t2]);
-        }
+        radiance.run(&mut steps, &mut out[start + 1..end]);
     }
 }
 
