@@ -357,6 +357,7 @@ fn node_columns(
 /// Whether linear interpolation between columns `i` and `j` of `out` predicts column `m`
 /// within [`TOLERANCE`] of the pixel's radiance there (`background` plus the addition), plus
 /// [`FLOOR`].
+#[inline]
 fn predicts(out: &[[f64; 3]], i: usize, j: usize, m: usize, background: [f64; 3]) -> bool {
     let t = (m - i) as f64 / (j - i) as f64;
     let (a, b, v) = (out[i], out[j], out[m]);
@@ -806,6 +807,7 @@ fn within(predicted: [f64; 3], value: [f64; 3], background: [f64; 3]) -> bool {
 }
 
 /// Fill the columns strictly between `i` and `j` of `out` by linear interpolation.
+#[inline]
 fn interpolate(out: &mut [[f64; 3]], i: usize, j: usize) {
     let (a, b) = (out[i], out[j]);
     for (k, v) in out[i + 1..j].iter_mut().enumerate() {
