@@ -458,7 +458,7 @@ impl DiscChord {
         }
         // |sin(Δ/2)| below this is needed for a haversine below the edge's.
         let half_sin = ((self.edge_haversine - self.rise_haversine).max(0.0) / weight).sqrt();
-        if !(half_sin < 0.5) {
+        if half_sin.is_nan() || half_sin >= 0.5 {
             return f64::INFINITY;
         }
         2.0 * half_sin.asin() * (1.0 + 1e-6) + 1e-9
