@@ -13,7 +13,9 @@
 //! band's colour plus the addition, per channel, plus [`FLOOR`]) or the nodes are neighbours.
 //! So the sharp edges of the disc and of its mirror image are resolved to single columns (the
 //! test fails across them), and inside them the addition is within about that tolerance of the
-//! exact shading.
+//! exact shading. The disc's terms that depend on the elevation alone are worked out once per
+//! band ([`DiscChord`]), and a column whose azimuth is outside the chord's half-width is dark
+//! without evaluating it (the same 0 the exact shading gives).
 //!
 //! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
 //! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated
@@ -22,10 +24,13 @@
 //! with the azimuth), with a test that bounds their combined error at every column of an
 //! accepted interval, not only at its middle.
 
+use std::cell::RefCell;
+
 use super::ray_model::FanEnd;
 use super::reflection::{SeaSunAt, glint_radiance};
 use super::shade::{Shader, wrap_pi};
 use crate::scene::camera::CameraFrame;
+use crate::scene::sky::DiscChord;
 
 /// Node spacing (columns) before refinement.
 pub const STRIDE: usize = 8;
@@ -73,23 +78,6 @@ impl BandSun {
                 transmittance: shader.sea_transmittance(alpha, distance_m),
             }),
             _ => None,
-        }
-    }
-
-    /// The addition towards azimuth offset `azimuth_offset_rad` (from the camera's heading).
-    fn at(&self, shader: &Shader<'_>, azimuth_offset_rad: f64) -> [f64; 3] {
-        match *self {
-            BandSun::Disc {
-                elevation_rad,
-                transmittance,
-            } => shader.sun_disc(elevation_rad, azimuth_offset_rad, transmittance),
-            BandSun::Sea { sun, transmittance } => match &shader.reflection {
-                Some(refl) => {
-                    let sun = sun.at(refl, shader.heading_rad + azimuth_offset_rad);
-                    [0, 1, 2].map(|c| sun[c] * transmittance[c])
-                }
-                None => [0.0; 3],
-            },
         }
     }
 }
@@ -142,12 +130,14 @@ impl BandColumns<'_> {
         width: usize,
         out: &mut [[f64; 3]],
     ) {
-        self.fill((start, end), out);
-        self.fill((width - end, (width - start).min(width / 2)), out);
+        SCRATCH.with_borrow_mut(|scratch| {
+            self.fill((start, end), out, scratch);
+            self.fill((width - end, (width - start).min(width / 2)), out, scratch);
+        });
     }
 
     /// Fill `out[x]` for the columns x of [`a`, `b`) (module docs).
-    fn fill(&self, (a, b): (usize, usize), out: &mut [[f64; 3]]) {
+    fn fill(&self, (a, b): (usize, usize), out: &mut [[f64; 3]], scratch: &mut Scratch) {
         let centre = self.sun_column((a, b));
         if let BandSun::Sea {
             sun: sun @ SeaSunAt::Glint { .. },
@@ -160,18 +150,153 @@ impl BandColumns<'_> {
                 sun.glint_factor_and_transmittance(refl, heading + self.azimuth_offset(x))
                     .unwrap_or((0.0, [0.0; 3]))
             };
-            let scales = sun.glint_scales(refl).unwrap_or(([0.0; 3], [0.0; 3]));
-            let radiance = |k: f64, t: [f64; 3]| {
-                let sun = glint_radiance(k, t, scales);
-                [0, 1, 2].map(|c| sun[c] * transmittance[c])
+            let radiance = Glitter {
+                scales: sun.glint_scales(refl).unwrap_or(([0.0; 3], [0.0; 3])),
+                air: transmittance,
             };
             let glitter = Smooth { exact, radiance };
-            glitter.fill((a, b), centre, self.background, out);
+            glitter.fill((a, b), centre, self.background, out, scratch);
             return;
         }
-        let value = |x: usize| self.sun.at(self.shader, self.azimuth_offset(x));
-        fill_columns((a, b), centre, self.background, value, out);
+        let Some((chord, weight)) = self.disc_along() else {
+            out[a..b.max(a)].fill([0.0; 3]);
+            return;
+        };
+        let heading = self.shader.heading_rad;
+        // Columns whose azimuth is at least the chord's half-width from the disc centre's are
+        // outside the disc ([`DiscChord::half_width_rad`]: offsets within ±π/2 and a target
+        // within ±π differ by at most 3π/2, below 2π less a half-width under π/3).
+        let target = wrap_pi(chord.azimuth_rad() - heading);
+        let half_width = chord.half_width_rad();
+        let value = |x: usize| {
+            let offset = self.azimuth_offset(x);
+            if offset.abs() <= std::f64::consts::FRAC_PI_2 && (offset - target).abs() >= half_width
+            {
+                return [0.0; 3];
+            }
+            weight.apply(chord.radiance(heading + offset))
+        };
+        fill_columns((a, b), centre, self.background, value, out, scratch);
     }
+
+    /// The disc (or a mirror sea's image of it) along the band's elevation and what weights its
+    /// radiance, when the band's sun is one; `None` where neither shows in any column.
+    fn disc_along(&self) -> Option<(DiscChord, DiscWeight)> {
+        match self.sun {
+            BandSun::Disc {
+                elevation_rad,
+                transmittance,
+            } => Some((
+                self.shader.sun.as_ref()?.along(elevation_rad)?,
+                DiscWeight::Sky(transmittance),
+            )),
+            BandSun::Sea {
+                sun:
+                    SeaSunAt::Mirror {
+                        elevation_rad,
+                        reflectance,
+                        transmittance: sky,
+                    },
+                transmittance,
+            } => {
+                let (_, disc) = self.shader.reflection.as_ref()?.mirror_sun.as_ref()?;
+                Some((
+                    disc.along(elevation_rad)?,
+                    DiscWeight::Mirror {
+                        reflectance,
+                        sky,
+                        air: transmittance,
+                    },
+                ))
+            }
+            BandSun::Sea { .. } => None,
+        }
+    }
+}
+
+/// What a band's disc radiance is weighted by, with the arithmetic of the shading per sample
+/// (the sky's disc, [`Shader::with_sun`]; its mirror image, [`SeaSunAt`]).
+#[derive(Clone, Copy)]
+enum DiscWeight {
+    /// The disc itself, through the air's transmittance per channel towards the sun.
+    Sky([f64; 3]),
+    /// A mirror sea's image of it: its reflectance, the sky's transmittance at the grazing
+    /// angle and the air's from the sea to the camera.
+    Mirror {
+        reflectance: f64,
+        sky: [f64; 3],
+        air: [f64; 3],
+    },
+}
+
+impl DiscWeight {
+    /// The addition of a disc radiance `disc`.
+    #[inline]
+    fn apply(&self, disc: f64) -> [f64; 3] {
+        match *self {
+            DiscWeight::Sky(transmittance) => {
+                if disc > 0.0 {
+                    transmittance.map(|t| disc * t)
+                } else {
+                    [0.0; 3]
+                }
+            }
+            DiscWeight::Mirror {
+                reflectance,
+                sky,
+                air,
+            } => {
+                if disc <= 0.0 {
+                    return [0.0; 3];
+                }
+                let sun = sky.map(|t| reflectance * disc * t);
+                [0, 1, 2].map(|c| sun[c] * air[c])
+            }
+        }
+    }
+}
+
+/// Work space of [`fill_columns`] and [`Smooth::fill`], reused across the bands a thread fills.
+#[derive(Default)]
+struct Scratch {
+    nodes: Vec<usize>,
+    open: Vec<(usize, usize)>,
+    /// Per column of the row, the exact weights [`Smooth::fill`] evaluated there; an entry
+    /// holds for the call whose stamp it bears.
+    exact: Vec<Exact>,
+    /// The stamp of the latest call of [`Smooth::fill`].
+    stamp: u32,
+}
+
+/// A column's exact weights in a call of [`Smooth::fill`], and once asked for their
+/// logarithms.
+#[derive(Clone, Copy, Default)]
+struct Exact {
+    /// The call's stamp ([`Scratch::stamp`]; 0: none).
+    stamp: u32,
+    weights: Weights,
+    /// ln of the factor and of each channel's transmittance, when `logged`.
+    logs: [f64; 4],
+    logged: bool,
+}
+
+impl Exact {
+    /// The logarithm of weight `n` (0: the factor, 1 + c: channel c's transmittance); the
+    /// first call computes all four (a fit or a test asks for all of them but where they are
+    /// zero or equal).
+    #[inline]
+    fn log(&mut self, n: usize) -> f64 {
+        if !self.logged {
+            let (k, t) = self.weights;
+            self.logs = [k.ln(), t[0].ln(), t[1].ln(), t[2].ln()];
+            self.logged = true;
+        }
+        self.logs[n]
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
 /// Fill `out[x]` for the columns x of [`a`, `b`) with `value(x)` at the nodes (every
@@ -184,15 +309,18 @@ fn fill_columns(
     background: [f64; 3],
     value: impl Fn(usize) -> [f64; 3],
     out: &mut [[f64; 3]],
+    scratch: &mut Scratch,
 ) {
     if b <= a {
         return;
     }
-    let nodes = nodes((a, b), STRIDE, centre);
-    for &x in &nodes {
+    let Scratch { nodes, open, .. } = scratch;
+    node_columns((a, b), STRIDE, centre, nodes);
+    for &x in nodes.iter() {
         out[x] = value(x);
     }
-    let mut open: Vec<(usize, usize)> = nodes.windows(2).map(|w| (w[0], w[1])).collect();
+    open.clear();
+    open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
     while let Some((i, j)) = open.pop() {
         if j <= i + 1 {
             continue;
@@ -208,22 +336,28 @@ fn fill_columns(
     }
 }
 
-/// The node columns of [`a`, `b`) (not empty): every `stride`th column, the last, and `centre`
-/// with its neighbours when it lies in the run; ascending.
-fn nodes((a, b): (usize, usize), stride: usize, centre: Option<usize>) -> Vec<usize> {
-    let mut nodes: Vec<usize> = (a..b).step_by(stride).collect();
+/// The node columns of [`a`, `b`) (not empty) into `nodes`: every `stride`th column, the last,
+/// and `centre` with its neighbours when it lies in the run; ascending.
+fn node_columns(
+    (a, b): (usize, usize),
+    stride: usize,
+    centre: Option<usize>,
+    nodes: &mut Vec<usize>,
+) {
+    nodes.clear();
+    nodes.extend((a..b).step_by(stride));
     nodes.push(b - 1);
     if let Some(c) = centre.filter(|c| (a..b).contains(c)) {
         nodes.extend([c.saturating_sub(1).max(a), c, (c + 1).min(b - 1)]);
     }
     nodes.sort_unstable();
     nodes.dedup();
-    nodes
 }
 
 /// Whether linear interpolation between columns `i` and `j` of `out` predicts column `m`
 /// within [`TOLERANCE`] of the pixel's radiance there (`background` plus the addition), plus
 /// [`FLOOR`].
+#[inline]
 fn predicts(out: &[[f64; 3]], i: usize, j: usize, m: usize, background: [f64; 3]) -> bool {
     let t = (m - i) as f64 / (j - i) as f64;
     let (a, b, v) = (out[i], out[j], out[m]);
@@ -249,7 +383,69 @@ struct Smooth<E, R> {
 /// A column's factor and transmittance per channel.
 type Weights = (f64, [f64; 3]);
 
-impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
+/// The radiance of a factor and a transmittance per channel ([`Smooth`]), and of runs of them.
+trait Radiance {
+    /// The radiance of factor `k` and transmittance `t`.
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3];
+
+    /// Set each `out[n]` to the radiance of the next values of `steps` in turn.
+    fn run(&self, steps: &mut Steps4, out: &mut [[f64; 3]]) {
+        for v in out {
+            let [k, t0, t1, t2] = steps.next();
+            *v = self.of(k, [t0, t1, t2]);
+        }
+    }
+}
+
+impl<F: Fn(f64, [f64; 3]) -> [f64; 3]> Radiance for F {
+    #[inline]
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3] {
+        self(k, t)
+    }
+}
+
+/// The glitter seen through the air: [`glint_radiance`] with `scales`, times the air's
+/// transmittance `air` per channel.
+struct Glitter {
+    scales: ([f64; 3], [f64; 3]),
+    air: [f64; 3],
+}
+
+impl Radiance for Glitter {
+    #[inline]
+    fn of(&self, k: f64, t: [f64; 3]) -> [f64; 3] {
+        let sun = glint_radiance(k, t, self.scales);
+        [0, 1, 2].map(|c| sun[c] * self.air[c])
+    }
+
+    /// The same values as [`Self::of`] in turn, the cap taken by a comparison: the same as
+    /// `f64::min` wherever the cap is not NaN (a NaN capped value gives the cap).
+    fn run(&self, steps: &mut Steps4, out: &mut [[f64; 3]]) {
+        let (irradiance, cap) = self.scales;
+        if cap.iter().any(|c| c.is_nan()) {
+            for v in out {
+                let [k, t0, t1, t2] = steps.next();
+                *v = self.of(k, [t0, t1, t2]);
+            }
+            return;
+        }
+        for v in out {
+            let [k, t0, t1, t2] = steps.next();
+            if k <= 0.0 {
+                *v = [0.0; 3];
+                continue;
+            }
+            let channel = |c: usize, t: f64| {
+                let x = k * irradiance[c];
+                let capped = if x < cap[c] { x } else { cap[c] };
+                capped * t * self.air[c]
+            };
+            *v = [channel(0, t0), channel(1, t1), channel(2, t2)];
+        }
+    }
+}
+
+impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
     /// Fill `out[x]` for the columns x of [`a`, `b`): the radiance of the exact factor and
     /// transmittance at nodes ([`SMOOTH_STRIDE`] apart, the last column, `centre` and its
     /// neighbours) and at the points refinement evaluates; elsewhere of the factor and each
@@ -262,26 +458,46 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         centre: Option<usize>,
         background: [f64; 3],
         out: &mut [[f64; 3]],
+        scratch: &mut Scratch,
     ) {
         if b <= a {
             return;
         }
-        let nodes = nodes((a, b), SMOOTH_STRIDE, centre);
-        // The exact factor and transmittance of each column of [a, b) evaluated so far (factor
-        // NaN: not yet; a NaN factor is kept as 0, and its radiance as the exact shading gives
-        // it).
-        let mut w: Vec<Weights> = vec![(f64::NAN, [0.0; 3]); b - a];
-        let exact = |x: usize, w: &mut [Weights], out: &mut [[f64; 3]]| {
-            if w[x - a].0.is_nan() {
+        let Scratch {
+            nodes,
+            open,
+            exact: w,
+            stamp,
+        } = scratch;
+        node_columns((a, b), SMOOTH_STRIDE, centre, nodes);
+        // The exact factor and transmittance of the columns evaluated so far, those entries of
+        // `w` with this call's stamp (a NaN factor is kept as 0, and its radiance as the exact
+        // shading gives it).
+        *stamp = stamp.wrapping_add(1);
+        if *stamp == 0 {
+            w.iter_mut().for_each(|e| e.stamp = 0);
+            *stamp = 1;
+        }
+        let stamp = *stamp;
+        if w.len() < b {
+            w.resize(b, Exact::default());
+        }
+        let exact = |x: usize, w: &mut [Exact], out: &mut [[f64; 3]]| {
+            if w[x].stamp != stamp {
                 let (f, t) = (self.exact)(x);
-                w[x - a] = (if f.is_nan() { 0.0 } else { f }, t);
-                out[x] = (self.radiance)(f, t);
+                w[x] = Exact {
+                    stamp,
+                    weights: (if f.is_nan() { 0.0 } else { f }, t),
+                    ..Exact::default()
+                };
+                out[x] = self.radiance.of(f, t);
             }
         };
-        for &x in &nodes {
-            exact(x, &mut w, out);
+        for &x in nodes.iter() {
+            exact(x, w, out);
         }
-        let mut open: Vec<(usize, usize)> = nodes.windows(2).map(|w| (w[0], w[1])).collect();
+        open.clear();
+        open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
         while let Some((i, j)) = open.pop() {
             if j <= i + 1 {
                 continue;
@@ -289,18 +505,24 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             let m = (i + j) / 2;
             let tests =
                 [(i + m) / 2, (m + j) / 2].map(|t| (t > i && t < m || t > m && t < j).then_some(t));
-            exact(m, &mut w, out);
+            exact(m, w, out);
             for t in tests.into_iter().flatten() {
-                exact(t, &mut w, out);
+                exact(t, w, out);
             }
-            let fit = Fit::through([i, m, j].map(|x| (x, w[x - a])));
-            let weights = |x: usize| w[x - a];
-            match fit.filter(|fit| self.accepts(fit, (i, j), tests, weights, background, out)) {
-                Some(fit) => fit.for_each(i, j, |x, k, t| {
-                    if w[x - a].0.is_nan() {
-                        out[x] = (self.radiance)(k, t);
+            let points = [(i, w[i].weights), (m, w[m].weights), (j, w[j].weights)];
+            let fit = Fit::through(points, |x, n| w[x].log(n));
+            match fit.filter(|fit| self.accepts(fit, (i, j), tests, w, background, out)) {
+                Some(fit) => {
+                    // The interval's columns evaluated exactly keep their radiance: its middle
+                    // and test points, no others (an interval holds no other points its
+                    // ancestors evaluated: their middles are ends of their halves, their test
+                    // points the middles of those halves).
+                    let kept = [Some(m), tests[0], tests[1]].map(|x| x.map(|x| (x, out[x])));
+                    fit.fill(i, j, &self.radiance, out);
+                    for (x, v) in kept.into_iter().flatten() {
+                        out[x] = v;
                     }
-                }),
+                }
                 None => open.extend([(i, m), (m, j)]),
             }
         }
@@ -323,7 +545,7 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         fit: &Fit,
         (i, j): (usize, usize),
         tests: [Option<usize>; 2],
-        exact: impl Fn(usize) -> Weights,
+        exact: &mut [Exact],
         background: [f64; 3],
         out: &[[f64; 3]],
     ) -> bool {
@@ -334,17 +556,23 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
             (0..3).for_each(|c| clearest[c] = clearest[c].max(t[c]));
         };
         for x in [i, (i + j) / 2, j] {
-            widen(exact(x));
+            widen(exact[x].weights);
         }
         for x in tests.into_iter().flatten() {
-            let (want, got) = (exact(x), fit.at(x));
+            let (want, got) = (exact[x].weights, fit.at(x));
             widen(want);
-            if !within((self.radiance)(got.0, got.1), out[x], background) {
+            if !within(self.radiance.of(got.0, got.1), out[x], background) {
                 return false;
             }
-            let errors = [0, 1, 2].map(|c| log_ratio(want.1[c], got.1[c]));
-            let (Some(k), [Some(t0), Some(t1), Some(t2)]) = (log_ratio(want.0, got.0), errors)
-            else {
+            let mut error =
+                |n: usize, want: f64, got: f64| log_ratio(want, got, || exact[x].log(n));
+            let errors = [
+                error(0, want.0, got.0),
+                error(1, want.1[0], got.1[0]),
+                error(2, want.1[1], got.1[1]),
+                error(3, want.1[2], got.1[2]),
+            ];
+            let [Some(k), Some(t0), Some(t1), Some(t2)] = errors else {
                 return false;
             };
             log_error = log_error.max(k + t0.max(t1).max(t2));
@@ -359,18 +587,20 @@ impl<E: Fn(usize) -> Weights, R: Fn(f64, [f64; 3]) -> [f64; 3]> Smooth<E, R> {
         if excess <= 0.0 {
             return true;
         }
-        let v = (self.radiance)(largest * growth, clearest.map(|t| t * growth));
+        let v = self
+            .radiance
+            .of(largest * growth, clearest.map(|t| t * growth));
         (0..3).all(|c| excess * v[c] <= TOLERANCE * background[c].abs() + FLOOR)
     }
 }
 
-/// |ln(`got` / `want`)| (0 when they are equal); `None` when they differ and not both are
-/// positive.
-fn log_ratio(want: f64, got: f64) -> Option<f64> {
+/// |ln(`got` / `want`)| (0 when they are equal), `ln_want` giving ln `want`; `None` when they
+/// differ and not both are positive.
+fn log_ratio(want: f64, got: f64, ln_want: impl FnOnce() -> f64) -> Option<f64> {
     if want == got {
         return Some(0.0);
     }
-    (want > 0.0 && got > 0.0).then(|| (got.ln() - want.ln()).abs())
+    (want > 0.0 && got > 0.0).then(|| (got.ln() - ln_want()).abs())
 }
 
 /// Quadratics in the logarithms of a column's factor and of each channel of its
@@ -381,40 +611,63 @@ struct Fit {
 }
 
 impl Fit {
-    /// Through `points` (column, weights; columns increasing): `None` where some but not all
+    /// Through `points` (column, weights; columns increasing), `log(x, n)` giving the
+    /// logarithm of column x's weight n ([`Exact::log`]): `None` where some but not all
     /// factors, or values of one channel's transmittance, are zero.
-    fn through(points: [(usize, Weights); 3]) -> Option<Self> {
-        let factor = LogQuadratic::through(points.map(|(x, w)| (x, w.0)))?;
-        let [t0, t1, t2] =
-            [0, 1, 2].map(|c| LogQuadratic::through(points.map(|(x, w)| (x, w.1[c]))));
+    fn through(
+        points: [(usize, Weights); 3],
+        mut log: impl FnMut(usize, usize) -> f64,
+    ) -> Option<Self> {
+        let [(x0, w0), (x1, w1), (x2, w2)] = points;
+        let mut logs_of = |n: usize| [log(x0, n), log(x1, n), log(x2, n)];
+        let factor = LogQuadratic::through([(x0, w0.0), (x1, w1.0), (x2, w2.0)], || logs_of(0))?;
+        let mut channel = |c: usize| {
+            let values = [(x0, w0.1[c]), (x1, w1.1[c]), (x2, w2.1[c])];
+            LogQuadratic::through(values, || logs_of(c + 1))
+        };
+        let transmittance = [channel(0)?, channel(1)?, channel(2)?];
         Some(Fit {
             factor,
-            transmittance: [t0?, t1?, t2?],
+            transmittance,
         })
     }
 
     /// The weights at column `x`.
     fn at(&self, x: usize) -> Weights {
-        (self.factor.at(x), self.transmittance.map(|t| t.at(x)))
+        let t = &self.transmittance;
+        (self.factor.at(x), [t[0].at(x), t[1].at(x), t[2].at(x)])
     }
 
     /// The largest factor and transmittance per channel over columns [`i`, `j`]
     /// ([`LogQuadratic::max_over`]).
     fn max_over(&self, i: usize, j: usize) -> Weights {
+        let t = &self.transmittance;
         (
             self.factor.max_over(i, j),
-            self.transmittance.map(|t| t.max_over(i, j)),
+            [
+                t[0].max_over(i, j),
+                t[1].max_over(i, j),
+                t[2].max_over(i, j),
+            ],
         )
     }
 
-    /// Call `each(x, factor, transmittance)` for the columns x of (`start`, `end`) in order
+    /// Set `out[x]` to `radiance(factor, transmittance)` for the columns x of (`start`, `end`)
     /// (`start` is the quadratics' first column), by [`LogQuadratic::steps`].
-    fn for_each(&self, start: usize, end: usize, mut each: impl FnMut(usize, f64, [f64; 3])) {
-        let mut k = self.factor.steps(start);
-        let mut t = self.transmittance.map(|q| q.steps(start));
-        for x in start + 1..end {
-            each(x, k.next(), [t[0].next(), t[1].next(), t[2].next()]);
-        }
+    fn fill(&self, start: usize, end: usize, radiance: &impl Radiance, out: &mut [[f64; 3]]) {
+        let [k, t0, t1, t2] = [
+            self.factor,
+            self.transmittance[0],
+            self.transmittance[1],
+            self.transmittance[2],
+        ]
+        .map(|q| q.steps(start));
+        let mut steps = Steps4 {
+            value: [k.value, t0.value, t1.value, t2.value],
+            ratio: [k.ratio, t0.ratio, t1.ratio, t2.ratio],
+            growth: [k.growth, t0.growth, t1.growth, t2.growth],
+        };
+        radiance.run(&mut steps, &mut out[start + 1..end]);
     }
 }
 
@@ -442,30 +695,39 @@ struct Steps {
     growth: f64,
 }
 
-impl Steps {
-    /// The value at the next column.
+/// Four [`Steps`] side by side (the factor's and the transmittances'), the same values.
+struct Steps4 {
+    value: [f64; 4],
+    ratio: [f64; 4],
+    growth: [f64; 4],
+}
+
+impl Steps4 {
+    /// The values at the next column.
     #[inline]
-    fn next(&mut self) -> f64 {
+    fn next(&mut self) -> [f64; 4] {
         let value = self.value;
-        self.value *= self.ratio;
-        self.ratio *= self.growth;
+        for n in 0..4 {
+            self.value[n] *= self.ratio[n];
+            self.ratio[n] *= self.growth[n];
+        }
         value
     }
 }
 
 impl LogQuadratic {
-    /// Through `points` (column, factor; columns increasing): `None` where some but not all
-    /// factors are zero.
-    fn through(points: [(usize, f64); 3]) -> Option<Self> {
+    /// Through `points` (column, factor; columns increasing), `logs` giving their logarithms:
+    /// `None` where some but not all factors are zero.
+    fn through(points: [(usize, f64); 3], logs: impl FnOnce() -> [f64; 3]) -> Option<Self> {
         if points.iter().all(|&(_, k)| k == 0.0) {
             return Some(LogQuadratic::Zero);
         }
         if !points.iter().all(|&(_, k)| k > 0.0 && k.is_finite()) {
             return None;
         }
-        let [(x0, k0), (x1, k1), (x2, k2)] = points;
+        let [(x0, _), (x1, _), (x2, _)] = points;
         let (u1, u2) = ((x1 - x0) as f64, (x2 - x0) as f64);
-        let (y0, y1, y2) = (k0.ln(), k1.ln(), k2.ln());
+        let [y0, y1, y2] = logs();
         // Newton's divided differences.
         let d1 = (y1 - y0) / u1;
         let gamma = ((y2 - y1) / (u2 - u1) - d1) / u2;
@@ -545,6 +807,7 @@ fn within(predicted: [f64; 3], value: [f64; 3], background: [f64; 3]) -> bool {
 }
 
 /// Fill the columns strictly between `i` and `j` of `out` by linear interpolation.
+#[inline]
 fn interpolate(out: &mut [[f64; 3]], i: usize, j: usize) {
     let (a, b) = (out[i], out[j]);
     for (k, v) in out[i + 1..j].iter_mut().enumerate() {
@@ -570,7 +833,14 @@ mod tests {
             exact(x)
         };
         let mut out = vec![[f64::NAN; 3]; 400];
-        fill_columns((0, 400), Some(centre), background, value, &mut out);
+        fill_columns(
+            (0, 400),
+            Some(centre),
+            background,
+            value,
+            &mut out,
+            &mut Scratch::default(),
+        );
         (worst_error(&out, exact, background), calls.get())
     }
 
@@ -655,7 +925,13 @@ mod tests {
             radiance,
         };
         let mut out = vec![[f64::NAN; 3]; 400];
-        glitter.fill((0, 400), Some(centre), background, &mut out);
+        glitter.fill(
+            (0, 400),
+            Some(centre),
+            background,
+            &mut out,
+            &mut Scratch::default(),
+        );
         (
             worst_error(&out, |x| radiance(k(x), weight(x)), background),
             calls.get(),

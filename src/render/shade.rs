@@ -660,27 +660,6 @@ impl<'a> Shader<'a> {
         })
     }
 
-    /// The sun's disc towards azimuth offset `azimuth_offset_rad` from the heading, for a ray
-    /// that leaves towards `elevation_rad` with `transmittance` towards the sun
-    /// ([`Self::sun_transmittance_at`]): what [`Self::with_sun`] adds to the sky.
-    #[inline]
-    pub(super) fn sun_disc(
-        &self,
-        elevation_rad: f64,
-        azimuth_offset_rad: f64,
-        transmittance: [f64; 3],
-    ) -> [f64; 3] {
-        let Some(sun) = &self.sun else {
-            return [0.0; 3];
-        };
-        let disc = sun.radiance(self.heading_rad + azimuth_offset_rad, elevation_rad);
-        if disc > 0.0 {
-            transmittance.map(|t| disc * t)
-        } else {
-            [0.0; 3]
-        }
-    }
-
     /// `sky` plus the sun disc where a sample along `dir` (apparent elevation `alpha`) whose ray
     /// leaves towards `elevation_rad` meets it.
     #[inline]

@@ -365,16 +365,26 @@ impl SunDisc {
     }
 
     /// [`Sun::disc`]: the haversine of the angular distance from the centre against that of the
-    /// edge, so a direction outside costs no arcsine.
+    /// edge, so a direction outside costs no arcsine ([`Self::along`] then
+    /// [`DiscChord::radiance`]).
     #[inline]
     pub fn radiance(&self, azimuth_rad: f64, elevation_rad: f64) -> f64 {
-        if !(elevation_rad.is_finite() && azimuth_rad.is_finite()) {
-            return 0.0;
+        self.along(elevation_rad)
+            .map_or(0.0, |chord| chord.radiance(azimuth_rad))
+    }
+
+    /// The disc along elevation `elevation_rad`, its terms that depend on the elevation alone
+    /// worked out once: `None` where [`Self::radiance`] is 0 at every azimuth because of the
+    /// elevation (not finite, or outside the disc's band).
+    #[inline]
+    pub fn along(&self, elevation_rad: f64) -> Option<DiscChord> {
+        if !elevation_rad.is_finite() {
+            return None;
         }
         // Quick reject on elevation (cheap), then the haversine distance on the sphere.
         let rise = elevation_rad - self.elevation_rad;
         if rise.abs() > self.radius_rad {
-            return 0.0;
+            return None;
         }
         let half_rise_sin = (0.5 * rise).sin();
         // cos(e) = cos(e☉ + rise), from the half-angle's sine and cosine.
@@ -384,9 +394,45 @@ impl SunDisc {
             1.0 - 2.0 * half_rise_sin * half_rise_sin,
         );
         let cos_elevation = self.cos_elevation * rise_cos - self.sin_elevation * rise_sin;
+        Some(DiscChord {
+            azimuth_rad: self.azimuth_rad,
+            rise_haversine: half_rise_sin * half_rise_sin,
+            longitude_weight: cos_elevation * self.cos_elevation,
+            edge_haversine: self.edge_haversine,
+            radius_rad: self.radius_rad,
+            intensity: self.intensity,
+            limb_darkening: self.limb_darkening,
+        })
+    }
+}
+
+/// A [`SunDisc`] along one elevation ([`SunDisc::along`]): its radiance as a function of the
+/// azimuth alone, the same values as [`SunDisc::radiance`] at that elevation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiscChord {
+    /// The disc centre's azimuth (rad).
+    azimuth_rad: f64,
+    /// sin²(rise / 2), the rise the elevation's above the centre's: the haversine's elevation
+    /// term.
+    rise_haversine: f64,
+    /// cos e · cos e☉: the weight of the haversine's longitude term.
+    longitude_weight: f64,
+    edge_haversine: f64,
+    radius_rad: f64,
+    intensity: f64,
+    limb_darkening: f64,
+}
+
+impl DiscChord {
+    /// The disc's radiance towards azimuth `azimuth_rad` (rad, clockwise from north) along this
+    /// elevation; 0 outside the disc.
+    #[inline]
+    pub fn radiance(&self, azimuth_rad: f64) -> f64 {
+        if !azimuth_rad.is_finite() {
+            return 0.0;
+        }
         let half_lon_sin = (0.5 * (azimuth_rad - self.azimuth_rad)).sin();
-        let haversine = half_rise_sin * half_rise_sin
-            + cos_elevation * self.cos_elevation * half_lon_sin * half_lon_sin;
+        let haversine = self.rise_haversine + self.longitude_weight * half_lon_sin * half_lon_sin;
         if haversine >= self.edge_haversine {
             return 0.0;
         }
@@ -395,11 +441,83 @@ impl SunDisc {
         let mu = (1.0 - s * s).sqrt();
         self.intensity * (1.0 - self.limb_darkening * (1.0 - mu))
     }
+
+    /// The disc centre's azimuth (rad, clockwise from north).
+    pub fn azimuth_rad(&self) -> f64 {
+        self.azimuth_rad
+    }
+
+    /// A half-width w (rad) of the chord in azimuth, below π/3 when finite: [`Self::radiance`]
+    /// is 0 towards every azimuth whose difference from the centre's is, modulo 2π, within
+    /// [w, 2π − w] (padded far beyond any rounding of the azimuth). Infinite where it bounds
+    /// nothing (no positive longitude weight, or a chord this wide).
+    pub fn half_width_rad(&self) -> f64 {
+        let weight = self.longitude_weight;
+        if !(weight > 0.0 && weight.is_finite()) {
+            return f64::INFINITY;
+        }
+        // |sin(Δ/2)| below this is needed for a haversine below the edge's.
+        let half_sin = ((self.edge_haversine - self.rise_haversine).max(0.0) / weight).sqrt();
+        if half_sin.is_nan() || half_sin >= 0.5 {
+            return f64::INFINITY;
+        }
+        2.0 * half_sin.asin() * (1.0 + 1e-6) + 1e-9
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_chord_half_width_bounds_the_disc_tightly() {
+        // Suns low and high, elevations across the disc's band (its edges included): towards
+        // every azimuth at least the half-width from the centre's (modulo 2π, on either side,
+        // many turns away) the disc is dark; just inside it, where the chord is not a point, it
+        // is lit.
+        let tau = std::f64::consts::TAU;
+        for sun_elevation in [-0.03, 0.0, 0.4, 1.2] {
+            let disc = SunDisc::new(&Sun {
+                elevation_rad: sun_elevation,
+                azimuth_rad: 2.5,
+                angular_diameter_rad: 0.533f64.to_radians(),
+                limb_darkening: 0.6,
+                intensity: 1.0,
+            });
+            let r = disc.radius_rad;
+            for i in -100i32..=100 {
+                let e = sun_elevation + r * f64::from(i) / 100.0;
+                // The band's very edges may round outside it.
+                let Some(chord) = disc.along(e) else {
+                    assert_eq!(i.abs(), 100, "{e}");
+                    continue;
+                };
+                let w = chord.half_width_rad();
+                assert!(w.is_finite() && w < std::f64::consts::FRAC_PI_3, "{e}: {w}");
+                for turns in [-3.0, 0.0, 1.0, 40.0] {
+                    for k in 0..=200 {
+                        let delta = w + (tau - 2.0 * w) * f64::from(k) / 200.0;
+                        for d in [delta, -delta] {
+                            let azimuth = 2.5 + d + tau * turns;
+                            assert_eq!(chord.radiance(azimuth), 0.0, "{e} {d} {turns}");
+                            assert_eq!(disc.radiance(azimuth, e), 0.0, "{e} {d} {turns}");
+                        }
+                    }
+                }
+                if i.abs() <= 99 {
+                    for d in [0.9999 * w, -0.9999 * w] {
+                        assert!(chord.radiance(2.5 + d) > 0.0, "{e} {d}: {w}");
+                    }
+                }
+                assert_eq!(
+                    chord.radiance(2.5 + 0.3 * w),
+                    disc.radiance(2.5 + 0.3 * w, e)
+                );
+            }
+            assert!(disc.along(sun_elevation + 1.0001 * r).is_none());
+            assert!(disc.along(f64::NAN).is_none());
+        }
+    }
 
     #[test]
     fn the_disc_range_test_holds_wherever_an_elevation_in_the_range_meets_the_band() {
