@@ -354,19 +354,24 @@ fn texture_columns(
 /// from there (a ray skimming a surface duct crosses far more air than any air-mass formula of
 /// its elevation gives), at the apparent elevation the sea-level refraction of its true
 /// elevation there gives. The table of that refraction depends on the atmosphere and the sky
-/// alone: `shared` is the one of a base frame with the same ones, if any.
+/// alone. `base`: the glitter of the base frame (the same scene under another sun), if any: its table
+/// is taken, and its azimuth bounds when its sun has the same azimuth (they depend only on the
+/// camera, the frame's elevations and the sun's azimuth).
 fn glint(
     scene: &Scene,
     tracer: &dyn RayTracer,
-    shared: Option<&Arc<SeaSunTable>>,
+    base: Option<&Glint>,
     elevations: (f64, f64),
 ) -> Option<Glint> {
     let sun = scene.sun.filter(|_| scene.sea.wave_slope_rad != 0.0)?;
-    let at_sea = shared.map_or_else(
+    let at_sea = base.map_or_else(
         || Arc::new(SeaSunTable::build(tracer, &scene.sky.sun_extinction())),
-        Arc::clone,
+        |b| Arc::clone(&b.at_sea),
     );
-    let cos_azimuth = cos_azimuth_range(&scene.camera, sun.azimuth_rad, elevations);
+    let cos_azimuth = match base {
+        Some(b) if b.sun.azimuth_rad.to_bits() == sun.azimuth_rad.to_bits() => b.cos_azimuth,
+        _ => cos_azimuth_range(&scene.camera, sun.azimuth_rad, elevations),
+    };
     let r = 0.5 * sun.angular_diameter_rad;
     let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
     Some(Glint {
@@ -629,17 +634,16 @@ impl<'a> FramePlan<'a> {
         };
         // The sun's glitter needs its own rays from the sea, not the sea's tables: found while
         // they are built (or the base frame's, which has the same atmosphere and sky).
-        let base_table = base
+        let base_glint = base
             .and_then(|b| b.shader.reflection.as_ref())
-            .and_then(|r| r.glint.as_ref())
-            .map(|g| &g.at_sea);
+            .and_then(|r| r.glint.as_ref());
         let ((sea, same_sea), glint) = rayon::join(
             || inputs.sea_tables(&sea_inputs, base),
             || {
                 scene
                     .sea
                     .reflections
-                    .then(|| glint(scene, tracer, base_table, inputs.elevations))
+                    .then(|| glint(scene, tracer, base_glint, inputs.elevations))
                     .flatten()
             },
         );
