@@ -75,6 +75,9 @@ pub(super) struct FramePlan<'a> {
     /// Whether every input of shading but the sun and the fan is the base's (module docs);
     /// true for a plan built alone.
     shares_base: bool,
+    /// The camera, with the frame's azimuth span and elevation range, kept for plans built on
+    /// this one.
+    view: (Camera, Option<(f64, f64)>, (f64, f64)),
 }
 
 /// The sea's tables that do not depend on the sun, and the steepest grazing angle of the fan
@@ -487,8 +490,9 @@ impl<'a> PlanInputs<'a> {
         }
     }
 
-    /// The fan (none in exact mode) and the sky table: the base's table, or built while the
-    /// fan is traced (it needs no fan).
+    /// The fan (none in exact mode; built on the base's fan when there is one, which the same
+    /// tracer traced: [`ElevationFan::build_on`]) and the sky table: the base's table, or built
+    /// while the fan is traced (it needs no fan).
     fn fan_and_sky(
         &self,
         spec: &FanSpec,
@@ -496,7 +500,15 @@ impl<'a> PlanInputs<'a> {
     ) -> (Option<ElevationFan>, Arc<AngleTable>) {
         let build_fan = || (!self.options.exact).then(|| ElevationFan::build(self.tracer, spec));
         match base {
-            Some(b) => (build_fan(), Arc::clone(&b.shader.sky_table)),
+            Some(b) => {
+                let fan = match &b.fan {
+                    Some(f) if !self.options.exact => {
+                        Some(ElevationFan::build_on(self.tracer, spec, f))
+                    }
+                    _ => build_fan(),
+                };
+                (fan, Arc::clone(&b.shader.sky_table))
+            }
             None => {
                 let (sky, (lo, hi)) = (self.scene.sky, self.elevations);
                 // The optical depths once per frame, not once per table entry (same values).
@@ -597,13 +609,20 @@ impl<'a> FramePlan<'a> {
         let frame = cam.frame();
         let pixel_rad = 1.0 / frame.focal_px;
         let (width, height) = (cam.width, cam.height);
-        let span = azimuth_span(&frame, width, height, cam.heading_rad);
+        // The frame's border directions: the base's when the camera is the same.
+        let (span, elevations) = match base.map(|b| b.view).filter(|v| v.0 == *cam) {
+            Some((_, span, elevations)) => (span, elevations),
+            None => (
+                azimuth_span(&frame, width, height, cam.heading_rad),
+                elevation_range(&frame, width, height, pixel_rad),
+            ),
+        };
         let view = ViewCards::new(scene, span, pixel_rad);
         let inputs = PlanInputs {
             scene,
             tracer,
             options: options.clone(),
-            elevations: elevation_range(&frame, width, height, pixel_rad),
+            elevations,
             pixel_rad,
         };
         let terrain = match base {
@@ -695,6 +714,7 @@ impl<'a> FramePlan<'a> {
             sea,
             stats,
             shares_base,
+            view: (*cam, span, elevations),
         })
     }
 }
