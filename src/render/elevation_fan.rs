@@ -129,6 +129,16 @@ struct FanParts {
 }
 
 impl FanParts {
+    /// Room for `rays` rays of `distances` heights each.
+    fn with_capacity(rays: usize, distances: usize) -> Self {
+        FanParts {
+            alphas: Vec::with_capacity(rays),
+            heights: Vec::with_capacity(rays * distances),
+            ends: Vec::with_capacity(rays),
+            monotone: Vec::with_capacity(rays),
+        }
+    }
+
     fn push(&mut self, ray: &FanRay) {
         self.alphas.push(ray.elevation_rad);
         self.heights.extend_from_slice(&ray.heights_m);
@@ -400,7 +410,7 @@ impl ElevationFan {
                 Some((inside, depth))
             })
             .collect();
-        let mut parts = FanParts::default();
+        let mut parts = FanParts::with_capacity(base.len(), base.n_distances);
         let mut base_rays = Vec::with_capacity(last + 1);
         let mut depths = Vec::with_capacity(last);
         for (k, own) in refined.iter().enumerate() {

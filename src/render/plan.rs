@@ -45,7 +45,7 @@ use super::{
     traced_grid,
 };
 use crate::scene::camera::{Camera, CameraFrame};
-use crate::scene::sky::SunDisc;
+use crate::scene::sky::{Extinction, Sky, SunDisc};
 use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
 /// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
@@ -78,6 +78,9 @@ pub(super) struct FramePlan<'a> {
     /// The camera, with the frame's azimuth span and elevation range, kept for plans built on
     /// this one.
     view: (Camera, Option<(f64, f64)>, (f64, f64)),
+    /// The sky and its extinction along the sun's rays (when the scene has a sun), kept for
+    /// plans built on this one.
+    sun_extinction: Option<(Sky, Arc<Extinction>)>,
 }
 
 /// The sea's tables that do not depend on the sun, and the steepest grazing angle of the fan
@@ -668,6 +671,16 @@ impl<'a> FramePlan<'a> {
         );
         let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
         let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
+        // The sun's extinction: the base's when the sky is the same.
+        let sun_extinction = scene.sun.map(|_| {
+            let shared = base
+                .and_then(|b| b.sun_extinction.as_ref())
+                .filter(|(sky, _)| *sky == scene.sky);
+            match shared {
+                Some((_, e)) => Arc::clone(e),
+                None => Arc::new(scene.sky.sun_extinction()),
+            }
+        });
         let shares_base = base.is_none_or(|b| {
             b.clear_sky_from.to_bits() == clear_sky_from.to_bits() && same_sea && same_aerial
         });
@@ -689,6 +702,7 @@ impl<'a> FramePlan<'a> {
             glint,
             aerial,
             traced: &traced,
+            sun_extinction: sun_extinction.as_deref(),
             base,
         });
         stats.sea_fan_rays = shader
@@ -715,6 +729,7 @@ impl<'a> FramePlan<'a> {
             stats,
             shares_base,
             view: (*cam, span, elevations),
+            sun_extinction: sun_extinction.map(|e| (scene.sky, e)),
         })
     }
 }
@@ -730,6 +745,9 @@ struct ShaderParts<'a, 'b> {
     aerial: Option<AerialShading>,
     /// The rays the sun's transmittance is integrated along, with their ends.
     traced: &'b [(f64, FanEnd)],
+    /// The sky's extinction along the sun's rays ([`Sky::sun_extinction`]), when the scene has
+    /// a sun.
+    sun_extinction: Option<&'b Extinction>,
     base: Option<&'b FramePlan<'a>>,
 }
 
@@ -739,16 +757,13 @@ impl<'a> PlanInputs<'a> {
     fn shader(&self, parts: ShaderParts<'a, '_>) -> Shader<'a> {
         let (scene, tracer) = (self.scene, self.tracer);
         let (sky, cam) = (scene.sky, &scene.camera);
-        let sun_path = scene.sun.and_then(|sun| {
-            let band = sun_band_rad(&sun, self.pixel_rad);
-            SunTransmittance::build(
-                tracer,
-                cam.height_m,
-                &sky.sun_extinction(),
-                band,
-                parts.traced,
-            )
-        });
+        let sun_path = scene
+            .sun
+            .zip(parts.sun_extinction)
+            .and_then(|(sun, extinction)| {
+                let band = sun_band_rad(&sun, self.pixel_rad);
+                SunTransmittance::build(tracer, cam.height_m, extinction, band, parts.traced)
+            });
         let (lo, hi) = self.elevations;
         let sun_transmittance = scene.sun.map(|_| {
             parts
