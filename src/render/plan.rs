@@ -790,6 +790,11 @@ impl<'a> PlanInputs<'a> {
 }
 
 impl FramePlan<'_> {
+    /// The elevation fan (`None` in exact mode).
+    pub(super) fn fan(&self) -> Option<&ElevationFan> {
+        self.fan.as_ref()
+    }
+
     /// Film width and height (pixels).
     pub(super) fn size(&self) -> (u32, u32) {
         (self.width, self.height)

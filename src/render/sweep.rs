@@ -34,6 +34,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use rayon::prelude::*;
 
+use super::elevation_fan::ElevationFan;
 use super::memo::MemoRays;
 use super::plan::{FramePlan, SunReads};
 use super::ray_model::{FanEnd, RayTracer};
@@ -185,9 +186,24 @@ impl ColumnSky {
     /// Column `x` of `scene`'s camera, its rays traced through `tracer` (need_sky_direction:
     /// their final directions).
     pub fn trace(scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Self {
+        Self::trace_beside(scene, tracer, x, None)
+    }
+
+    /// [`Self::trace`], but for the rows whose rays `fan` (traced by `tracer` from the same
+    /// camera height) shows to end in the sea ([`ElevationFan::surely_sea`]): those are not
+    /// traced, and they leave into no sky all the same.
+    fn trace_beside(
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        x: u32,
+        fan: Option<&ElevationFan>,
+    ) -> Self {
         let height_m = scene.camera.height_m;
         let rows = column_directions(scene, x)
             .map(|(alpha, azimuth)| {
+                if fan.is_some_and(|f| f.surely_sea(alpha)) {
+                    return (alpha, azimuth, None);
+                }
                 let sky = match tracer.trace(height_m, alpha, &[], true).end {
                     FanEnd::Sky { elevation_rad } => Some(elevation_rad),
                     _ => None,
@@ -271,11 +287,14 @@ fn frame_facts_with(
 }
 
 /// The sun's columns of a sweep's frames that share the first frame's camera, each traced
-/// once ([`ColumnSky`] does not depend on the sun), found once per sun azimuth
-/// ([`sun_column`] depends only on the camera and the azimuth). Two threads may trace the same
-/// column at once; they find the same rays, and either copy is kept.
+/// once ([`ColumnSky`] does not depend on the sun), beside the first frame's fan when it has
+/// one ([`ColumnSky::trace_beside`]), found once per sun azimuth ([`sun_column`] depends only
+/// on the camera and the azimuth). Two threads may trace the same column at once; they find
+/// the same rays, and either copy is kept.
 #[derive(Default)]
-struct SharedColumns {
+struct SharedColumns<'f> {
+    /// The first frame's fan.
+    fan: Option<&'f ElevationFan>,
     /// [`sun_column`] by the bits of the sun's azimuth.
     by_azimuth: Mutex<Vec<(u64, u32)>>,
     columns: Mutex<Vec<(u32, Arc<ColumnSky>)>>,
@@ -287,7 +306,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-impl SharedColumns {
+impl SharedColumns<'_> {
     fn get(&self, scene: &Scene, tracer: &dyn RayTracer, sun: &Sun) -> Arc<ColumnSky> {
         let azimuth = sun.azimuth_rad.to_bits();
         let found = lock(&self.by_azimuth)
@@ -302,7 +321,7 @@ impl SharedColumns {
         if let Some((_, column)) = lock(&self.columns).iter().find(|(k, _)| *k == x) {
             return Arc::clone(column);
         }
-        let column = Arc::new(ColumnSky::trace(scene, tracer, x));
+        let column = Arc::new(ColumnSky::trace_beside(scene, tracer, x, self.fan));
         lock(&self.columns).push((x, Arc::clone(&column)));
         column
     }
@@ -480,7 +499,19 @@ pub fn render_shared(
     transfer: bool,
 ) -> Result<Vec<SweepFrame>, RenderError> {
     let memo = MemoRays::new(tracer);
-    let columns = SharedColumns::default();
+    let Some((first, rest)) = scenes.split_first() else {
+        return Ok(Vec::new());
+    };
+    let first_record = record_without_sun(first);
+    let on_base: Vec<bool> = rest
+        .iter()
+        .map(|s| differ_only_in_sun(first, &first_record, s))
+        .collect();
+    let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
+    let columns = SharedColumns {
+        fan: base.as_ref().and_then(|b| b.plan.fan()),
+        ..SharedColumns::default()
+    };
     // `first_camera`: the frame has the first frame's camera (it differs from it only in its
     // sun), so it shares the first frame's sun columns.
     let finish = |scene: &Scene, film: Film, rows_shaded: u32, first_camera: bool| {
@@ -498,15 +529,6 @@ pub fn render_shared(
             rows_shaded,
         }
     };
-    let Some((first, rest)) = scenes.split_first() else {
-        return Ok(Vec::new());
-    };
-    let first_record = record_without_sun(first);
-    let on_base: Vec<bool> = rest
-        .iter()
-        .map(|s| differ_only_in_sun(first, &first_record, s))
-        .collect();
-    let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
     let mut frames = vec![finish(first, film, first.camera.height, true)];
     let rest: Vec<SweepFrame> = rest
         .par_iter()
