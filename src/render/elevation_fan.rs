@@ -621,15 +621,31 @@ impl ElevationFan {
     /// lookups read, for tables indexed by the fan's elevations with the other bracketing
     /// convention, such as the air paths).
     pub fn same_rays_over(&self, other: &ElevationFan, lo: f64, hi: f64) -> bool {
+        self.same_rays_in(other, self.intervals_of(lo, hi), other.intervals_of(lo, hi))
+    }
+
+    /// The intervals ([`Self::interval`]) holding `lo` and `hi`.
+    pub fn intervals_of(&self, lo: f64, hi: f64) -> (usize, usize) {
+        (self.interval(lo), self.interval(hi))
+    }
+
+    /// [`Self::same_rays_over`] of the elevations whose intervals are `mine` in this fan and
+    /// `theirs` in `other` ([`Self::intervals_of`]).
+    pub fn same_rays_in(
+        &self,
+        other: &ElevationFan,
+        mine: (usize, usize),
+        theirs: (usize, usize),
+    ) -> bool {
         if self.n_distances != other.n_distances || self.len() < 2 || other.len() < 2 {
             return false;
         }
-        let window = |fan: &ElevationFan| {
-            let first = fan.interval(lo).saturating_sub(1);
-            let last = (fan.interval(hi) + 1).min(fan.len() - 1);
+        let window = |fan: &ElevationFan, (lo, hi): (usize, usize)| {
+            let first = lo.saturating_sub(1);
+            let last = (hi + 1).min(fan.len() - 1);
             (first, last)
         };
-        let ((a0, a1), (b0, b1)) = (window(self), window(other));
+        let ((a0, a1), (b0, b1)) = (window(self, mine), window(other, theirs));
         // A window at an end of one fan must be at the same end of the other (lookups clamp
         // there).
         if (a0 == 0) != (b0 == 0)

@@ -949,14 +949,26 @@ pub(super) struct SunReads {
 }
 
 impl SunReads {
-    /// Whether a lookup in `fan` (the plan's) of an elevation in `elevations` (lo, hi) may
-    /// read the sun.
-    fn any(&self, fan: &ElevationFan, (lo, hi): (f64, f64)) -> bool {
-        let (i, j) = (fan.interval(lo), fan.interval(hi));
+    /// Whether a lookup in the plan's fan of an elevation between those in intervals `i` and
+    /// `j` ([`ElevationFan::intervals_of`]) may read the sun.
+    fn any(&self, (i, j): (usize, usize)) -> bool {
         let (i, j) = (i.min(j), i.max(j));
         let last = self.prefix.len() - 1;
         self.prefix[(j + 1).min(last)] > self.prefix[i.min(last)]
     }
+}
+
+/// What deciding whether to copy a row of a base plan reads of the base, the same for every
+/// plan built on it ([`FramePlan::base_row`]).
+#[derive(Clone, Copy)]
+pub(super) struct BaseRow {
+    /// The lowest and highest elevation (rad) the row's lookups read
+    /// ([`FramePlan::row_elevations`]).
+    elevations: (f64, f64),
+    /// The base fan's intervals holding them (`None`: the base has no fan).
+    intervals: Option<(usize, usize)>,
+    /// Whether the row may read the sun in the base.
+    reads_sun: bool,
 }
 
 impl FramePlan<'_> {
@@ -1039,26 +1051,43 @@ impl FramePlan<'_> {
         }
     }
 
-    /// Whether row `y` of this plan, whose lookups span `elevations`
-    /// ([`Self::row_elevations`]), shades to the pixels of row `y` of `base` (the plan this one
-    /// was built on), with `reads` and `base_reads` their [`Self::sun_reads`]: the tables are
-    /// the base's, the row reads the same fan rays in both, and may read the sun in neither
-    /// (module docs).
+    /// What [`Self::copies_base_row`] reads of this plan's row whose lookups span
+    /// `elevations` ([`Self::row_elevations`]), with `reads` this plan's
+    /// [`Self::sun_reads`].
+    pub(super) fn base_row(&self, reads: &SunReads, elevations: (f64, f64)) -> BaseRow {
+        let intervals = self
+            .fan
+            .as_ref()
+            .map(|f| f.intervals_of(elevations.0, elevations.1));
+        BaseRow {
+            elevations,
+            intervals,
+            reads_sun: intervals.is_none_or(|i| reads.any(i)),
+        }
+    }
+
+    /// Whether row `y` of this plan shades to the pixels of row `y` of `base` (the plan this
+    /// one was built on), with `reads` this plan's [`Self::sun_reads`] and `row` what
+    /// [`Self::base_row`] of `base` gives for the row: the tables are the base's, the row
+    /// reads the same fan rays in both, and may read the sun in neither (module docs).
     pub(super) fn copies_base_row(
         &self,
         reads: &SunReads,
         base: &FramePlan<'_>,
-        base_reads: &SunReads,
-        elevations: (f64, f64),
+        row: &BaseRow,
     ) -> bool {
-        let (Some(fan), Some(base_fan)) = (&self.fan, &base.fan) else {
+        let (Some(fan), Some(base_fan), Some(theirs)) = (&self.fan, &base.fan, row.intervals)
+        else {
             return false;
         };
-        self.shares_base
-            && (self.width, self.height, self.n) == (base.width, base.height, base.n)
-            && !reads.any(fan, elevations)
-            && !base_reads.any(base_fan, elevations)
-            && fan.same_rays_over(base_fan, elevations.0, elevations.1)
+        if !self.shares_base
+            || (self.width, self.height, self.n) != (base.width, base.height, base.n)
+            || row.reads_sun
+        {
+            return false;
+        }
+        let mine = fan.intervals_of(row.elevations.0, row.elevations.1);
+        !reads.any(mine) && fan.same_rays_in(base_fan, mine, theirs)
     }
 }
 

@@ -36,7 +36,7 @@ use rayon::prelude::*;
 
 use super::elevation_fan::ElevationFan;
 use super::memo::MemoRays;
-use super::plan::{FramePlan, SunReads};
+use super::plan::{BaseRow, FramePlan};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::wrap_pi;
 use super::{Film, RenderError, RenderOptions, RenderStats, render_scene};
@@ -356,9 +356,8 @@ pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> T
 struct SweepBase<'a> {
     plan: FramePlan<'a>,
     film: Film,
-    /// Per row: the elevations its lookups span, and its non-finite samples.
-    rows: Vec<((f64, f64), u64)>,
-    reads: SunReads,
+    /// Per row: what a copy decision reads of it, and its non-finite samples.
+    rows: Vec<(BaseRow, u64)>,
 }
 
 impl<'a> SweepBase<'a> {
@@ -379,7 +378,7 @@ impl<'a> SweepBase<'a> {
             return Ok((film_of(width, height, pixels, stats), None));
         };
         let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
-        let rows: Vec<((f64, f64), u64)> = pixels
+        let rows: Vec<(BaseRow, u64)> = pixels
             .par_chunks_mut(width as usize)
             .enumerate()
             .map_init(
@@ -387,7 +386,8 @@ impl<'a> SweepBase<'a> {
                 |scratch, (y, row)| {
                     let y = y as u32;
                     let bad = plan.shade_row(y, row, scratch);
-                    (plan.row_elevations(y, scratch), bad)
+                    let elevations = plan.row_elevations(y, scratch);
+                    (plan.base_row(&reads, elevations), bad)
                 },
             )
             .collect();
@@ -397,7 +397,6 @@ impl<'a> SweepBase<'a> {
             plan,
             film: film.clone(),
             rows,
-            reads,
         };
         Ok((film, Some(base)))
     }
@@ -435,8 +434,8 @@ fn render_on_base<'a>(
         .enumerate()
         .map_init(
             || plan.scratch(),
-            |scratch, (y, ((row, base_row), &(elevations, base_bad)))| {
-                if plan.copies_base_row(&reads, &base.plan, &base.reads, elevations) {
+            |scratch, (y, ((row, base_row), &(decision, base_bad)))| {
+                if plan.copies_base_row(&reads, &base.plan, &decision) {
                     row.copy_from_slice(base_row);
                     (0, base_bad)
                 } else {
