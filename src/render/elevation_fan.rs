@@ -82,12 +82,79 @@ pub struct ElevationFan {
     /// Heights, `distances` per ray, row-major.
     heights: Vec<Option<f64>>,
     ends: Vec<FanEnd>,
+    /// Each ray's [`FanRay::monotone`].
+    monotone: Vec<bool>,
     n_distances: usize,
     guide: Vec<u32>,
     guide_start: f64,
     guide_inv_width: f64,
     /// Deepest bisection level reached.
     pub max_depth_reached: u32,
+    /// How the fan was refined, for fans built on it ([`ElevationFan::build_on`]).
+    refinement: Refinement,
+}
+
+/// How a fan was refined: its spec, and per base interval where its rays start and how deep
+/// it was bisected.
+#[derive(Debug, Clone)]
+struct Refinement {
+    spec: FanSpec,
+    /// Index in the fan of each base ray (the first ray of each base interval, and the last).
+    base_rays: Vec<usize>,
+    /// Deepest bisection level of each base interval.
+    depths: Vec<u32>,
+}
+
+/// Whether two specs are the same, bit for bit, but for their sun bands.
+fn same_but_sun(a: &FanSpec, b: &FanSpec) -> bool {
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    a.camera_height_m.to_bits() == b.camera_height_m.to_bits()
+        && bits(&a.distances_m) == bits(&b.distances_m)
+        && bits(&a.max_top_m) == bits(&b.max_top_m)
+        && a.need_sky_direction == b.need_sky_direction
+        && a.elevation_range_rad.0.to_bits() == b.elevation_range_rad.0.to_bits()
+        && a.elevation_range_rad.1.to_bits() == b.elevation_range_rad.1.to_bits()
+        && a.pixel_rad.to_bits() == b.pixel_rad.to_bits()
+        && a.tolerance_px.to_bits() == b.tolerance_px.to_bits()
+        && a.max_depth == b.max_depth
+}
+
+/// The fan's rays as they are collected.
+#[derive(Default)]
+struct FanParts {
+    alphas: Vec<f64>,
+    heights: Vec<Option<f64>>,
+    ends: Vec<FanEnd>,
+    monotone: Vec<bool>,
+}
+
+impl FanParts {
+    /// Room for `rays` rays of `distances` heights each.
+    fn with_capacity(rays: usize, distances: usize) -> Self {
+        FanParts {
+            alphas: Vec::with_capacity(rays),
+            heights: Vec::with_capacity(rays * distances),
+            ends: Vec::with_capacity(rays),
+            monotone: Vec::with_capacity(rays),
+        }
+    }
+
+    fn push(&mut self, ray: &FanRay) {
+        self.alphas.push(ray.elevation_rad);
+        self.heights.extend_from_slice(&ray.heights_m);
+        self.ends.push(ray.end);
+        self.monotone.push(ray.monotone);
+    }
+
+    /// Rays `first..last` of `fan`.
+    fn extend_from(&mut self, fan: &ElevationFan, first: usize, last: usize) {
+        let d = fan.n_distances;
+        self.alphas.extend_from_slice(&fan.alphas[first..last]);
+        self.heights
+            .extend_from_slice(&fan.heights[first * d..last * d]);
+        self.ends.extend_from_slice(&fan.ends[first..last]);
+        self.monotone.extend_from_slice(&fan.monotone[first..last]);
+    }
 }
 
 /// Whether two ends are shaded alike (trapped and lost rays both get the fallback).
@@ -232,6 +299,21 @@ fn refine(
     depth
 }
 
+/// The ray of `spec` at `alpha`, traced by `tracer`.
+fn traced_for(tracer: &dyn RayTracer, spec: &FanSpec, alpha: f64) -> FanRay {
+    let mut ray = tracer.trace(
+        spec.camera_height_m,
+        alpha,
+        &spec.distances_m,
+        spec.need_sky_direction,
+    );
+    // Guard against a tracer that breaks the contract: the fan is indexed by the requested
+    // elevation and one height per distance.
+    ray.elevation_rad = alpha;
+    ray.heights_m.resize(spec.distances_m.len(), None);
+    ray
+}
+
 impl ElevationFan {
     /// Trace and refine the fan for `spec` (rays traced in parallel, collected in order: the
     /// result does not depend on the number of threads).
@@ -242,19 +324,7 @@ impl ElevationFan {
         let step = 2.0 * spec.pixel_rad.max(1e-12);
         let n_base = (((hi - lo) / step).ceil() as usize).max(1) + 1;
         let spacing = (hi - lo) / (n_base - 1) as f64;
-        let trace = |alpha: f64| {
-            let mut ray = tracer.trace(
-                spec.camera_height_m,
-                alpha,
-                &spec.distances_m,
-                spec.need_sky_direction,
-            );
-            // Guard against a tracer that breaks the contract: the fan is indexed by the
-            // requested elevation and one height per distance.
-            ray.elevation_rad = alpha;
-            ray.heights_m.resize(spec.distances_m.len(), None);
-            ray
-        };
+        let trace = |alpha: f64| traced_for(tracer, spec, alpha);
         let rays: Vec<FanRay> = (0..n_base)
             .into_par_iter()
             .map(|i| {
@@ -282,27 +352,137 @@ impl ElevationFan {
                 (inside, depth)
             })
             .collect();
-        let depth = refined.iter().map(|(_, d)| *d).max().unwrap_or(0);
-        let mut all =
-            Vec::with_capacity(rays.len() + refined.iter().map(|(r, _)| r.len()).sum::<usize>());
+        let mut parts = FanParts::default();
+        let mut base_rays = Vec::with_capacity(rays.len());
+        let mut depths = Vec::with_capacity(refined.len());
         let mut refined = refined.into_iter();
-        for ray in rays {
-            all.push(ray);
-            if let Some((inside, _)) = refined.next() {
-                all.extend(inside);
+        for ray in &rays {
+            base_rays.push(parts.alphas.len());
+            parts.push(ray);
+            if let Some((inside, depth)) = refined.next() {
+                inside.iter().for_each(|r| parts.push(r));
+                depths.push(depth);
             }
         }
-        Self::from_rays(all, spec.distances_m.len(), depth)
+        Self::from_parts(
+            parts,
+            Refinement {
+                spec: spec.clone(),
+                base_rays,
+                depths,
+            },
+        )
     }
 
-    fn from_rays(rays: Vec<FanRay>, n_distances: usize, depth: u32) -> Self {
-        let alphas: Vec<f64> = rays.iter().map(|r| r.elevation_rad).collect();
-        let mut heights = Vec::with_capacity(rays.len() * n_distances);
-        let mut ends = Vec::with_capacity(rays.len());
-        for r in &rays {
-            heights.extend_from_slice(&r.heights_m);
-            ends.push(r.end);
+    /// [`Self::build`] for `spec`, from the rays of `base`, a fan that `tracer` built for the
+    /// same spec but for its sun band (otherwise this is [`Self::build`]): the same fan, bit
+    /// for bit. The rays it needs that `base` holds are read from it. A base interval whose
+    /// rays' final sky elevations all lie outside both suns' bands is bisected alike for
+    /// either band (the sun's test of [`needs_refinement`] applies to neither: every triple
+    /// it tests is of those rays), so its rays and depth are taken from `base` whole; the
+    /// other base intervals are refined again.
+    pub fn build_on(tracer: &dyn RayTracer, spec: &FanSpec, base: &ElevationFan) -> Self {
+        let prior = &base.refinement;
+        if !same_but_sun(spec, &prior.spec) {
+            return Self::build(tracer, spec);
         }
+        let bands = [prior.spec.sun_band_rad, spec.sun_band_rad];
+        let trace = |alpha: f64| {
+            base.ray_at(alpha)
+                .unwrap_or_else(|| traced_for(tracer, spec, alpha))
+        };
+        let last = prior.base_rays.len() - 1;
+        // In order on this thread: most intervals are taken whole, the others mostly read
+        // rays already traced (the frames of a sweep are rendered in parallel instead).
+        let refined: Vec<Option<(Vec<FanRay>, u32)>> = (0..last)
+            .map(|k| {
+                let (first, end) = (prior.base_rays[k], prior.base_rays[k + 1]);
+                if base.clear_of_bands(first, end, bands) {
+                    return None;
+                }
+                let (a, b) = (base.ray(first), base.ray(end));
+                let mut inside = Vec::new();
+                let depth = if monotone_and_clear(spec, &a, &b) {
+                    0
+                } else {
+                    refine(spec, &trace, &a, &b, 0, &mut inside)
+                };
+                Some((inside, depth))
+            })
+            .collect();
+        let mut parts = FanParts::with_capacity(base.len(), base.n_distances);
+        let mut base_rays = Vec::with_capacity(last + 1);
+        let mut depths = Vec::with_capacity(last);
+        for (k, own) in refined.iter().enumerate() {
+            let (first, end) = (prior.base_rays[k], prior.base_rays[k + 1]);
+            base_rays.push(parts.alphas.len());
+            match own {
+                None => {
+                    parts.extend_from(base, first, end);
+                    depths.push(prior.depths[k]);
+                }
+                Some((inside, depth)) => {
+                    parts.extend_from(base, first, first + 1);
+                    inside.iter().for_each(|r| parts.push(r));
+                    depths.push(*depth);
+                }
+            }
+        }
+        base_rays.push(parts.alphas.len());
+        parts.extend_from(base, prior.base_rays[last], prior.base_rays[last] + 1);
+        Self::from_parts(
+            parts,
+            Refinement {
+                spec: spec.clone(),
+                base_rays,
+                depths,
+            },
+        )
+    }
+
+    /// Whether no ray `first..=last` of the fan ends in the sky inside either band (a NaN
+    /// final elevation counts as inside), nor do two of them straddle one.
+    fn clear_of_bands(&self, first: usize, last: usize, bands: [Option<(f64, f64)>; 2]) -> bool {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for end in &self.ends[first..=last] {
+            if let FanEnd::Sky { elevation_rad: e } = *end {
+                if e.is_nan() {
+                    return false;
+                }
+                (lo, hi) = (lo.min(e), hi.max(e));
+            }
+        }
+        bands
+            .iter()
+            .flatten()
+            .all(|&(band_lo, band_hi)| !(hi >= band_lo && lo <= band_hi))
+    }
+
+    /// Ray `i` as it was traced.
+    fn ray(&self, i: usize) -> FanRay {
+        FanRay {
+            elevation_rad: self.alphas[i],
+            heights_m: self.ray_heights(i).to_vec(),
+            end: self.ends[i],
+            monotone: self.monotone[i],
+        }
+    }
+
+    /// The fan's ray at exactly `alpha` (bit for bit), if it has one.
+    fn ray_at(&self, alpha: f64) -> Option<FanRay> {
+        let i = self.alphas.partition_point(|&a| a < alpha);
+        (self.alphas.get(i)?.to_bits() == alpha.to_bits()).then(|| self.ray(i))
+    }
+
+    fn from_parts(parts: FanParts, refinement: Refinement) -> Self {
+        let FanParts {
+            alphas,
+            heights,
+            ends,
+            monotone,
+        } = parts;
+        let n_distances = refinement.spec.distances_m.len();
+        let depth = refinement.depths.iter().copied().max().unwrap_or(0);
         let n = alphas.len();
         let start = alphas[0];
         let span = (alphas[n - 1] - start).max(1e-300);
@@ -321,11 +501,13 @@ impl ElevationFan {
             alphas,
             heights,
             ends,
+            monotone,
             n_distances,
             guide,
             guide_start: start,
             guide_inv_width: inv_width,
             max_depth_reached: depth,
+            refinement,
         }
     }
 
@@ -361,6 +543,24 @@ impl ElevationFan {
                 _ => None,
             })
             .reduce(f64::max)
+    }
+
+    /// Whether the ray launched at `alpha` surely ends in the sea: `alpha` lies on or between
+    /// two neighbouring rays of the fan launched downwards that descended into the sea without
+    /// turning (a monotone family, module docs: every ray between them descends between them
+    /// and lands no farther than the shallower one).
+    pub fn surely_sea(&self, alpha: f64) -> bool {
+        let n = self.alphas.len();
+        if n < 2 || !(alpha >= self.alphas[0] && alpha <= self.alphas[n - 1]) {
+            return false;
+        }
+        let down = |k: usize| {
+            self.monotone[k]
+                && self.alphas[k] < 0.0
+                && matches!(self.ends[k], FanEnd::Ground { .. })
+        };
+        let i = self.interval(alpha);
+        down(i) && down(i + 1)
     }
 
     /// Number of traced rays in the fan.
@@ -421,15 +621,31 @@ impl ElevationFan {
     /// lookups read, for tables indexed by the fan's elevations with the other bracketing
     /// convention, such as the air paths).
     pub fn same_rays_over(&self, other: &ElevationFan, lo: f64, hi: f64) -> bool {
+        self.same_rays_in(other, self.intervals_of(lo, hi), other.intervals_of(lo, hi))
+    }
+
+    /// The intervals ([`Self::interval`]) holding `lo` and `hi`.
+    pub fn intervals_of(&self, lo: f64, hi: f64) -> (usize, usize) {
+        (self.interval(lo), self.interval(hi))
+    }
+
+    /// [`Self::same_rays_over`] of the elevations whose intervals are `mine` in this fan and
+    /// `theirs` in `other` ([`Self::intervals_of`]).
+    pub fn same_rays_in(
+        &self,
+        other: &ElevationFan,
+        mine: (usize, usize),
+        theirs: (usize, usize),
+    ) -> bool {
         if self.n_distances != other.n_distances || self.len() < 2 || other.len() < 2 {
             return false;
         }
-        let window = |fan: &ElevationFan| {
-            let first = fan.interval(lo).saturating_sub(1);
-            let last = (fan.interval(hi) + 1).min(fan.len() - 1);
+        let window = |fan: &ElevationFan, (lo, hi): (usize, usize)| {
+            let first = lo.saturating_sub(1);
+            let last = (hi + 1).min(fan.len() - 1);
             (first, last)
         };
-        let ((a0, a1), (b0, b1)) = (window(self), window(other));
+        let ((a0, a1), (b0, b1)) = (window(self, mine), window(other, theirs));
         // A window at an end of one fan must be at the same end of the other (lookups clamp
         // there).
         if (a0 == 0) != (b0 == 0)
@@ -671,6 +887,86 @@ mod tests {
         let m = b.elevations_rad().len();
         let top = b.elevations_rad();
         assert!(top[m - 1] - top[m - 2] <= 2e-5 * 1.0001);
+    }
+
+    /// Whether two fans are the same, bit for bit.
+    fn same_fan(a: &ElevationFan, b: &ElevationFan) -> bool {
+        a.len() == b.len()
+            && a.max_depth_reached == b.max_depth_reached
+            && a.monotone == b.monotone
+            && (0..a.len()).all(|i| a.same_ray(i, b, i))
+    }
+
+    #[test]
+    fn a_fan_built_on_another_suns_fan_is_the_fan_built_alone() {
+        // Final elevations that dip and rise like a mirage's (rays near the sun's band are
+        // refined for it), leaving below the sea horizon as trapped rays.
+        let leave = |a: f64| (a > -0.0035).then(|| -0.02 + 2.0 * a + 3e-4 * (a * 4e4).sin());
+        let tracer = crate::render::test_rays::Leaving::new(leave);
+        let spec_for = |centre: f64| FanSpec {
+            need_sky_direction: true,
+            sun_band_rad: Some((centre - 0.004, centre + 0.004)),
+            ..spec(vec![], vec![])
+        };
+        let base = ElevationFan::build(&tracer, &spec_for(-0.03));
+        let mut reused = 0;
+        for centre in [-0.03, -0.029, -0.026, -0.022, -0.02, -0.017, -0.013, -0.5] {
+            let alone = ElevationFan::build(&tracer, &spec_for(centre));
+            let before = tracer.traces();
+            let on_base = ElevationFan::build_on(&tracer, &spec_for(centre), &base);
+            let traced = tracer.traces() - before;
+            assert!(same_fan(&alone, &on_base), "sun band at {centre}");
+            // Only rays the base does not hold are traced.
+            let missing = on_base
+                .elevations_rad()
+                .iter()
+                .filter(|a| base.ray_at(**a).is_none())
+                .count();
+            assert!(
+                traced <= missing,
+                "{centre}: {traced} traced, {missing} new"
+            );
+            reused += on_base.len() - traced;
+        }
+        assert!(reused > 1000, "{reused}");
+        // A spec that differs but in its sun band is built alone.
+        let wider = FanSpec {
+            elevation_range_rad: (-0.004, 0.003),
+            ..spec_for(-0.02)
+        };
+        let alone = ElevationFan::build(&tracer, &wider);
+        assert!(same_fan(
+            &alone,
+            &ElevationFan::build_on(&tracer, &wider, &base)
+        ));
+    }
+
+    #[test]
+    fn rays_surely_in_the_sea_are_so() {
+        let tracer = StraightRays::new(EARTH_RADIUS_M).unwrap();
+        let s = FanSpec {
+            need_sky_direction: true,
+            sun_band_rad: Some((-0.001, 0.0)),
+            ..spec(vec![], vec![])
+        };
+        let fan = ElevationFan::build(&tracer, &s);
+        let (mut sure, mut sea) = (0, 0);
+        for i in 0..=6000 {
+            let alpha = -0.004 + 1e-6 * f64::from(i);
+            let ground = matches!(
+                tracer.trace(10.0, alpha, &[], true).end,
+                FanEnd::Ground { .. }
+            );
+            if fan.surely_sea(alpha) {
+                assert!(ground, "{alpha}");
+                sure += 1;
+            }
+            sea += usize::from(ground);
+        }
+        // All but the rays next to the horizon, which the fan refines (the dip from 10 m is
+        // 1.8 mrad: 2200 of the 6001 rays reach the sea).
+        assert!(sure > 2000 && sure <= sea, "{sure} of {sea}");
+        assert!(!fan.surely_sea(-0.0041) && !fan.surely_sea(f64::NAN));
     }
 
     #[test]

@@ -45,7 +45,7 @@ use super::{
     traced_grid,
 };
 use crate::scene::camera::{Camera, CameraFrame};
-use crate::scene::sky::SunDisc;
+use crate::scene::sky::{Extinction, Sky, SunDisc};
 use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
 /// Range (m) of a sea fan traced only for the sun's mirror image (no card in view).
@@ -75,6 +75,12 @@ pub(super) struct FramePlan<'a> {
     /// Whether every input of shading but the sun and the fan is the base's (module docs);
     /// true for a plan built alone.
     shares_base: bool,
+    /// The camera, with the frame's azimuth span and elevation range, kept for plans built on
+    /// this one.
+    view: (Camera, Option<(f64, f64)>, (f64, f64)),
+    /// The sky and its extinction along the sun's rays (when the scene has a sun), kept for
+    /// plans built on this one.
+    sun_extinction: Option<(Sky, Arc<Extinction>)>,
 }
 
 /// The sea's tables that do not depend on the sun, and the steepest grazing angle of the fan
@@ -354,19 +360,24 @@ fn texture_columns(
 /// from there (a ray skimming a surface duct crosses far more air than any air-mass formula of
 /// its elevation gives), at the apparent elevation the sea-level refraction of its true
 /// elevation there gives. The table of that refraction depends on the atmosphere and the sky
-/// alone: `shared` is the one of a base frame with the same ones, if any.
+/// alone. `base`: the glitter of the base frame (the same scene under another sun), if any: its table
+/// is taken, and its azimuth bounds when its sun has the same azimuth (they depend only on the
+/// camera, the frame's elevations and the sun's azimuth).
 fn glint(
     scene: &Scene,
     tracer: &dyn RayTracer,
-    shared: Option<&Arc<SeaSunTable>>,
+    base: Option<&Glint>,
     elevations: (f64, f64),
 ) -> Option<Glint> {
     let sun = scene.sun.filter(|_| scene.sea.wave_slope_rad != 0.0)?;
-    let at_sea = shared.map_or_else(
+    let at_sea = base.map_or_else(
         || Arc::new(SeaSunTable::build(tracer, &scene.sky.sun_extinction())),
-        Arc::clone,
+        |b| Arc::clone(&b.at_sea),
     );
-    let cos_azimuth = cos_azimuth_range(&scene.camera, sun.azimuth_rad, elevations);
+    let cos_azimuth = match base {
+        Some(b) if b.sun.azimuth_rad.to_bits() == sun.azimuth_rad.to_bits() => b.cos_azimuth,
+        _ => cos_azimuth_range(&scene.camera, sun.azimuth_rad, elevations),
+    };
     let r = 0.5 * sun.angular_diameter_rad;
     let solid_angle = std::f64::consts::PI * r * r * (1.0 - sun.limb_darkening / 3.0);
     Some(Glint {
@@ -482,8 +493,9 @@ impl<'a> PlanInputs<'a> {
         }
     }
 
-    /// The fan (none in exact mode) and the sky table: the base's table, or built while the
-    /// fan is traced (it needs no fan).
+    /// The fan (none in exact mode; built on the base's fan when there is one, which the same
+    /// tracer traced: [`ElevationFan::build_on`]) and the sky table: the base's table, or built
+    /// while the fan is traced (it needs no fan).
     fn fan_and_sky(
         &self,
         spec: &FanSpec,
@@ -491,7 +503,15 @@ impl<'a> PlanInputs<'a> {
     ) -> (Option<ElevationFan>, Arc<AngleTable>) {
         let build_fan = || (!self.options.exact).then(|| ElevationFan::build(self.tracer, spec));
         match base {
-            Some(b) => (build_fan(), Arc::clone(&b.shader.sky_table)),
+            Some(b) => {
+                let fan = match &b.fan {
+                    Some(f) if !self.options.exact => {
+                        Some(ElevationFan::build_on(self.tracer, spec, f))
+                    }
+                    _ => build_fan(),
+                };
+                (fan, Arc::clone(&b.shader.sky_table))
+            }
             None => {
                 let (sky, (lo, hi)) = (self.scene.sky, self.elevations);
                 // The optical depths once per frame, not once per table entry (same values).
@@ -592,13 +612,20 @@ impl<'a> FramePlan<'a> {
         let frame = cam.frame();
         let pixel_rad = 1.0 / frame.focal_px;
         let (width, height) = (cam.width, cam.height);
-        let span = azimuth_span(&frame, width, height, cam.heading_rad);
+        // The frame's border directions: the base's when the camera is the same.
+        let (span, elevations) = match base.map(|b| b.view).filter(|v| v.0 == *cam) {
+            Some((_, span, elevations)) => (span, elevations),
+            None => (
+                azimuth_span(&frame, width, height, cam.heading_rad),
+                elevation_range(&frame, width, height, pixel_rad),
+            ),
+        };
         let view = ViewCards::new(scene, span, pixel_rad);
         let inputs = PlanInputs {
             scene,
             tracer,
             options: options.clone(),
-            elevations: elevation_range(&frame, width, height, pixel_rad),
+            elevations,
             pixel_rad,
         };
         let terrain = match base {
@@ -629,22 +656,31 @@ impl<'a> FramePlan<'a> {
         };
         // The sun's glitter needs its own rays from the sea, not the sea's tables: found while
         // they are built (or the base frame's, which has the same atmosphere and sky).
-        let base_table = base
+        let base_glint = base
             .and_then(|b| b.shader.reflection.as_ref())
-            .and_then(|r| r.glint.as_ref())
-            .map(|g| &g.at_sea);
+            .and_then(|r| r.glint.as_ref());
         let ((sea, same_sea), glint) = rayon::join(
             || inputs.sea_tables(&sea_inputs, base),
             || {
                 scene
                     .sea
                     .reflections
-                    .then(|| glint(scene, tracer, base_table, inputs.elevations))
+                    .then(|| glint(scene, tracer, base_glint, inputs.elevations))
                     .flatten()
             },
         );
         let alphas: Vec<f64> = traced.iter().map(|(a, _)| *a).collect();
         let (aerial, same_aerial) = inputs.aerial(&view, &alphas, base);
+        // The sun's extinction: the base's when the sky is the same.
+        let sun_extinction = scene.sun.map(|_| {
+            let shared = base
+                .and_then(|b| b.sun_extinction.as_ref())
+                .filter(|(sky, _)| *sky == scene.sky);
+            match shared {
+                Some((_, e)) => Arc::clone(e),
+                None => Arc::new(scene.sky.sun_extinction()),
+            }
+        });
         let shares_base = base.is_none_or(|b| {
             b.clear_sky_from.to_bits() == clear_sky_from.to_bits() && same_sea && same_aerial
         });
@@ -666,6 +702,7 @@ impl<'a> FramePlan<'a> {
             glint,
             aerial,
             traced: &traced,
+            sun_extinction: sun_extinction.as_deref(),
             base,
         });
         stats.sea_fan_rays = shader
@@ -691,6 +728,8 @@ impl<'a> FramePlan<'a> {
             sea,
             stats,
             shares_base,
+            view: (*cam, span, elevations),
+            sun_extinction: sun_extinction.map(|e| (scene.sky, e)),
         })
     }
 }
@@ -706,6 +745,9 @@ struct ShaderParts<'a, 'b> {
     aerial: Option<AerialShading>,
     /// The rays the sun's transmittance is integrated along, with their ends.
     traced: &'b [(f64, FanEnd)],
+    /// The sky's extinction along the sun's rays ([`Sky::sun_extinction`]), when the scene has
+    /// a sun.
+    sun_extinction: Option<&'b Extinction>,
     base: Option<&'b FramePlan<'a>>,
 }
 
@@ -715,16 +757,13 @@ impl<'a> PlanInputs<'a> {
     fn shader(&self, parts: ShaderParts<'a, '_>) -> Shader<'a> {
         let (scene, tracer) = (self.scene, self.tracer);
         let (sky, cam) = (scene.sky, &scene.camera);
-        let sun_path = scene.sun.and_then(|sun| {
-            let band = sun_band_rad(&sun, self.pixel_rad);
-            SunTransmittance::build(
-                tracer,
-                cam.height_m,
-                &sky.sun_extinction(),
-                band,
-                parts.traced,
-            )
-        });
+        let sun_path = scene
+            .sun
+            .zip(parts.sun_extinction)
+            .and_then(|(sun, extinction)| {
+                let band = sun_band_rad(&sun, self.pixel_rad);
+                SunTransmittance::build(tracer, cam.height_m, extinction, band, parts.traced)
+            });
         let (lo, hi) = self.elevations;
         let sun_transmittance = scene.sun.map(|_| {
             parts
@@ -751,6 +790,11 @@ impl<'a> PlanInputs<'a> {
 }
 
 impl FramePlan<'_> {
+    /// The elevation fan (`None` in exact mode).
+    pub(super) fn fan(&self) -> Option<&ElevationFan> {
+        self.fan.as_ref()
+    }
+
     /// Film width and height (pixels).
     pub(super) fn size(&self) -> (u32, u32) {
         (self.width, self.height)
@@ -905,14 +949,26 @@ pub(super) struct SunReads {
 }
 
 impl SunReads {
-    /// Whether a lookup in `fan` (the plan's) of an elevation in `elevations` (lo, hi) may
-    /// read the sun.
-    fn any(&self, fan: &ElevationFan, (lo, hi): (f64, f64)) -> bool {
-        let (i, j) = (fan.interval(lo), fan.interval(hi));
+    /// Whether a lookup in the plan's fan of an elevation between those in intervals `i` and
+    /// `j` ([`ElevationFan::intervals_of`]) may read the sun.
+    fn any(&self, (i, j): (usize, usize)) -> bool {
         let (i, j) = (i.min(j), i.max(j));
         let last = self.prefix.len() - 1;
         self.prefix[(j + 1).min(last)] > self.prefix[i.min(last)]
     }
+}
+
+/// What deciding whether to copy a row of a base plan reads of the base, the same for every
+/// plan built on it ([`FramePlan::base_row`]).
+#[derive(Clone, Copy)]
+pub(super) struct BaseRow {
+    /// The lowest and highest elevation (rad) the row's lookups read
+    /// ([`FramePlan::row_elevations`]).
+    elevations: (f64, f64),
+    /// The base fan's intervals holding them (`None`: the base has no fan).
+    intervals: Option<(usize, usize)>,
+    /// Whether the row may read the sun in the base.
+    reads_sun: bool,
 }
 
 impl FramePlan<'_> {
@@ -995,26 +1051,43 @@ impl FramePlan<'_> {
         }
     }
 
-    /// Whether row `y` of this plan, whose lookups span `elevations`
-    /// ([`Self::row_elevations`]), shades to the pixels of row `y` of `base` (the plan this one
-    /// was built on), with `reads` and `base_reads` their [`Self::sun_reads`]: the tables are
-    /// the base's, the row reads the same fan rays in both, and may read the sun in neither
-    /// (module docs).
+    /// What [`Self::copies_base_row`] reads of this plan's row whose lookups span
+    /// `elevations` ([`Self::row_elevations`]), with `reads` this plan's
+    /// [`Self::sun_reads`].
+    pub(super) fn base_row(&self, reads: &SunReads, elevations: (f64, f64)) -> BaseRow {
+        let intervals = self
+            .fan
+            .as_ref()
+            .map(|f| f.intervals_of(elevations.0, elevations.1));
+        BaseRow {
+            elevations,
+            intervals,
+            reads_sun: intervals.is_none_or(|i| reads.any(i)),
+        }
+    }
+
+    /// Whether row `y` of this plan shades to the pixels of row `y` of `base` (the plan this
+    /// one was built on), with `reads` this plan's [`Self::sun_reads`] and `row` what
+    /// [`Self::base_row`] of `base` gives for the row: the tables are the base's, the row
+    /// reads the same fan rays in both, and may read the sun in neither (module docs).
     pub(super) fn copies_base_row(
         &self,
         reads: &SunReads,
         base: &FramePlan<'_>,
-        base_reads: &SunReads,
-        elevations: (f64, f64),
+        row: &BaseRow,
     ) -> bool {
-        let (Some(fan), Some(base_fan)) = (&self.fan, &base.fan) else {
+        let (Some(fan), Some(base_fan), Some(theirs)) = (&self.fan, &base.fan, row.intervals)
+        else {
             return false;
         };
-        self.shares_base
-            && (self.width, self.height, self.n) == (base.width, base.height, base.n)
-            && !reads.any(fan, elevations)
-            && !base_reads.any(base_fan, elevations)
-            && fan.same_rays_over(base_fan, elevations.0, elevations.1)
+        if !self.shares_base
+            || (self.width, self.height, self.n) != (base.width, base.height, base.n)
+            || row.reads_sun
+        {
+            return false;
+        }
+        let mine = fan.intervals_of(row.elevations.0, row.elevations.1);
+        !reads.any(mine) && fan.same_rays_in(base_fan, mine, theirs)
     }
 }
 

@@ -34,8 +34,9 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use rayon::prelude::*;
 
+use super::elevation_fan::ElevationFan;
 use super::memo::MemoRays;
-use super::plan::{FramePlan, SunReads};
+use super::plan::{BaseRow, FramePlan};
 use super::ray_model::{FanEnd, RayTracer};
 use super::shade::wrap_pi;
 use super::{Film, RenderError, RenderOptions, RenderStats, render_scene};
@@ -107,12 +108,18 @@ fn column_at_azimuth(scene: &Scene, azimuth_rad: f64) -> Option<u32> {
     let cam = &scene.camera;
     let frame = cam.frame();
     let y = 0.5 * cam.height as f64;
-    let offset = |x: u32| wrap_pi(frame.direction(x as f64 + 0.5, y).0 - azimuth_rad);
-    let (first, last) = (offset(0), offset(cam.width - 1));
+    let offsets: Vec<f64> = (0..cam.width)
+        .map(|x| wrap_pi(frame.direction(x as f64 + 0.5, y).0 - azimuth_rad))
+        .collect();
+    let (&first, &last) = (offsets.first()?, offsets.last()?);
     if first.min(last) > 0.0 || first.max(last) < 0.0 {
         return None;
     }
-    (0..cam.width).min_by(|&a, &b| offset(a).abs().total_cmp(&offset(b).abs()))
+    (0..cam.width).min_by(|&a, &b| {
+        offsets[a as usize]
+            .abs()
+            .total_cmp(&offsets[b as usize].abs())
+    })
 }
 
 /// The column whose facts [`SunFacts`] reports: the one whose pixel centre on the middle row is
@@ -179,11 +186,26 @@ impl ColumnSky {
     /// Column `x` of `scene`'s camera, its rays traced through `tracer` (need_sky_direction:
     /// their final directions).
     pub fn trace(scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Self {
+        Self::trace_beside(scene, tracer, x, None)
+    }
+
+    /// [`Self::trace`], but for the rows whose rays `fan` (traced by `tracer` from the same
+    /// camera height) shows to end in the sea ([`ElevationFan::surely_sea`]): those are not
+    /// traced, and they leave into no sky all the same.
+    fn trace_beside(
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        x: u32,
+        fan: Option<&ElevationFan>,
+    ) -> Self {
         let height_m = scene.camera.height_m;
         let directions: Vec<(f64, f64)> = column_directions(scene, x).collect();
         let rows = directions
             .into_par_iter()
             .map(|(alpha, azimuth)| {
+                if fan.is_some_and(|f| f.surely_sea(alpha)) {
+                    return (alpha, azimuth, None);
+                }
                 let sky = match tracer.trace(height_m, alpha, &[], true).end {
                     FanEnd::Sky { elevation_rad } => Some(elevation_rad),
                     _ => None,
@@ -245,20 +267,19 @@ pub fn farthest_card(scene: &Scene) -> Option<&Card> {
 
 /// The facts of `scene` from rays traced through `tracer`.
 pub fn frame_facts(scene: &Scene, tracer: &dyn RayTracer) -> FrameFacts {
-    frame_facts_with(scene, tracer, &|x| {
-        Arc::new(ColumnSky::trace(scene, tracer, x))
+    frame_facts_with(scene, tracer, &|sun| {
+        Arc::new(ColumnSky::trace(scene, tracer, sun_column(scene, sun)))
     })
 }
 
-/// [`frame_facts`], the sun's column from `column` (the rays of a column of `scene`'s camera).
+/// [`frame_facts`], the rays of the sun's column ([`sun_column`] of `scene`'s camera) from
+/// `column`.
 fn frame_facts_with(
     scene: &Scene,
     tracer: &dyn RayTracer,
-    column: &dyn Fn(u32) -> Arc<ColumnSky>,
+    column: &dyn Fn(&Sun) -> Arc<ColumnSky>,
 ) -> FrameFacts {
-    let sun = scene
-        .sun
-        .map(|sun| column(sun_column(scene, &sun)).sun_facts(&sun));
+    let sun = scene.sun.map(|sun| column(&sun).sun_facts(&sun));
     let cards = scene
         .cards
         .iter()
@@ -268,19 +289,42 @@ fn frame_facts_with(
 }
 
 /// The sun's columns of a sweep's frames that share the first frame's camera, each traced
-/// once ([`ColumnSky`] does not depend on the sun). Two threads may trace the same column at
-/// once; they find the same rays, and either copy is kept.
+/// once ([`ColumnSky`] does not depend on the sun), beside the first frame's fan when it has
+/// one ([`ColumnSky::trace_beside`]), found once per sun azimuth ([`sun_column`] depends only
+/// on the camera and the azimuth). Two threads may trace the same column at once; they find
+/// the same rays, and either copy is kept.
 #[derive(Default)]
-struct SharedColumns(Mutex<Vec<(u32, Arc<ColumnSky>)>>);
+struct SharedColumns<'f> {
+    /// The first frame's fan.
+    fan: Option<&'f ElevationFan>,
+    /// [`sun_column`] by the bits of the sun's azimuth.
+    by_azimuth: Mutex<Vec<(u64, u32)>>,
+    columns: Mutex<Vec<(u32, Arc<ColumnSky>)>>,
+}
 
-impl SharedColumns {
-    fn get(&self, scene: &Scene, tracer: &dyn RayTracer, x: u32) -> Arc<ColumnSky> {
-        let lock = || self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some((_, column)) = lock().iter().find(|(k, _)| *k == x) {
+/// The list behind `m`, even if a thread panicked while holding it (it is only ever extended
+/// with finished values).
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+impl SharedColumns<'_> {
+    fn get(&self, scene: &Scene, tracer: &dyn RayTracer, sun: &Sun) -> Arc<ColumnSky> {
+        let azimuth = sun.azimuth_rad.to_bits();
+        let found = lock(&self.by_azimuth)
+            .iter()
+            .find(|(k, _)| *k == azimuth)
+            .map(|&(_, x)| x);
+        let x = found.unwrap_or_else(|| {
+            let x = sun_column(scene, sun);
+            lock(&self.by_azimuth).push((azimuth, x));
+            x
+        });
+        if let Some((_, column)) = lock(&self.columns).iter().find(|(k, _)| *k == x) {
             return Arc::clone(column);
         }
-        let column = Arc::new(ColumnSky::trace(scene, tracer, x));
-        lock().push((x, Arc::clone(&column)));
+        let column = Arc::new(ColumnSky::trace_beside(scene, tracer, x, self.fan));
+        lock(&self.columns).push((x, Arc::clone(&column)));
         column
     }
 }
@@ -314,9 +358,8 @@ pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> T
 struct SweepBase<'a> {
     plan: FramePlan<'a>,
     film: Film,
-    /// Per row: the elevations its lookups span, and its non-finite samples.
-    rows: Vec<((f64, f64), u64)>,
-    reads: SunReads,
+    /// Per row: what a copy decision reads of it, and its non-finite samples.
+    rows: Vec<(BaseRow, u64)>,
 }
 
 impl<'a> SweepBase<'a> {
@@ -337,7 +380,7 @@ impl<'a> SweepBase<'a> {
             return Ok((film_of(width, height, pixels, stats), None));
         };
         let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
-        let rows: Vec<((f64, f64), u64)> = pixels
+        let rows: Vec<(BaseRow, u64)> = pixels
             .par_chunks_mut(width as usize)
             .enumerate()
             .map_init(
@@ -345,7 +388,8 @@ impl<'a> SweepBase<'a> {
                 |scratch, (y, row)| {
                     let y = y as u32;
                     let bad = plan.shade_row(y, row, scratch);
-                    (plan.row_elevations(y, scratch), bad)
+                    let elevations = plan.row_elevations(y, scratch);
+                    (plan.base_row(&reads, elevations), bad)
                 },
             )
             .collect();
@@ -355,7 +399,6 @@ impl<'a> SweepBase<'a> {
             plan,
             film: film.clone(),
             rows,
-            reads,
         };
         Ok((film, Some(base)))
     }
@@ -393,8 +436,8 @@ fn render_on_base<'a>(
         .enumerate()
         .map_init(
             || plan.scratch(),
-            |scratch, (y, ((row, base_row), &(elevations, base_bad)))| {
-                if plan.copies_base_row(&reads, &base.plan, &base.reads, elevations) {
+            |scratch, (y, ((row, base_row), &(decision, base_bad)))| {
+                if plan.copies_base_row(&reads, &base.plan, &decision) {
                     row.copy_from_slice(base_row);
                     (0, base_bad)
                 } else {
@@ -408,8 +451,9 @@ fn render_on_base<'a>(
 }
 
 /// Whether `a` and `b` are the same scene but for their suns (both have one): then a frame of
-/// one can be rendered on the other ([`render_on_base`]).
-fn differ_only_in_sun(a: &Scene, b: &Scene) -> bool {
+/// one can be rendered on the other ([`render_on_base`]). `a_record`: `a`'s
+/// [`record_without_sun`].
+fn differ_only_in_sun(a: &Scene, a_record: &Option<String>, b: &Scene) -> bool {
     if a.sun.is_none() || b.sun.is_none() || a.cards.len() != b.cards.len() {
         return false;
     }
@@ -433,12 +477,14 @@ fn differ_only_in_sun(a: &Scene, b: &Scene) -> bool {
         _ => false,
     };
     // Everything else by its serialised record (exact for numbers), without the sun.
-    let record = |s: &Scene| {
-        let mut s = s.clone();
-        s.sun = None;
-        serde_json::to_string(&s).ok()
-    };
-    cards && terrain && record(a).is_some() && record(a) == record(b)
+    cards && terrain && a_record.is_some() && *a_record == record_without_sun(b)
+}
+
+/// `scene`'s serialised record without its sun ([`differ_only_in_sun`]).
+fn record_without_sun(scene: &Scene) -> Option<String> {
+    let mut s = scene.clone();
+    s.sun = None;
+    serde_json::to_string(&s).ok()
 }
 
 /// Render every scene of `scenes` through one ray cache over `tracer` (module docs). The
@@ -454,12 +500,24 @@ pub fn render_shared(
     transfer: bool,
 ) -> Result<Vec<SweepFrame>, RenderError> {
     let memo = MemoRays::new(tracer);
-    let columns = SharedColumns::default();
+    let Some((first, rest)) = scenes.split_first() else {
+        return Ok(Vec::new());
+    };
+    let first_record = record_without_sun(first);
+    let on_base: Vec<bool> = rest
+        .iter()
+        .map(|s| differ_only_in_sun(first, &first_record, s))
+        .collect();
+    let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
+    let columns = SharedColumns {
+        fan: base.as_ref().and_then(|b| b.plan.fan()),
+        ..SharedColumns::default()
+    };
     // `first_camera`: the frame has the first frame's camera (it differs from it only in its
     // sun), so it shares the first frame's sun columns.
     let finish = |scene: &Scene, film: Film, rows_shaded: u32, first_camera: bool| {
         let facts = if first_camera {
-            frame_facts_with(scene, &memo, &|x| columns.get(scene, &memo, x))
+            frame_facts_with(scene, &memo, &|sun| columns.get(scene, &memo, sun))
         } else {
             frame_facts(scene, &memo)
         };
@@ -472,11 +530,6 @@ pub fn render_shared(
             rows_shaded,
         }
     };
-    let Some((first, rest)) = scenes.split_first() else {
-        return Ok(Vec::new());
-    };
-    let on_base: Vec<bool> = rest.iter().map(|s| differ_only_in_sun(first, s)).collect();
-    let (film, base) = SweepBase::new(first, &memo, options, on_base.contains(&true))?;
     let mut frames = vec![finish(first, film, first.camera.height, true)];
     let rest: Vec<SweepFrame> = rest
         .par_iter()
