@@ -805,6 +805,22 @@ mod tests {
         }
     }
 
+    /// A 1.1° frame pitched up 0.3° (the Fata Morgana scene's width), `width` columns and 200
+    /// rows wide, with the flat-row limit of its pixels.
+    fn wide_frame(width: u32) -> (crate::scene::camera::CameraFrame, f64) {
+        let cam = crate::scene::camera::Camera {
+            height_m: 10.0,
+            heading_rad: 0.3,
+            pitch_rad: 0.005,
+            hfov_rad: 0.019,
+            width,
+            height: 200,
+            samples_per_pixel: 1,
+        };
+        let limit_rad = FLAT_ROW_FRACTION * 0.25 * cam.min_pixel_angle_rad();
+        (cam.frame(), limit_rad)
+    }
+
     #[test]
     fn flat_bands_cover_the_row_within_the_limit() {
         // A 1.1° frame pitched up 0.3° (the Fata Morgana scene's width), where the elevation
@@ -812,17 +828,7 @@ mod tests {
         // column of x is width − 1 − x).
         let mut most_bands = 0;
         for width in [1920u32, 1921, 7] {
-            let cam = crate::scene::camera::Camera {
-                height_m: 10.0,
-                heading_rad: 0.3,
-                pitch_rad: 0.005,
-                hfov_rad: 0.019,
-                width,
-                height: 200,
-                samples_per_pixel: 1,
-            };
-            let frame = cam.frame();
-            let limit_rad = FLAT_ROW_FRACTION * 0.25 * cam.min_pixel_angle_rad();
+            let (frame, limit_rad) = wide_frame(width);
             let mut banded_rows = 0;
             for y in [0u32, 40, 100, 199] {
                 let Some(bands) = flat_bands(&frame, y, width, limit_rad) else {
@@ -854,17 +860,7 @@ mod tests {
     fn the_bands_runs_cover_every_column_of_a_row_once() {
         for width in [1u32, 2, 7, 8, 400, 401] {
             // Bands as flat_bands cuts them: from the centre column to the right edge.
-            let cam = crate::scene::camera::Camera {
-                height_m: 10.0,
-                heading_rad: 0.3,
-                pitch_rad: 0.005,
-                hfov_rad: 0.019,
-                width,
-                height: 200,
-                samples_per_pixel: 1,
-            };
-            let frame = cam.frame();
-            let limit_rad = FLAT_ROW_FRACTION * 0.25 * cam.min_pixel_angle_rad();
+            let (frame, limit_rad) = wide_frame(width);
             let starts = flat_bands(&frame, 3, width, limit_rad).expect("few bands");
             let w = width as usize;
             let mut covered = vec![0u32; w];
