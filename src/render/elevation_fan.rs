@@ -364,14 +364,7 @@ impl ElevationFan {
                 depths.push(depth);
             }
         }
-        Self::from_parts(
-            parts,
-            Refinement {
-                spec: spec.clone(),
-                base_rays,
-                depths,
-            },
-        )
+        Self::from_parts(parts, spec, base_rays, depths)
     }
 
     /// [`Self::build`] for `spec`, from the rays of `base`, a fan that `tracer` built for the
@@ -430,14 +423,7 @@ impl ElevationFan {
         }
         base_rays.push(parts.alphas.len());
         parts.extend_from(base, prior.base_rays[last], prior.base_rays[last] + 1);
-        Self::from_parts(
-            parts,
-            Refinement {
-                spec: spec.clone(),
-                base_rays,
-                depths,
-            },
-        )
+        Self::from_parts(parts, spec, base_rays, depths)
     }
 
     /// Whether no ray `first..=last` of the fan ends in the sky inside either band (a NaN
@@ -474,7 +460,19 @@ impl ElevationFan {
         (self.alphas.get(i)?.to_bits() == alpha.to_bits()).then(|| self.ray(i))
     }
 
-    fn from_parts(parts: FanParts, refinement: Refinement) -> Self {
+    /// The fan of the collected `parts`, refined for `spec` with base rays at `base_rays` and
+    /// each base interval bisected `depths` deep.
+    fn from_parts(
+        parts: FanParts,
+        spec: &FanSpec,
+        base_rays: Vec<usize>,
+        depths: Vec<u32>,
+    ) -> Self {
+        let refinement = Refinement {
+            spec: spec.clone(),
+            base_rays,
+            depths,
+        };
         let FanParts {
             alphas,
             heights,
