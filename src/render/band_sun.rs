@@ -123,21 +123,30 @@ impl BandColumns<'_> {
 
     /// Fill `out[x]` for the columns x of the band whose right-half columns are [`start`,
     /// `end`) in a row `width` columns wide: those, and the left-half columns at the same
-    /// distance from the centre column.
+    /// distance from the centre column. Returns, for each of those two runs, the columns
+    /// outside of which the addition is exactly zero (+0 in every channel; possibly empty).
     pub(super) fn fill_band(
         &self,
         (start, end): (usize, usize),
         width: usize,
         out: &mut [[f64; 3]],
-    ) {
+    ) -> [(usize, usize); 2] {
         SCRATCH.with_borrow_mut(|scratch| {
-            self.fill((start, end), out, scratch);
-            self.fill((width - end, (width - start).min(width / 2)), out, scratch);
-        });
+            [
+                self.fill((start, end), out, scratch),
+                self.fill((width - end, (width - start).min(width / 2)), out, scratch),
+            ]
+        })
     }
 
-    /// Fill `out[x]` for the columns x of [`a`, `b`) (module docs).
-    fn fill(&self, (a, b): (usize, usize), out: &mut [[f64; 3]], scratch: &mut Scratch) {
+    /// Fill `out[x]` for the columns x of [`a`, `b`) (module docs); returns the columns of
+    /// them outside of which the addition is exactly zero.
+    fn fill(
+        &self,
+        (a, b): (usize, usize),
+        out: &mut [[f64; 3]],
+        scratch: &mut Scratch,
+    ) -> (usize, usize) {
         let centre = self.sun_column((a, b));
         if let BandSun::Sea {
             sun: sun @ SeaSunAt::Glint { .. },
@@ -156,11 +165,11 @@ impl BandColumns<'_> {
             };
             let glitter = Smooth { exact, radiance };
             glitter.fill((a, b), centre, self.background, out, scratch);
-            return;
+            return (a, b);
         }
         let Some((chord, weight)) = self.disc_along() else {
             out[a..b.max(a)].fill([0.0; 3]);
-            return;
+            return (a, a);
         };
         let heading = self.shader.heading_rad;
         // Columns whose azimuth is at least the chord's half-width from the disc centre's are
@@ -176,7 +185,17 @@ impl BandColumns<'_> {
             }
             weight.apply(chord.radiance(heading + offset))
         };
-        fill_columns((a, b), centre, self.background, value, out, scratch);
+        let offset = |x: usize| self.azimuth_offset(x);
+        let dark_outside = chord_columns((a, b), offset, target, half_width);
+        fill_columns(
+            (a, b),
+            dark_outside,
+            centre,
+            self.background,
+            value,
+            out,
+            scratch,
+        )
     }
 
     /// The disc (or a mirror sea's image of it) along the band's elevation and what weights its
@@ -299,30 +318,84 @@ thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
+/// The columns [lo, hi) of [`a`, `b`) outside of which a disc's chord (centre azimuth offset
+/// `target`, half-width `half_width`) is dark by the test of [`BandColumns::fill`] (an offset
+/// within ±π/2 at least the half-width from the target), `offset(x)` giving column x's azimuth
+/// offset (increasing along the row): the columns before the first whose offset is past
+/// `target − half_width`, and those from the first whose offset reaches `target + half_width`.
+/// All of [`a`, `b`) where the test may not hold at the run's ends (an offset beyond ±π/2, an
+/// unbounded chord).
+fn chord_columns(
+    (a, b): (usize, usize),
+    offset: impl Fn(usize) -> f64,
+    target: f64,
+    half_width: f64,
+) -> (usize, usize) {
+    let within = |x: usize| offset(x).abs() <= std::f64::consts::FRAC_PI_2;
+    if b <= a || !half_width.is_finite() || !within(a) || !within(b - 1) {
+        return (a, b);
+    }
+    // The first column of [lo, b) whose offset less the target is `past` (b if none): `past`
+    // is false then true along the row.
+    let first = |lo: usize, past: &dyn Fn(f64) -> bool| {
+        let (mut lo, mut hi) = (lo, b);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if past(offset(mid) - target) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    };
+    let lo = first(a, &|d| d > -half_width);
+    let hi = first(lo, &|d| d >= half_width);
+    (lo, hi)
+}
+
 /// Fill `out[x]` for the columns x of [`a`, `b`) with `value(x)` at the nodes (every
 /// [`STRIDE`]th column, the last, and `centre` with its neighbours) and where refinement needs
 /// it, linear interpolation between them elsewhere (module docs); `background` is the colour
-/// the values are added to.
+/// the values are added to. `value` is +0 (every channel) at the columns outside `lit`: those
+/// are set so without asking it, and so is every interval between two nodes on one side of
+/// `lit` (refinement would find its middle +0 and interpolate +0 from its ends: the same).
+/// Returns the columns outside of which `out` was set to +0 (possibly empty).
 fn fill_columns(
     (a, b): (usize, usize),
+    (lit_lo, lit_hi): (usize, usize),
     centre: Option<usize>,
     background: [f64; 3],
     value: impl Fn(usize) -> [f64; 3],
     out: &mut [[f64; 3]],
     scratch: &mut Scratch,
-) {
+) -> (usize, usize) {
     if b <= a {
-        return;
+        return (a, a);
     }
+    let dark = |x: usize| x < lit_lo || x >= lit_hi;
     let Scratch { nodes, open, .. } = scratch;
     node_columns((a, b), STRIDE, centre, nodes);
+    // The span of the nodes outside the dark columns and of the intervals that are refined.
+    let mut span = (b, a);
+    let mut widen = |x: usize, y: usize| span = (span.0.min(x), span.1.max(y + 1));
     for &x in nodes.iter() {
-        out[x] = value(x);
+        out[x] = if dark(x) { [0.0; 3] } else { value(x) };
+        if !dark(x) {
+            widen(x, x);
+        }
+    }
+    for w in nodes.windows(2).filter(|w| w[1] >= lit_lo && w[0] < lit_hi) {
+        widen(w[0], w[1]);
     }
     open.clear();
     open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
     while let Some((i, j)) = open.pop() {
         if j <= i + 1 {
+            continue;
+        }
+        if j < lit_lo || i >= lit_hi {
+            out[i + 1..j].fill([0.0; 3]);
             continue;
         }
         let m = (i + j) / 2;
@@ -334,6 +407,7 @@ fn fill_columns(
             open.extend([(i, m), (m, j)]);
         }
     }
+    if span.0 < span.1 { span } else { (a, a) }
 }
 
 /// The node columns of [`a`, `b`) (not empty) into `nodes`: every `stride`th column, the last,
@@ -820,6 +894,109 @@ fn interpolate(out: &mut [[f64; 3]], i: usize, j: usize) {
 mod tests {
     use super::*;
 
+    #[test]
+    fn columns_known_dark_are_filled_with_the_bits_refinement_gives_them() {
+        // Limb-darkened chords (zero outside), wide, narrow (below the node spacing) and at the
+        // run's ends, on runs that start at and after column 0: filling with the columns
+        // outside the chord's known dark gives the same bits as refining them, and the span it
+        // returns holds every column it did not set to +0.
+        let background = [0.3, 0.35, 0.4];
+        for (c, half) in [
+            (200.0, 150.0),
+            (13.0, 40.0),
+            (390.0, 20.0),
+            (101.3, 2.5),
+            (250.0, 0.4),
+        ] {
+            let value = |x: usize| {
+                let s = ((x as f64 + 0.5 - c) / half).abs();
+                if s >= 1.0 {
+                    return [0.0; 3];
+                }
+                let v = 2.0 * (1.0 - 0.6 * (1.0 - (1.0 - s * s).sqrt()));
+                [v, 0.9 * v, 0.8 * v]
+            };
+            let lit = (
+                (c - half - 0.5).floor().max(0.0) as usize,
+                ((c + half + 0.5).ceil() as usize).min(400),
+            );
+            for ((a, b), centre) in [((0, 400), None), ((37, 333), Some(c as usize))] {
+                let fill = |lit: (usize, usize)| {
+                    let mut out = vec![[f64::NAN; 3]; 400];
+                    let span = fill_columns(
+                        (a, b),
+                        lit,
+                        centre,
+                        background,
+                        value,
+                        &mut out,
+                        &mut Scratch::default(),
+                    );
+                    (out, span)
+                };
+                let (refined, _) = fill((a, b));
+                let (known, (lo, hi)) = fill(lit);
+                let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> {
+                    v.iter().map(|p| p.map(f64::to_bits)).collect()
+                };
+                assert_eq!(
+                    bits(&refined),
+                    bits(&known),
+                    "chord {c} ± {half} in {a}..{b}"
+                );
+                assert!(a <= lo && lo <= hi && hi <= b, "{lo}..{hi}");
+                for x in (a..b).filter(|x| !(lo..hi).contains(x)) {
+                    assert_eq!(
+                        known[x].map(f64::to_bits),
+                        [0; 3],
+                        "{c} ± {half}: column {x}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chord_columns_hold_every_column_the_dark_test_may_light_and_no_more() {
+        let offset = |x: usize| ((x as f64 + 0.5 - 200.0) / 3000.0).atan();
+        let cases = [
+            (0.0, 0.01),
+            (0.05, 0.002),
+            (-0.066, 0.001),
+            (0.3, 0.01),
+            (0.0, 1e-7),
+            (0.0, f64::INFINITY),
+        ];
+        for (target, half_width) in cases {
+            let dark = |x: usize| {
+                let o = offset(x);
+                o.abs() <= std::f64::consts::FRAC_PI_2 && (o - target).abs() >= half_width
+            };
+            for (a, b) in [(0, 400), (200, 400), (0, 200), (57, 58), (9, 9)] {
+                let (lo, hi) = chord_columns((a, b), offset, target, half_width);
+                assert!(
+                    a <= lo && lo <= hi && hi <= b,
+                    "{target} {half_width}: {lo}..{hi}"
+                );
+                for x in (a..b).filter(|x| !(lo..hi).contains(x)) {
+                    assert!(dark(x), "{target} ± {half_width} in {a}..{b}: column {x}");
+                }
+                if lo < hi && half_width.is_finite() {
+                    assert!(
+                        !dark(lo) && !dark(hi - 1),
+                        "{target} ± {half_width}: {lo}..{hi}"
+                    );
+                }
+            }
+        }
+        // Offsets beyond ±π/2 at an end of the run: the test may not hold, so all of it.
+        let wide = |x: usize| (x as f64 - 200.0) * 0.01;
+        assert_eq!(chord_columns((0, 400), wide, 0.0, 0.01), (0, 400));
+        // Within them, only column 200 is nearer the target than the half-width (199 and 201
+        // are exactly at it: dark).
+        assert_eq!(chord_columns((100, 300), wide, 0.0, 0.01), (200, 201));
+    }
+
     /// The worst error of `fill_columns` over 400 columns against `exact`, in units of the
     /// tolerance on the pixel's radiance; and how many columns it evaluated.
     fn worst(
@@ -834,6 +1011,7 @@ mod tests {
         };
         let mut out = vec![[f64::NAN; 3]; 400];
         fill_columns(
+            (0, 400),
             (0, 400),
             Some(centre),
             background,

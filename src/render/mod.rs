@@ -351,6 +351,9 @@ struct FlatBand {
     reflects: bool,
     /// Whether it may show the sun (its columns then add the sun's part, `band_sun`).
     sun: bool,
+    /// Where it may show the sun: per run of [`band_runs`], the columns outside of which the
+    /// sun's part is exactly +0 ([`BandColumns::fill_band`]).
+    sun_lit: [(usize, usize); 2],
 }
 
 /// Cut row `y` into bands of columns, by their distance from the centre column (the elevation
@@ -431,6 +434,7 @@ fn shade_flat_row(
                 fan_end: FanEnd::Lost,
                 reflects: false,
                 sun: false,
+                sun_lit: [(0, 0); 2],
             });
             continue;
         }
@@ -443,6 +447,7 @@ fn shade_flat_row(
             .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
         let background = ctx.shader.background_with(&dir, fan_end, false);
         let sun = BandSun::of(ctx.shader, alpha, fan_end);
+        let mut sun_lit = [(0, 0); 2];
         if let Some(sun) = sun {
             sun_added.resize(width as usize, [0.0; 3]);
             let run = BandColumns {
@@ -453,7 +458,7 @@ fn shade_flat_row(
                 sun,
                 background,
             };
-            run.fill_band((start, end), width as usize, sun_added);
+            sun_lit = run.fill_band((start, end), width as usize, sun_added);
         }
         let mut reflects = false;
         for card in &ctx.shader.cards {
@@ -476,6 +481,7 @@ fn shade_flat_row(
             fan_end,
             reflects,
             sun: sun.is_some(),
+            sun_lit,
         });
     }
     let sun_added = &sun_added[..];
@@ -529,12 +535,13 @@ fn shade_bands(
             };
             ctx.shader.composite(&dir, heights, background)
         };
-        for (a, b) in band_runs(band.start, band.end, width) {
+        let runs = band_runs(band.start, band.end, width);
+        for ((a, b), lit) in runs.into_iter().zip(band.sun_lit) {
             if b <= a {
                 continue;
             }
             if cards.clone().next().is_none() {
-                fill_run(ctx, &mut row[a..b], band, sun_added, a, non_finite);
+                fill_run(ctx, &mut row[a..b], band, sun_added, (a, lit), non_finite);
                 continue;
             }
             let mut x = a;
@@ -545,7 +552,7 @@ fn shade_bands(
                     continue;
                 }
                 let end = (x + 1..b).find(|&e| in_card(e)).unwrap_or(b);
-                fill_run(ctx, &mut row[x..end], band, sun_added, x, non_finite);
+                fill_run(ctx, &mut row[x..end], band, sun_added, (x, lit), non_finite);
                 x = end;
             }
         }
@@ -571,39 +578,56 @@ fn finite_or_fallback(c: [f64; 3], ctx: &FlatRow<'_>, non_finite: &AtomicU64) ->
 }
 
 /// Fill `run`, the columns from `first` on of one band of a row that meet no card: the band's
-/// background, plus the sun's part per column (`sun_added`) where the band may show the sun.
+/// background, plus the sun's part per column (`sun_added`) where the band may show the sun,
+/// which is +0 outside the columns `lit`: there the pixels are one colour, worked out once.
 fn fill_run(
     ctx: &FlatRow<'_>,
     run: &mut [[f32; 4]],
     band: &FlatBand,
     sun_added: &[[f64; 3]],
-    first: usize,
+    (first, lit): (usize, (usize, usize)),
     non_finite: &AtomicU64,
 ) {
     let c = band.background;
-    if band.sun {
-        let sums = run.iter_mut().zip(&sun_added[first..]);
-        let mut all_finite = true;
-        for (px, add) in sums {
+    if !band.sun {
+        fill_constant(ctx, run, c, non_finite);
+        return;
+    }
+    let end = first + run.len();
+    let (lo, hi) = (lit.0.clamp(first, end), lit.1.clamp(first, end));
+    let (lo, hi) = if lo < hi { (lo, hi) } else { (end, end) };
+    let (before, rest) = run.split_at_mut(lo - first);
+    let (lit_run, after) = rest.split_at_mut(hi - lo);
+    let dark = [c[0] + 0.0, c[1] + 0.0, c[2] + 0.0];
+    fill_constant(ctx, before, dark, non_finite);
+    fill_constant(ctx, after, dark, non_finite);
+    let sums = lit_run.iter_mut().zip(&sun_added[lo..hi]);
+    let mut all_finite = true;
+    for (px, add) in sums {
+        let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
+        // Without a branch per pixel (the loop vectorises); a run with a colour that is not
+        // finite is done again below, pixel by pixel.
+        all_finite &= sum[0].is_finite() & sum[1].is_finite() & sum[2].is_finite();
+        *px = pixel(sum);
+    }
+    if !all_finite {
+        for (px, add) in lit_run.iter_mut().zip(&sun_added[lo..hi]) {
             let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
-            // Without a branch per pixel (the loop vectorises); a run with a colour that is
-            // not finite is done again below, pixel by pixel.
-            all_finite &= sum[0].is_finite() & sum[1].is_finite() & sum[2].is_finite();
-            *px = pixel(sum);
+            *px = pixel(finite_or_fallback(sum, ctx, non_finite));
         }
-        if !all_finite {
-            for (px, add) in run.iter_mut().zip(&sun_added[first..]) {
-                let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
-                *px = pixel(finite_or_fallback(sum, ctx, non_finite));
-            }
-        }
-    } else {
-        let fill = pixel(finite_or_fallback(c, ctx, non_finite));
-        run.fill(fill);
-        if !c.iter().all(|v| v.is_finite()) {
-            // Counted once above; once per further pixel.
-            non_finite.fetch_add(run.len() as u64 - 1, Ordering::Relaxed);
-        }
+    }
+}
+
+/// Fill `run` with colour `c` (the shader's fallback where it is not finite, counted per
+/// pixel).
+fn fill_constant(ctx: &FlatRow<'_>, run: &mut [[f32; 4]], c: [f64; 3], non_finite: &AtomicU64) {
+    if run.is_empty() {
+        return;
+    }
+    run.fill(pixel(finite_or_fallback(c, ctx, non_finite)));
+    if !c.iter().all(|v| v.is_finite()) {
+        // Counted once above; once per further pixel.
+        non_finite.fetch_add(run.len() as u64 - 1, Ordering::Relaxed);
     }
 }
 
