@@ -291,18 +291,19 @@ impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
         if (0..K).all(|k| error[k] <= tolerances[k]) {
             return Some(value);
         }
-        // Each piece: its ends, its integrals and their error estimates.
-        let mut pieces = [(0.0, 0.0, [0.0; K], [0.0; K]); MAX_PIECES];
+        // Each piece: its ends, its integrals and their error estimates. Grown as needed (most
+        // climbs settle in a few pieces): a full array of MAX_PIECES would be zeroed every call.
+        let mut pieces = Vec::with_capacity(8);
         let (value, error) = Self::rule(&GK15, a, b, &f)?;
-        pieces[0] = (a, b, value, error);
-        let mut count = 1;
+        pieces.push((a, b, value, error));
         let share = |error: &[f64; K]| {
             (0..K)
                 .map(|k| error[k] / tolerances[k])
                 .fold(0.0f64, f64::max)
         };
         loop {
-            let used = &pieces[..count];
+            let count = pieces.len();
+            let used = &pieces[..];
             let settled = (0..K).all(|k| {
                 tolerances[k].is_infinite()
                     || used.iter().map(|p| p.3[k]).sum::<f64>() <= tolerances[k]
@@ -320,8 +321,7 @@ impl<'f, F: Fn(f64) -> (f64, f64)> Leg<'f, F> {
             let (left, left_error) = Self::rule(&GK15, lo, mid, &f)?;
             let (right, right_error) = Self::rule(&GK15, mid, hi, &f)?;
             pieces[worst] = (lo, mid, left, left_error);
-            pieces[count] = (mid, hi, right, right_error);
-            count += 1;
+            pieces.push((mid, hi, right, right_error));
         }
     }
 
