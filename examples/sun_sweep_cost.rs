@@ -8,7 +8,9 @@
 //! 0.04° higher (`pairX+`: the difference of the two is the cost of one later frame there).
 //! `valgrind --tool=callgrind target/release/examples/sun_sweep_cost MODE` for each mode: the
 //! sweep costs (sweep − load) / (one − load) frames, a count that does not depend on the load of
-//! a shared machine.
+//! a shared machine. Mode `alternate` (run without valgrind) renders one frame and the sweep in
+//! turn, six times each, and prints each one's wall time and the minor page faults it took
+//! (Linux: /proc/self/stat).
 
 use std::path::PathBuf;
 
@@ -48,6 +50,25 @@ fn main() -> anyhow::Result<()> {
         let frames = sweep(&elevations)?;
         let rows: u32 = frames.iter().map(|f| f.rows_shaded).sum();
         println!("{} frames, {rows} rows shaded", frames.len());
+    } else if mode == "alternate" {
+        let elevations: Vec<f64> = (0..100).map(|i| -3.0 + 0.04 * f64::from(i)).collect();
+        for _ in 0..6 {
+            let (f0, t0) = (minor_faults(), std::time::Instant::now());
+            let tracer = prepare_tracer(&scene, refractive, &options)?;
+            drop(render_scene(&scene, tracer.as_ref(), &options)?);
+            let (f1, t1) = (minor_faults(), std::time::Instant::now());
+            drop(sweep(&elevations)?);
+            let (f2, t2) = (minor_faults(), std::time::Instant::now());
+            let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
+            let faults = |a: Option<u64>, b: Option<u64>| b.zip(a).map(|(b, a)| b - a);
+            println!(
+                "one frame {:.1} ms, {:?} faults; 100 frames {:.1} ms, {:?} faults",
+                ms(t0, t1),
+                faults(f0, f1),
+                ms(t1, t2),
+                faults(f1, f2)
+            );
+        }
     } else if let Some(at) = mode.strip_prefix("pair") {
         let (at, next) = at.strip_suffix('+').map_or((at, false), |a| (a, true));
         let x: f64 = at.parse()?;
@@ -61,7 +82,17 @@ fn main() -> anyhow::Result<()> {
             frames.iter().map(|f| f.rows_shaded).collect::<Vec<_>>()
         );
     } else {
-        anyhow::bail!("unknown mode {mode:?}: use `load`, `one`, `sweep`, `pairX` or `pairX+`");
+        anyhow::bail!(
+            "unknown mode {mode:?}: use `load`, `one`, `sweep`, `pairX`, `pairX+` or `alternate`"
+        );
     }
     Ok(())
+}
+
+/// This process's minor page faults so far (Linux), else `None`.
+fn minor_faults() -> Option<u64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The fields after the command name (which is in parentheses and may hold spaces).
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    fields.get(7)?.parse().ok()
 }

@@ -15,7 +15,10 @@
 //! test fails across them), and inside them the addition is within about that tolerance of the
 //! exact shading. The disc's terms that depend on the elevation alone are worked out once per
 //! band ([`DiscChord`]), and a column whose azimuth is outside the chord's half-width is dark
-//! without evaluating it (the same 0 the exact shading gives).
+//! without evaluating it (the same 0 the exact shading gives): the columns on either side of the
+//! chord are found by binary search ([`chord_columns`]), and they and every node interval among
+//! them are set to +0 without refinement; the caller is told the span outside which the addition
+//! is +0, and fills the pixels there with one colour.
 //!
 //! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
 //! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated

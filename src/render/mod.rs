@@ -598,6 +598,7 @@ fn fill_run(
     let (lo, hi) = if lo < hi { (lo, hi) } else { (end, end) };
     let (before, rest) = run.split_at_mut(lo - first);
     let (lit_run, after) = rest.split_at_mut(hi - lo);
+    // The sum with a +0 addition, as the loop below forms it (a −0 channel becomes +0).
     let dark = [c[0] + 0.0, c[1] + 0.0, c[2] + 0.0];
     fill_constant(ctx, before, dark, non_finite);
     fill_constant(ctx, after, dark, non_finite);
