@@ -9,8 +9,8 @@
 //! `valgrind --tool=callgrind target/release/examples/sun_sweep_cost MODE` for each mode: the
 //! sweep costs (sweep − load) / (one − load) frames, a count that does not depend on the load of
 //! a shared machine. Mode `alternate` (run without valgrind) renders one frame and the sweep in
-//! turn, six times each, and prints each one's wall time and the minor page faults it took
-//! (Linux: /proc/self/stat).
+//! turn, six times each, each with a tracer prepared for it, and prints each one's wall time
+//! and the minor page faults it took (Linux: /proc/self/stat).
 
 use std::path::PathBuf;
 
@@ -57,7 +57,15 @@ fn main() -> anyhow::Result<()> {
             let tracer = prepare_tracer(&scene, refractive, &options)?;
             drop(render_scene(&scene, tracer.as_ref(), &options)?);
             let (f1, t1) = (minor_faults(), std::time::Instant::now());
-            drop(sweep(&elevations)?);
+            // Each side prepares its own tracer, as the bench does.
+            let tracer = prepare_tracer(&scene, refractive, &options)?;
+            let radians: Vec<f64> = elevations.iter().map(|e| e.to_radians()).collect();
+            drop(render_sun_sweep(
+                &scene,
+                tracer.as_ref(),
+                &options,
+                &radians,
+            )?);
             let (f2, t2) = (minor_faults(), std::time::Instant::now());
             let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
             let faults = |a: Option<u64>, b: Option<u64>| b.zip(a).map(|(b, a)| b - a);

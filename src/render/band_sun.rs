@@ -362,7 +362,8 @@ fn chord_columns(
 /// it, linear interpolation between them elsewhere (module docs); `background` is the colour
 /// the values are added to. `value` is +0 (every channel) at the columns outside `lit`: those
 /// are set so without asking it, and so is every interval between two nodes on one side of
-/// `lit` (refinement would find its middle +0 and interpolate +0 from its ends: the same).
+/// `lit`, or between any two nodes when `lit` is empty (refinement would find its middle +0 and
+/// interpolate +0 from its ends: the same).
 /// Returns the columns outside of which `out` was set to +0 (possibly empty).
 fn fill_columns(
     (a, b): (usize, usize),
@@ -388,7 +389,9 @@ fn fill_columns(
             widen(x, x);
         }
     }
-    for w in nodes.windows(2).filter(|w| w[1] >= lit_lo && w[0] < lit_hi) {
+    // A node interval is dark when it lies on one side of `lit`, or `lit` is empty.
+    let dark_between = |i: usize, j: usize| j < lit_lo || i >= lit_hi || lit_lo >= lit_hi;
+    for w in nodes.windows(2).filter(|w| !dark_between(w[0], w[1])) {
         widen(w[0], w[1]);
     }
     open.clear();
@@ -397,7 +400,7 @@ fn fill_columns(
         if j <= i + 1 {
             continue;
         }
-        if j < lit_lo || i >= lit_hi {
+        if dark_between(i, j) {
             out[i + 1..j].fill([0.0; 3]);
             continue;
         }
@@ -899,31 +902,40 @@ mod tests {
 
     #[test]
     fn columns_known_dark_are_filled_with_the_bits_refinement_gives_them() {
-        // Limb-darkened chords (zero outside), wide, narrow (below the node spacing) and at the
-        // run's ends, on runs that start at and after column 0: filling with the columns
-        // outside the chord's known dark gives the same bits as refining them, and the span it
-        // returns holds every column it did not set to +0.
+        // Limb-darkened chords (zero outside), wide, narrow (below the node spacing), at the
+        // run's ends and outside it, bright and faint (a faint chord's interpolation into the
+        // dark columns is accepted, so an interval skipped wrongly changes bits), with chord
+        // edges on nodes and between them, on runs that start at and after column 0: filling
+        // with the columns outside the chord known dark gives the same bits as refining them,
+        // and the span returned holds every column not set to +0, within the nodes round the
+        // chord.
         let background = [0.3, 0.35, 0.4];
-        for (c, half) in [
+        let chords = [
             (200.0, 150.0),
             (13.0, 40.0),
             (390.0, 20.0),
             (101.3, 2.5),
             (250.0, 0.4),
-        ] {
+            (200.0, 152.0),
+            (201.0, 152.0),
+            (500.0, 20.0),
+        ];
+        for ((c, half), amplitude) in chords.into_iter().flat_map(|c| [(c, 2.0), (c, 2e-4)]) {
             let value = |x: usize| {
                 let s = ((x as f64 + 0.5 - c) / half).abs();
                 if s >= 1.0 {
                     return [0.0; 3];
                 }
-                let v = 2.0 * (1.0 - 0.6 * (1.0 - (1.0 - s * s).sqrt()));
+                let v = amplitude * (1.0 - 0.6 * (1.0 - (1.0 - s * s).sqrt()));
                 [v, 0.9 * v, 0.8 * v]
             };
-            let lit = (
-                (c - half - 0.5).floor().max(0.0) as usize,
-                ((c + half + 0.5).ceil() as usize).min(400),
-            );
             for ((a, b), centre) in [((0, 400), None), ((37, 333), Some(c as usize))] {
+                // The chord's columns in the run, exactly.
+                let lit_columns: Vec<usize> = (a..b).filter(|&x| value(x) != [0.0; 3]).collect();
+                let lit = match (lit_columns.first(), lit_columns.last()) {
+                    (Some(&lo), Some(&last)) => (lo, last + 1),
+                    _ => (a, a),
+                };
                 let fill = |lit: (usize, usize)| {
                     let mut out = vec![[f64::NAN; 3]; 400];
                     let span = fill_columns(
@@ -942,18 +954,23 @@ mod tests {
                 let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> {
                     v.iter().map(|p| p.map(f64::to_bits)).collect()
                 };
-                assert_eq!(
-                    bits(&refined),
-                    bits(&known),
-                    "chord {c} ± {half} in {a}..{b}"
-                );
-                assert!(a <= lo && lo <= hi && hi <= b, "{lo}..{hi}");
+                let case = format!("chord {c} ± {half} × {amplitude} in {a}..{b}");
+                assert_eq!(bits(&refined), bits(&known), "{case}");
+                assert!(a <= lo && lo <= hi && hi <= b, "{case}: {lo}..{hi}");
                 for x in (a..b).filter(|x| !(lo..hi).contains(x)) {
-                    assert_eq!(
-                        known[x].map(f64::to_bits),
-                        [0; 3],
-                        "{c} ± {half}: column {x}"
-                    );
+                    assert_eq!(known[x].map(f64::to_bits), [0; 3], "{case}: column {x}");
+                }
+                // Tight: within the nodes round the chord, the last before it and the first
+                // after it (an interval from a dark node to a lit one may interpolate into its
+                // dark columns); empty when the chord is outside the run.
+                let mut nodes = Vec::new();
+                node_columns((a, b), STRIDE, centre, &mut nodes);
+                if lit.0 < lit.1 {
+                    let below = *nodes.iter().rev().find(|&&n| n < lit.0).unwrap_or(&lit.0);
+                    let above = *nodes.iter().find(|&&n| n >= lit.1).unwrap_or(&(b - 1));
+                    assert!(lo >= below && hi <= above + 1, "{case}: {lo}..{hi}");
+                } else {
+                    assert_eq!(lo, hi, "{case}");
                 }
             }
         }

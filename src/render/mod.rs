@@ -513,6 +513,7 @@ fn shade_bands(
     let width = row.len();
     let n_dist = band_heights.len() / bands.len().max(1);
     let film_y = ctx.y as f64 + 0.5;
+    let fallback = ctx.shader.fallback;
     // A rough sea's parts of the slopes, found once per band and set of mirrored cards.
     let mut parts = reflection::PartsCache::default();
     for (k, band) in bands.iter().enumerate() {
@@ -541,18 +542,32 @@ fn shade_bands(
                 continue;
             }
             if cards.clone().next().is_none() {
-                fill_run(ctx, &mut row[a..b], band, sun_added, (a, lit), non_finite);
+                fill_run(
+                    fallback,
+                    &mut row[a..b],
+                    band,
+                    sun_added,
+                    (a, lit),
+                    non_finite,
+                );
                 continue;
             }
             let mut x = a;
             while x < b {
                 if in_card(x) {
-                    row[x] = pixel(finite_or_fallback(composite(x), ctx, non_finite));
+                    row[x] = pixel(finite_or_fallback(composite(x), fallback, non_finite));
                     x += 1;
                     continue;
                 }
                 let end = (x + 1..b).find(|&e| in_card(e)).unwrap_or(b);
-                fill_run(ctx, &mut row[x..end], band, sun_added, (x, lit), non_finite);
+                fill_run(
+                    fallback,
+                    &mut row[x..end],
+                    band,
+                    sun_added,
+                    (x, lit),
+                    non_finite,
+                );
                 x = end;
             }
         }
@@ -565,15 +580,15 @@ fn pixel(c: [f64; 3]) -> [f32; 4] {
     [c[0] as f32, c[1] as f32, c[2] as f32, 1.0]
 }
 
-/// `c`, or the shader's fallback colour when a channel is not finite (counted in
+/// `c`, or `fallback` (the shader's fallback colour) when a channel is not finite (counted in
 /// `non_finite`, per sample).
 #[inline]
-fn finite_or_fallback(c: [f64; 3], ctx: &FlatRow<'_>, non_finite: &AtomicU64) -> [f64; 3] {
+fn finite_or_fallback(c: [f64; 3], fallback: [f64; 3], non_finite: &AtomicU64) -> [f64; 3] {
     if c.iter().all(|v| v.is_finite()) {
         c
     } else {
         non_finite.fetch_add(1, Ordering::Relaxed);
-        ctx.shader.fallback
+        fallback
     }
 }
 
@@ -581,7 +596,7 @@ fn finite_or_fallback(c: [f64; 3], ctx: &FlatRow<'_>, non_finite: &AtomicU64) ->
 /// background, plus the sun's part per column (`sun_added`) where the band may show the sun,
 /// which is +0 outside the columns `lit`: there the pixels are one colour, worked out once.
 fn fill_run(
-    ctx: &FlatRow<'_>,
+    fallback: [f64; 3],
     run: &mut [[f32; 4]],
     band: &FlatBand,
     sun_added: &[[f64; 3]],
@@ -590,7 +605,7 @@ fn fill_run(
 ) {
     let c = band.background;
     if !band.sun {
-        fill_constant(ctx, run, c, non_finite);
+        fill_constant(fallback, run, c, non_finite);
         return;
     }
     let end = first + run.len();
@@ -600,8 +615,8 @@ fn fill_run(
     let (lit_run, after) = rest.split_at_mut(hi - lo);
     // The sum with a +0 addition, as the loop below forms it (a −0 channel becomes +0).
     let dark = [c[0] + 0.0, c[1] + 0.0, c[2] + 0.0];
-    fill_constant(ctx, before, dark, non_finite);
-    fill_constant(ctx, after, dark, non_finite);
+    fill_constant(fallback, before, dark, non_finite);
+    fill_constant(fallback, after, dark, non_finite);
     let sums = lit_run.iter_mut().zip(&sun_added[lo..hi]);
     let mut all_finite = true;
     for (px, add) in sums {
@@ -614,18 +629,17 @@ fn fill_run(
     if !all_finite {
         for (px, add) in lit_run.iter_mut().zip(&sun_added[lo..hi]) {
             let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
-            *px = pixel(finite_or_fallback(sum, ctx, non_finite));
+            *px = pixel(finite_or_fallback(sum, fallback, non_finite));
         }
     }
 }
 
-/// Fill `run` with colour `c` (the shader's fallback where it is not finite, counted per
-/// pixel).
-fn fill_constant(ctx: &FlatRow<'_>, run: &mut [[f32; 4]], c: [f64; 3], non_finite: &AtomicU64) {
+/// Fill `run` with colour `c` (`fallback` where it is not finite, counted per pixel).
+fn fill_constant(fallback: [f64; 3], run: &mut [[f32; 4]], c: [f64; 3], non_finite: &AtomicU64) {
     if run.is_empty() {
         return;
     }
-    run.fill(pixel(finite_or_fallback(c, ctx, non_finite)));
+    run.fill(pixel(finite_or_fallback(c, fallback, non_finite)));
     if !c.iter().all(|v| v.is_finite()) {
         // Counted once above; once per further pixel.
         non_finite.fetch_add(run.len() as u64 - 1, Ordering::Relaxed);
@@ -879,6 +893,74 @@ mod tests {
             assert!(banded_rows >= 2, "w{width}: {banded_rows}");
         }
         assert!(most_bands >= 2, "{most_bands}");
+    }
+
+    #[test]
+    fn a_run_with_a_lit_span_gives_each_pixel_its_sum_and_counts_each_non_finite_one() {
+        // Per pixel, as a run was filled before lit spans: the background plus the addition
+        // (which is +0 outside the span), the fallback where that is not finite, counted once
+        // per pixel. Runs before, across, inside and after the span; empty spans; a −0, a NaN
+        // and an infinite background channel; a NaN addition.
+        let fallback = [0.5, 0.25, 0.125];
+        let nan = f64::NAN;
+        let backgrounds = [[0.2, -0.0, 0.4], [0.2, nan, 0.4], [f64::INFINITY, 0.1, 0.1]];
+        let runs = [(0, 20), (4, 12), (8, 4), (0, 5), (15, 5), (3, 9)];
+        for lit in [(6, 14), (20, 20), (0, 0)] {
+            // The additions: +0 outside the span.
+            let added: Vec<[f64; 3]> = (0..20)
+                .map(|x| {
+                    let inside = (lit.0..lit.1).contains(&x);
+                    if inside {
+                        [1e-3 * x as f64, 2e-3, 0.0]
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect();
+            let mut with_nan = added.clone();
+            with_nan[9] = if lit.0 < lit.1 {
+                [nan, 0.0, 0.0]
+            } else {
+                [0.0; 3]
+            };
+            for background in backgrounds {
+                for sun_added in [&added, &with_nan] {
+                    for (first, len) in runs {
+                        let band = FlatBand {
+                            start: 0,
+                            end: 20,
+                            alpha: 0.0,
+                            background,
+                            clear_sky: false,
+                            fan_end: FanEnd::Lost,
+                            reflects: false,
+                            sun: true,
+                            sun_lit: [lit, lit],
+                        };
+                        let non_finite = AtomicU64::new(0);
+                        let mut run = vec![[9.0f32; 4]; len];
+                        let at = (first, lit);
+                        fill_run(fallback, &mut run, &band, sun_added, at, &non_finite);
+                        let mut want_bad = 0;
+                        for (k, px) in run.iter().enumerate() {
+                            let add = sun_added[first + k];
+                            let sum = [0, 1, 2].map(|c| background[c] + add[c]);
+                            let want = if sum.iter().all(|v| v.is_finite()) {
+                                sum
+                            } else {
+                                want_bad += 1;
+                                fallback
+                            };
+                            let bits = |p: [f32; 4]| p.map(f32::to_bits);
+                            let case = format!("{background:?} {lit:?} {first}+{k}");
+                            assert_eq!(bits(*px), bits(pixel(want)), "{case}");
+                        }
+                        let bad = non_finite.load(Ordering::Relaxed);
+                        assert_eq!(bad, want_bad, "{background:?} {lit:?} {first}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
