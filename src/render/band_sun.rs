@@ -126,7 +126,7 @@ impl BandColumns<'_> {
 
     /// Fill `out[x]` for the columns x of the band whose right-half columns are [`start`,
     /// `end`) in a row `width` columns wide: those, and the left-half columns at the same
-    /// distance from the centre column. Returns, for each of those two runs, the columns
+    /// distance from the centre column ([`super::band_runs`]). Returns, for each of those two runs, the columns
     /// outside of which the addition is exactly zero (+0 in every channel; possibly empty).
     pub(super) fn fill_band(
         &self,
@@ -135,10 +135,7 @@ impl BandColumns<'_> {
         out: &mut [[f64; 3]],
     ) -> [(usize, usize); 2] {
         SCRATCH.with_borrow_mut(|scratch| {
-            [
-                self.fill((start, end), out, scratch),
-                self.fill((width - end, (width - start).min(width / 2)), out, scratch),
-            ]
+            super::band_runs(start, end, width).map(|run| self.fill(run, out, scratch))
         })
     }
 
