@@ -41,6 +41,13 @@ pub const STRIDE: usize = 8;
 /// Node spacing (columns) of the glitter before refinement (it is smooth: [`Smooth`]).
 pub const SMOOTH_STRIDE: usize = 128;
 
+/// Share of the fill's tolerance of the background ([`TOLERANCE`] of it plus [`FLOOR`]) below
+/// which a bound on the glitter over a run's tail lets it be taken as dark (+0).
+pub const NEGLIGIBLE: f64 = 1e-3;
+
+/// How far below [`NEGLIGIBLE`] a run's end must be for its dark tail to be looked for.
+const TAIL_SEARCH: f64 = 1e-8;
+
 /// Relative error (per channel) at which linear interpolation closes an interval.
 pub const TOLERANCE: f64 = 1e-3;
 
@@ -164,8 +171,8 @@ impl BandColumns<'_> {
                 air: transmittance,
             };
             let glitter = Smooth { exact, radiance };
-            glitter.fill((a, b), centre, self.background, out, scratch);
-            return (a, b);
+            let tails = |ends| self.glitter_lit((a, b), &sun, refl, transmittance, ends);
+            return glitter.fill((a, b), centre, self.background, out, scratch, tails);
         }
         let Some((chord, weight)) = self.disc_along() else {
             out[a..b.max(a)].fill([0.0; 3]);
@@ -196,6 +203,82 @@ impl BandColumns<'_> {
             out,
             scratch,
         )
+    }
+
+    /// The columns [lo, hi) of [`a`, `b`) (not empty) outside of which the glitter of `sun`,
+    /// seen through the air's transmittance `air`, is negligible: a bound on it over the
+    /// columns of each tail ([`SeaSunAt::glint_bound`]) is at most [`NEGLIGIBLE`] of the
+    /// fill's tolerance of the band's background. Only the ends `ends` says may be dark (left,
+    /// right) are looked at. Each end's tail is found by binary search on its first column, the
+    /// bound checked over the whole tail found; empty (lo ≥ hi) where the whole run is
+    /// negligible.
+    fn glitter_lit(
+        &self,
+        (a, b): (usize, usize),
+        sun: &SeaSunAt,
+        refl: &super::reflection::Reflection,
+        air: [f64; 3],
+        [left, right]: [bool; 2],
+    ) -> (usize, usize) {
+        let heading = self.shader.heading_rad;
+        let azimuth = |x: usize| heading + self.azimuth_offset(x);
+        let (first, last) = (azimuth(a), azimuth(b - 1));
+        let span = (last - first).abs();
+        if span.is_nan() || span >= std::f64::consts::PI {
+            return (a, b);
+        }
+        let Some(bound) = sun.glint_bound(refl, (first, last)) else {
+            return (a, b);
+        };
+        let limit: [f64; 3] =
+            [0, 1, 2].map(|c| NEGLIGIBLE * (TOLERANCE * self.background[c].abs() + FLOOR) / air[c]);
+        let at = |x: usize| bound.azimuth_from_sun(azimuth(x));
+        // Every column between two whose azimuths from the sun's are `p` and `q`.
+        let dark = |p, q| {
+            let v = bound.at(p, q);
+            (0..3).all(|c| v[c] <= limit[c])
+        };
+        let (start, end) = (bound.azimuth_from_sun(first), bound.azimuth_from_sun(last));
+        if left && right && dark(start, end) {
+            return (a, a);
+        }
+        // Tails shorter than a quarter of the run are not looked for: the search would cost
+        // about what they save.
+        let quarter = (b - a) / 4;
+        // The first column of the right tail: `hi` dark to the end, `probe` not.
+        let hi = if right && dark(at(b - 1 - quarter), end) {
+            let (mut probe, mut hi) = (a, b - 1 - quarter);
+            while hi > probe + 1 {
+                let mid = probe + (hi - probe) / 2;
+                if dark(at(mid), end) {
+                    hi = mid
+                } else {
+                    probe = mid
+                }
+            }
+            hi
+        } else {
+            b
+        };
+        // The end of the left tail: `lo` − 1 dark from the start, `probe` not.
+        let lo = if left && dark(start, at(a + quarter)) {
+            if dark(start, at(hi - 1)) {
+                return (a, a);
+            }
+            let (mut lo, mut probe) = (a + quarter, hi - 1);
+            while probe > lo + 1 {
+                let mid = lo + (probe - lo) / 2;
+                if dark(start, at(mid)) {
+                    lo = mid
+                } else {
+                    probe = mid
+                }
+            }
+            lo + 1
+        } else {
+            a
+        };
+        (lo, hi)
     }
 
     /// The disc (or a mirror sea's image of it) along the band's elevation and what weights its
@@ -536,9 +619,10 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
         background: [f64; 3],
         out: &mut [[f64; 3]],
         scratch: &mut Scratch,
-    ) {
+        tails: impl FnOnce([bool; 2]) -> (usize, usize),
+    ) -> (usize, usize) {
         if b <= a {
-            return;
+            return (a, a);
         }
         let Scratch {
             nodes,
@@ -546,7 +630,6 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
             exact: w,
             stamp,
         } = scratch;
-        node_columns((a, b), SMOOTH_STRIDE, centre, nodes);
         // The exact factor and transmittance of the columns evaluated so far, those entries of
         // `w` with this call's stamp (a NaN factor is kept as 0, and its radiance as the exact
         // shading gives it).
@@ -570,6 +653,28 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
                 out[x] = self.radiance.of(f, t);
             }
         };
+        // The run's ends first: where one's exact radiance is far below negligible, `tails` may
+        // find columns from it on that are dark, left at +0 (it takes a column as dark only by
+        // a bound on it, never below its exact value). An end only just negligible has a short
+        // tail, if any, not worth the search: the glitter falls by orders of magnitude across it.
+        exact(a, w, out);
+        exact(b - 1, w, out);
+        let negligible = |x: usize| {
+            (0..3).all(|c| {
+                out[x][c] <= TAIL_SEARCH * NEGLIGIBLE * (TOLERANCE * background[c].abs() + FLOOR)
+            })
+        };
+        let (lo, hi) = match [negligible(a), negligible(b - 1)] {
+            [false, false] => (a, b),
+            ends => tails(ends),
+        };
+        out[a..lo.min(b)].fill([0.0; 3]);
+        out[hi.max(lo).max(a)..b].fill([0.0; 3]);
+        if lo >= hi {
+            return (a, a);
+        }
+        let (a, b) = (lo, hi);
+        node_columns((a, b), SMOOTH_STRIDE, centre, nodes);
         for &x in nodes.iter() {
             exact(x, w, out);
         }
@@ -603,6 +708,7 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
                 None => open.extend([(i, m), (m, j)]),
             }
         }
+        (a, b)
     }
 
     /// Whether `fit`, through the exact factors and transmittances at the ends and middle of
@@ -1126,6 +1232,7 @@ mod tests {
             background,
             &mut out,
             &mut Scratch::default(),
+            |_| (0, 400),
         );
         (
             worst_error(&out, |x| radiance(k(x), weight(x)), background),

@@ -1182,6 +1182,114 @@ mod tests {
     }
 
     #[test]
+    fn the_glitters_dark_tails_and_fits_are_within_the_tolerance_of_each_columns_own() {
+        use crate::render::band_sun::{BandColumns, BandSun, FLOOR, TOLERANCE};
+        use crate::render::reflection::SeaSunAt;
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/scenes/fig12b_novaya_zemlya_strips.toml"
+        );
+        let mut scene = Scene::from_file(std::path::Path::new(path)).expect("scene");
+        (scene.camera.width, scene.camera.height) = (400, 200);
+        let loaded = scene.atmosphere.load().expect("atmosphere");
+        let refractive = loaded.as_ref().map(|a| &a.refractive);
+        let options = RenderOptions {
+            samples_per_pixel: Some(1),
+            quiet: true,
+            ..RenderOptions::default()
+        };
+        let tracer = crate::render::prepare_tracer(&scene, refractive, &options).expect("tracer");
+        let width = scene.camera.width as usize;
+        // Suns low enough for the glitter to fall far below the sea across most of a row, and
+        // one high enough for it to cover the whole row.
+        for sun_deg in [-1.1, -0.96, -0.6, -0.2, 0.54] {
+            let mut scene = scene.clone();
+            scene.sun.as_mut().expect("sun").elevation_rad = f64::to_radians(sun_deg);
+            let plan = FramePlan::new(&scene, tracer.as_ref(), &options, None).expect("plan");
+            let (fan, shader) = (plan.fan.as_ref().expect("fan"), &plan.shader);
+            let refl = shader.reflection.as_ref().expect("sea");
+            let mut heights = vec![None; shader.distances_m.len()];
+            let (mut compared, mut dark, mut lit) = (0, 0, 0);
+            let mut out = vec![[f64::NAN; 3]; width];
+            for y in 0..plan.height {
+                let film_y = f64::from(y) + 0.5;
+                let bands = flat_bands(&plan.frame, y, plan.width, plan.flat_row_limit_rad);
+                let bands: Vec<(usize, f64)> = bands.into_iter().flatten().collect();
+                for (k, &(start, alpha)) in bands.iter().enumerate() {
+                    let end_of_band = bands.get(k + 1).map_or(width, |b| b.0);
+                    if alpha >= plan.clear_sky_from {
+                        continue;
+                    }
+                    let fan_end = fan.interpolate(alpha, &mut heights);
+                    let Some(
+                        band_sun @ BandSun::Sea {
+                            sun: sun @ SeaSunAt::Glint { .. },
+                            transmittance,
+                        },
+                    ) = BandSun::of(shader, alpha, fan_end)
+                    else {
+                        continue;
+                    };
+                    let dir =
+                        plan.frame
+                            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
+                    let background = shader.background_with(&dir, fan_end, false);
+                    let columns = BandColumns {
+                        shader,
+                        frame: &plan.frame,
+                        film_y,
+                        alpha,
+                        sun: band_sun,
+                        background,
+                    };
+                    out.fill([f64::NAN; 3]);
+                    let spans = columns.fill_band((start, end_of_band), width, &mut out);
+                    let runs = crate::render::band_runs(start, end_of_band, width);
+                    for ((a, b), (lo, hi)) in runs.into_iter().zip(spans) {
+                        for (x, &got) in out.iter().enumerate().take(b).skip(a) {
+                            let azimuth = plan
+                                .frame
+                                .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha)
+                                .azimuth_offset_rad()
+                                + shader.heading_rad;
+                            let want = sun.at(refl, azimuth);
+                            let want = [0, 1, 2].map(|c| want[c] * transmittance[c]);
+                            let outside = !(lo..hi).contains(&x);
+                            if outside {
+                                assert_eq!(got, [0.0; 3], "{sun_deg}° row {y} column {x}");
+                            }
+                            for c in 0..3 {
+                                let allowed = TOLERANCE * (background[c] + want[c]).abs() + FLOOR;
+                                assert!(
+                                    (got[c] - want[c]).abs() <= allowed,
+                                    "{sun_deg}° row {y} column {x} ({outside}): {got:?} vs {want:?}"
+                                );
+                            }
+                            compared += 1;
+                            dark += usize::from(outside);
+                            lit += usize::from(want.iter().any(|&v| v > 1e-3 * background[1]));
+                        }
+                    }
+                }
+            }
+            eprintln!("{sun_deg}°: {compared} columns, {dark} dark, {lit} visibly lit");
+            assert!(
+                compared >= 10_000 && lit > 500,
+                "{sun_deg}°: {compared} {lit}"
+            );
+            // The tails found: most of a row's columns when the sun is below the horizon (its
+            // glitter a narrow streak), none when it is above (the glitter covers every row).
+            if sun_deg < -0.5 {
+                assert!(dark > compared / 2, "{sun_deg}°: {dark} of {compared}");
+            } else if sun_deg < 0.0 {
+                assert!(dark > 0, "{sun_deg}°");
+            } else {
+                assert_eq!((dark, lit), (0, compared), "{sun_deg}°");
+            }
+        }
+    }
+
+    #[test]
     fn the_frames_azimuth_bounds_hold_every_film_point_and_are_narrow() {
         for (heading_deg, pitch_deg, hfov_deg, sun_deg) in [
             (0.0, 0.0, 10.0, 0.0),

@@ -26,10 +26,10 @@ use rayon::prelude::*;
 use super::objects::{Composed, Meet, PartAtCard, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, FanRay, RayTracer};
 use super::sea_sun::SeaSunTable;
-use super::shade::{AngleTable, Shader, ViewCard};
+use super::shade::{AngleTable, Shader, ViewCard, wrap_pi};
 use super::terrain::{TerrainView, piece_density};
 use crate::scene::camera::ViewDirection;
-use crate::scene::sea::{FacetNode, GlintGeometry, facet_slope_range};
+use crate::scene::sea::{FacetNode, GlintBound, GlintGeometry, facet_slope_range};
 use crate::scene::sky::SunDisc;
 use crate::scene::{Sea, Sky, Sun};
 
@@ -1193,6 +1193,42 @@ impl SeaSunAt {
         ))
     }
 
+    /// Bounds on the glitter towards absolute azimuths between `azimuth_rad` (a, b), either way
+    /// round and less than π apart ([`GlitterBound`]); `None` when this is not glitter.
+    pub(super) fn glint_bound(
+        &self,
+        refl: &Reflection,
+        azimuth_rad: (f64, f64),
+    ) -> Option<GlitterBound> {
+        let (SeaSunAt::Glint { geometry, tilt, .. }, Some(g)) = (self, &refl.glint) else {
+            return None;
+        };
+        let (irradiance, _) = self.glint_scales(refl)?;
+        let sun_azimuth_rad = g.sun.azimuth_rad;
+        let phi = |azimuth: f64| {
+            let phi = sun_azimuth_rad - azimuth;
+            (phi, phi.cos())
+        };
+        let cos_azimuth = cos_range(phi(azimuth_rad.0), phi(azimuth_rad.1));
+        // The true elevations [`Self::glint_factor_and_transmittance`] looks up: s + tilt·cos φ.
+        let s = g.sun.elevation_rad;
+        let true_rad = (s + tilt * cos_azimuth.0, s + tilt * cos_azimuth.1);
+        let t = g.at_sea.transmittance_bound(true_rad);
+        let (factor, light) = match g.at_sea.apparent_range(true_rad) {
+            Some(apparent) => (
+                geometry.bound_over(apparent),
+                [0, 1, 2].map(|c| irradiance[c] * t[c]),
+            ),
+            // Hidden below the sea's horizon at every one of them: +∞ depth, no light.
+            None => (geometry.bound_over((0.0, 0.0)), [0.0; 3]),
+        };
+        Some(GlitterBound {
+            sun_azimuth_rad,
+            factor,
+            light,
+        })
+    }
+
     /// The solar irradiance per channel and the Fresnel-reflected disc's radiance per channel
     /// of [`Self::glint_radiance`] (`None` when this is not glitter), for evaluating it many
     /// times.
@@ -1247,6 +1283,60 @@ impl SeaSunAt {
             SeaSunAt::Nothing => [0.0; 3],
         }
     }
+}
+
+/// Upper bounds on a rough sea's glitter along rays meeting the sea at one grazing angle and
+/// distance, towards the azimuths of a range ([`SeaSunAt::glint_bound`]), and of sub-ranges of
+/// it ([`Self::at`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct GlitterBound {
+    sun_azimuth_rad: f64,
+    /// The factor's bounds over the sun's elevations at the sea points of the whole range.
+    factor: GlintBound,
+    /// Per channel, the solar irradiance times a bound on its transmittance to the sea.
+    light: [f64; 3],
+}
+
+impl GlitterBound {
+    /// The azimuth φ (rad) of absolute azimuth `azimuth_rad` from the sun's, and cos φ: a
+    /// point of the ranges [`Self::at`] takes.
+    #[inline]
+    pub(super) fn azimuth_from_sun(&self, azimuth_rad: f64) -> (f64, f64) {
+        let phi = self.sun_azimuth_rad - azimuth_rad;
+        (phi, phi.cos())
+    }
+
+    /// Per channel, an upper bound on the glitter's radiance ([`SeaSunAt::glint_radiance`] of
+    /// [`SeaSunAt::glint_factor_and_transmittance`]) towards every azimuth between `a` and `b`
+    /// ([`Self::azimuth_from_sun`] of two absolute azimuths, either way round, within the range the
+    /// bound was made for); NaN or +∞ channels where none is derived.
+    #[inline]
+    pub(super) fn at(&self, a: (f64, f64), b: (f64, f64)) -> [f64; 3] {
+        let k = self.factor.at(cos_range(a, b));
+        // The cap, min(k·E, cap), only lowers it.
+        self.light.map(|l| k * l)
+    }
+}
+
+/// Bounds (lo, hi) on cos φ for every φ between φa and φb (rad, either way round, less than π
+/// apart), given as (φa, cos φa) and (φb, cos φb): the ends' cosines, widened to 1 or −1 where
+/// the range holds a multiple of 2π or an odd multiple of π.
+#[inline]
+fn cos_range((phi_a, ca): (f64, f64), (phi_b, cb): (f64, f64)) -> (f64, f64) {
+    let (lo, hi) = (phi_a.min(phi_b), phi_a.max(phi_b));
+    let from = wrap_pi(lo);
+    let to = from + (hi - lo);
+    let top = if from <= 0.0 && to >= 0.0 {
+        1.0
+    } else {
+        ca.max(cb)
+    };
+    let bottom = if to >= std::f64::consts::PI {
+        -1.0
+    } else {
+        ca.min(cb)
+    };
+    (bottom, top)
 }
 
 /// [`SeaSunAt::glint_radiance`] with its [`SeaSunAt::glint_scales`].
@@ -1995,6 +2085,37 @@ mod launch_tests {
             }
         }
         0.5 * (lo + hi)
+    }
+
+    #[test]
+    fn cos_ranges_hold_every_cosine_between_their_ends() {
+        let tau = std::f64::consts::TAU;
+        let mut widened = [0, 0];
+        for i in 0..400 {
+            // Ranges anywhere in (−3π, 3π), some across 0, ±π and ±2π, up to 3 rad wide.
+            let a = -9.4 + 18.8 * f64::from(i) / 400.0;
+            for width in [0.0, 1e-9, 0.01, 0.5, 3.0] {
+                for (p, q) in [(a, a + width), (a + width, a)] {
+                    let (lo, hi) = cos_range((p, p.cos()), (q, q.cos()));
+                    for k in 0..=200 {
+                        let c = (a + width * f64::from(k) / 200.0).cos();
+                        assert!(lo <= c && c <= hi, "{p}…{q}: {c} outside {lo}…{hi}");
+                    }
+                    // Widened only where the range holds a top (2πn) or a bottom (2πn + π).
+                    let holds = |shift: f64| ((a - shift) / tau).ceil() * tau + shift <= a + width;
+                    let (top, bottom) = (holds(0.0), holds(std::f64::consts::PI));
+                    if !top {
+                        assert_eq!(hi, p.cos().max(q.cos()), "{p}…{q}");
+                    }
+                    if !bottom {
+                        assert_eq!(lo, p.cos().min(q.cos()), "{p}…{q}");
+                    }
+                    widened[0] += usize::from(top && hi == 1.0);
+                    widened[1] += usize::from(bottom && lo == -1.0);
+                }
+            }
+        }
+        assert!(widened[0] > 10 && widened[1] > 10, "{widened:?}");
     }
 
     #[test]

@@ -114,10 +114,10 @@ pub(super) struct SeaSunTable {
     /// just above rays that do not leave); otherwise below the table the refraction is the
     /// lowest ray's.
     hidden_below: bool,
-    /// Bounds (lo, hi) on each interval's launch cubic, and on runs of 2, 4, 8, … intervals:
-    /// `launch_bounds[k][i]` bounds intervals i … i + 2^k − 1 (a sparse table, so that the
-    /// bounds over any run of intervals are one lookup).
-    launch_bounds: Vec<Vec<(f64, f64)>>,
+    /// Bounds on each interval's cubics ([`CellBounds`]), and on runs of 2, 4, 8, … intervals:
+    /// `bounds[k][i]` bounds intervals i … i + 2^k − 1 (a sparse table, so that the bounds over
+    /// any run of intervals are one lookup).
+    bounds: Vec<Vec<CellBounds>>,
     /// Rays traced to build the table.
     #[cfg_attr(not(test), allow(dead_code))]
     rays: usize,
@@ -162,7 +162,7 @@ impl SeaSunTable {
         }
         let (cubics, inv_width) = cubics(&true_rad, &launch_rad, &depth);
         let (buckets, bucket_scale) = buckets(&true_rad);
-        let launch_bounds = sparse_bounds(cubics.iter().map(|c| cubic_bounds(c[0])).collect());
+        let bounds = sparse_bounds(cubics.iter().map(CellBounds::of).collect());
         SeaSunTable {
             true_rad,
             launch_rad,
@@ -172,7 +172,7 @@ impl SeaSunTable {
             buckets,
             bucket_scale,
             hidden_below,
-            launch_bounds,
+            bounds,
             rays: rays.len(),
         }
     }
@@ -280,15 +280,53 @@ impl SeaSunTable {
         Some((min - ROUNDING_RAD, max + ROUNDING_RAD))
     }
 
+    /// Per channel, an upper bound on the transmittance e^−τ of the optical depths τ that
+    /// [`Self::at`] gives for every true elevation in `true_rad` (lo, hi), padded for rounding:
+    /// of the least depth of the intervals the range meets and of the depths it takes beyond
+    /// the table's ends. NaN where no bound is derived (a NaN end, or a NaN depth).
+    pub(super) fn transmittance_bound(&self, true_rad: (f64, f64)) -> [f64; 3] {
+        const ROUNDING: f64 = 1e-9;
+        let (lo, hi) = true_rad;
+        let n = self.true_rad.len();
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return [f64::NAN; 3];
+        }
+        if n == 0 {
+            return [0.0; 3];
+        }
+        let (s0, s_last) = (self.true_rad[0], self.true_rad[n - 1]);
+        let mut least = [f64::INFINITY; 3];
+        let mut take = |d: [f64; 3]| least = least_depths(least, d);
+        if lo < s0 && !self.hidden_below {
+            take(self.depth[0]);
+        }
+        if hi >= s_last || n == 1 {
+            take(self.depth[n - 1]);
+        }
+        if n >= 2 && hi >= s0 && lo < s_last {
+            let first = if lo > s0 { self.cell(lo).0 } else { 0 };
+            let last = if hi < s_last { self.cell(hi).0 } else { n - 2 };
+            take(self.bounds_over(first, last).depth_lo);
+        }
+        least.map(|d| {
+            if d == f64::INFINITY {
+                0.0
+            } else {
+                (ROUNDING * (1.0 + d.abs()) - d).exp()
+            }
+        })
+    }
+
     /// Bounds on the launch cubics of intervals `first` ..= `last`.
     fn launch_bounds_over(&self, first: usize, last: usize) -> (f64, f64) {
+        self.bounds_over(first, last).launch
+    }
+
+    /// Bounds on the cubics of intervals `first` ..= `last`.
+    fn bounds_over(&self, first: usize, last: usize) -> CellBounds {
         let count = last - first + 1;
         let k = (usize::BITS - 1 - count.leading_zeros()) as usize;
-        let (p, q) = (
-            self.launch_bounds[k][first],
-            self.launch_bounds[k][last + 1 - (1 << k)],
-        );
-        (p.0.min(q.0), p.1.max(q.1))
+        self.bounds[k][first].merge(self.bounds[k][last + 1 - (1 << k)])
     }
 }
 
@@ -316,8 +354,55 @@ fn cubic_bounds(c: [f64; 4]) -> (f64, f64) {
     (lo, hi)
 }
 
-/// The sparse table of [`SeaSunTable::launch_bounds`] over per-interval `bounds`.
-fn sparse_bounds(bounds: Vec<(f64, f64)>) -> Vec<Vec<(f64, f64)>> {
+/// Bounds on an interval's cubics, or on a run of intervals'.
+#[derive(Debug, Clone, Copy)]
+struct CellBounds {
+    /// The launch cubic's least and greatest values.
+    launch: (f64, f64),
+    /// Each depth cubic's least value (NaN where a coefficient is).
+    depth_lo: [f64; 3],
+}
+
+impl CellBounds {
+    /// The bounds of one interval's cubics (launch, then the three depths).
+    fn of(cubics: &[[f64; 4]; 4]) -> Self {
+        let depth_lo = [1, 2, 3].map(|k| {
+            let c = cubics[k];
+            if c.iter().any(|v| v.is_nan()) {
+                f64::NAN
+            } else {
+                cubic_bounds(c).0
+            }
+        });
+        CellBounds {
+            launch: cubic_bounds(cubics[0]),
+            depth_lo,
+        }
+    }
+
+    /// The bounds of both runs of intervals.
+    fn merge(self, other: Self) -> Self {
+        let (p, q) = (self.launch, other.launch);
+        CellBounds {
+            launch: (p.0.min(q.0), p.1.max(q.1)),
+            depth_lo: least_depths(self.depth_lo, other.depth_lo),
+        }
+    }
+}
+
+/// The lesser depth of `a` and `b` per channel, NaN where either is.
+fn least_depths(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        if a[c].is_nan() || b[c].is_nan() {
+            f64::NAN
+        } else {
+            a[c].min(b[c])
+        }
+    })
+}
+
+/// The sparse table of [`SeaSunTable::bounds`] over per-interval `bounds`.
+fn sparse_bounds(bounds: Vec<CellBounds>) -> Vec<Vec<CellBounds>> {
     let mut levels = vec![bounds];
     loop {
         let prev = levels.last().expect("one level");
@@ -326,10 +411,7 @@ fn sparse_bounds(bounds: Vec<(f64, f64)>) -> Vec<Vec<(f64, f64)>> {
             return levels;
         }
         let next = (0..prev.len() - span)
-            .map(|i| {
-                let (p, q) = (prev[i], prev[i + span]);
-                (p.0.min(q.0), p.1.max(q.1))
-            })
+            .map(|i| prev[i].merge(prev[i + span]))
             .collect();
         levels.push(next);
     }
@@ -639,5 +721,48 @@ mod tests {
             }
         }
         assert!(widest < 3e-3, "{widest}");
+    }
+
+    #[test]
+    fn the_transmittance_bound_holds_every_lookup_and_is_tight_over_a_narrow_range() {
+        let extinction = Sky::default().sun_extinction();
+        // A smooth map, and a duct that hides every sun below its lowest leaving ray.
+        let smooth = |e: f64| Some(e - 0.0105 * (-e / 0.02).exp());
+        let ducted = |e: f64| (e >= 0.0035).then(|| e - 0.0105 * (-e / 0.02).exp());
+        for (name, leave) in [
+            ("smooth", &smooth as &(dyn Fn(f64) -> Option<f64> + Sync)),
+            ("ducted", &ducted),
+        ] {
+            let tracer = Leaving::new(leave);
+            let table = SeaSunTable::build(&tracer, &extinction);
+            let mut loosest = 0.0f64;
+            for i in 0..300 {
+                // From below the table (hidden or not) to above its last ray (1.5 rad).
+                let lo = -0.02 + 1.6 * (f64::from(i) / 300.0).powi(3);
+                for width in [0.0, 1e-6, 1e-4, 0.05] {
+                    let bound = table.transmittance_bound((lo, lo + width));
+                    for k in 0..=40 {
+                        let s = lo + width * f64::from(k) / 40.0;
+                        let (_, depth) = table.at(s);
+                        for c in 0..3 {
+                            let t = (-depth[c]).exp();
+                            assert!(t <= bound[c], "{name} {s}: {t} above {}", bound[c]);
+                            if width == 1e-6 && t > 1e-30 {
+                                loosest = loosest.max(bound[c] / t);
+                            }
+                        }
+                    }
+                }
+            }
+            // Over a microradian the bound is within the least depth of the one or two table
+            // intervals met, not the whole table's (the sun at its horizon is dimmed by orders of
+            // magnitude more than high up).
+            let (_, low) = table.at(0.001);
+            let whole = table.transmittance_bound((-1.0, 2.0))[0] / (-low[0]).exp();
+            eprintln!("{name}: loosest {loosest}, whole table {whole}");
+            assert!(loosest < 3.0 && whole > 100.0, "{name}: {loosest} {whole}");
+            assert!(table.transmittance_bound((f64::NAN, 0.0))[0].is_nan());
+            assert!(table.transmittance_bound((0.1, 0.0))[0].is_nan());
+        }
     }
 }

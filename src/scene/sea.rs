@@ -318,6 +318,84 @@ impl GlintGeometry {
         let rho = fresnel_reflectance(cos_incidence.clamp(-1.0, 1.0).asin(), self.refractive_index);
         rho * cox_munk_pdf(tan2, sigma2) / (4.0 * self.sin_grazing * cos_tilt.powi(4))
     }
+
+    /// Upper bounds on [`Self::per_irradiance`] for every sun elevation in `sun_elevation_rad`
+    /// (lo, hi): the terms of the elevation range, worked out once for many azimuth ranges
+    /// ([`GlintBound::at`]).
+    pub fn bound_over(&self, sun_elevation_rad: (f64, f64)) -> GlintBound {
+        let (e_lo, e_hi) = sun_elevation_rad;
+        let (sigma2, g) = (self.sigma2, self.grazing_rad);
+        let (zero, unbounded) = if e_lo.is_nan() || e_hi.is_nan() || e_lo > e_hi {
+            (false, true)
+        } else if !(sigma2 > 0.0 && g > 0.0 && e_hi > 0.0) {
+            (true, false)
+        } else {
+            (false, e_hi > std::f64::consts::FRAC_PI_2)
+        };
+        // Elevations ≤ 0 give 0; the rest lie in [max(e_lo, 0), e_hi] ⊂ [0, π/2].
+        let e_lo = e_lo.max(0.0);
+        let hz = e_hi.sin() + self.sin_grazing;
+        GlintBound {
+            zero,
+            unbounded,
+            cos_elevation: (e_hi.cos(), e_lo.cos()),
+            cos_grazing: self.cos_grazing,
+            inv_hz2: 1.0 / (hz * hz),
+            sigma2,
+            least_tan2: 2.0 * sigma2 - 1.0,
+            // A relative margin far above the rounding of either evaluation.
+            scale: (1.0 + 1e-9) / (4.0 * std::f64::consts::PI * sigma2 * self.sin_grazing),
+        }
+    }
+}
+
+/// Upper bounds on [`GlintGeometry::per_irradiance`] over a range of sun elevations and a range
+/// of azimuths ([`GlintGeometry::bound_over`], [`Self::at`]).
+///
+/// With the half vector h = sun + view of [`GlintGeometry::per_irradiance`], its horizontal
+/// part is H² = cos²e − 2 cos e cos g cos φ + cos²g and its vertical hz = sin e + sin g, so the
+/// tilt's tan² is T = H²/hz², 1/cos⁴(tilt) = (1 + T)², and the factor is
+/// ρ · exp(−T/σ²) (1 + T)² / (4π σ² sin g) with ρ ≤ 1. Over the ranges H² is at least the
+/// squared gap between the ranges of cos e and cos g cos φ plus cos²g (1 − max cos²φ), hz at
+/// most sin e_hi + sin g, and exp(−T/σ²) (1 + T)² falls with T beyond T = 2σ² − 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GlintBound {
+    /// The factor is 0 for every elevation of the range.
+    zero: bool,
+    /// No bound is derived (an elevation range past 90°, or not a range).
+    unbounded: bool,
+    /// Bounds (lo, hi) on cos e.
+    cos_elevation: (f64, f64),
+    cos_grazing: f64,
+    /// 1 / (the greatest hz)².
+    inv_hz2: f64,
+    sigma2: f64,
+    /// T below which exp(−T/σ²) (1 + T)² still rises.
+    least_tan2: f64,
+    /// The factor's constant 1 / (4π σ² sin g), with a margin.
+    scale: f64,
+}
+
+impl GlintBound {
+    /// An upper bound on the factor for every elevation of the range and every azimuth whose
+    /// cosine is in `cos_azimuth` (lo, hi); +∞ where none is derived.
+    #[inline]
+    pub fn at(&self, cos_azimuth: (f64, f64)) -> f64 {
+        let (c_lo, c_hi) = cos_azimuth;
+        if self.unbounded || c_lo.is_nan() || c_hi.is_nan() || c_lo > c_hi {
+            return f64::INFINITY;
+        }
+        if self.zero {
+            return 0.0;
+        }
+        let (ce_lo, ce_hi) = self.cos_elevation;
+        let (p_lo, p_hi) = (self.cos_grazing * c_lo, self.cos_grazing * c_hi);
+        let gap = (ce_lo - p_hi).max(p_lo - ce_hi).max(0.0);
+        let most_cos2 = (c_lo * c_lo).max(c_hi * c_hi).min(1.0);
+        let h2 = gap * gap + self.cos_grazing * self.cos_grazing * (1.0 - most_cos2);
+        let t = (h2 * self.inv_hz2).max(self.least_tan2);
+        self.scale * (-t / self.sigma2).exp() * (1.0 + t) * (1.0 + t)
+    }
 }
 
 #[cfg(test)]
@@ -353,6 +431,87 @@ mod tests {
             }
         }
         assert!(refused > 100 && checked > 1000, "{refused} {checked}");
+    }
+
+    #[test]
+    fn the_glint_bound_holds_over_its_ranges_and_is_the_factor_over_a_point() {
+        let deg = f64::to_radians;
+        let mut checked = 0;
+        for wind in [0.5, 5.0, 14.0] {
+            let sea = Sea {
+                wave_slope_rad: cox_munk_rms_slope_rad(wind),
+                ..Sea::default()
+            };
+            for grazing in [0.01, 0.2, 2.0, 20.0, 80.0] {
+                let geometry = sea.glint_geometry(deg(grazing));
+                for e_lo in [-1.0, 0.0, 0.05, 0.5, 5.0, 40.0, 85.0] {
+                    for e_width in [0.0, 0.005, 0.5, 5.0] {
+                        let e = (deg(e_lo), deg((e_lo + e_width).min(90.0)));
+                        let bound = geometry.bound_over(e);
+                        for c_lo in [-1.0f64, -0.3, 0.5, 0.99, 0.999_99, 1.0] {
+                            for c_width in [0.0f64, 1e-6, 1e-3, 0.3] {
+                                let c = (c_lo, (c_lo + c_width).min(1.0));
+                                let most = bound.at(c);
+                                for i in 0..=6 {
+                                    let se = e.0 + (e.1 - e.0) * f64::from(i) / 6.0;
+                                    for j in 0..=6 {
+                                        let ca = c.0 + (c.1 - c.0) * f64::from(j) / 6.0;
+                                        for phi in [ca.acos(), -ca.acos()] {
+                                            let k = geometry.per_irradiance(se, phi);
+                                            checked += 1;
+                                            assert!(
+                                                k <= most,
+                                                "{wind} {grazing} {se} {ca}: {k} > {most}"
+                                            );
+                                        }
+                                    }
+                                }
+                                // Over a point, the factor up to its Fresnel reflectance (at
+                                // least 0.02, at normal incidence).
+                                if e_width == 0.0 && c_width == 0.0 {
+                                    let k = geometry.per_irradiance(e.0, c.0.acos());
+                                    if k > 1e-300 {
+                                        assert!(
+                                            most <= 51.0 * k,
+                                            "{wind} {grazing} {e:?} {c:?}: {most} vs {k}"
+                                        );
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked > 100_000, "{checked}");
+        let sea = Sea::default();
+        let geometry = sea.glint_geometry(0.01);
+        // No bound past the zenith, or over NaN ranges; none needed below the horizon or over a
+        // mirror sea.
+        assert_eq!(
+            geometry.bound_over((0.1, 1.6)).at((0.0, 1.0)),
+            f64::INFINITY
+        );
+        assert_eq!(
+            geometry.bound_over((f64::NAN, 0.1)).at((0.0, 1.0)),
+            f64::INFINITY
+        );
+        assert_eq!(
+            geometry.bound_over((0.0, 0.1)).at((f64::NAN, 1.0)),
+            f64::INFINITY
+        );
+        assert_eq!(geometry.bound_over((-0.2, -0.1)).at((0.0, 1.0)), 0.0);
+        let mirror = Sea {
+            wave_slope_rad: 0.0,
+            ..Sea::default()
+        };
+        assert_eq!(
+            mirror
+                .glint_geometry(0.01)
+                .bound_over((0.0, 0.1))
+                .at((0.0, 1.0)),
+            0.0
+        );
     }
 
     #[test]
