@@ -25,7 +25,11 @@
 //! instead by a quadratic in its logarithm (nodes [`SMOOTH_STRIDE`] apart; [`Smooth`]), and so
 //! is each channel's transmittance of the sun's light to the column's sea point (slowly varying
 //! with the azimuth), with a test that bounds their combined error at every column of an
-//! accepted interval, not only at its middle.
+//! accepted interval, not only at its middle. A low sun's glitter is a narrow streak, and most of
+//! a row lies orders of magnitude below the tolerance: where a run's end does, an upper bound on
+//! the glitter over the columns from a candidate to that end ([`SeaSunAt::glint_bound`]) finds
+//! the tail that is surely below [`NEGLIGIBLE`] of the tolerance, which is left at +0 and not
+//! evaluated ([`BandColumns::glitter_lit`]).
 
 use std::cell::RefCell;
 
