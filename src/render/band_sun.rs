@@ -43,7 +43,7 @@ use crate::scene::sky::DiscChord;
 pub const STRIDE: usize = 8;
 
 /// Node spacing (columns) of the glitter before refinement (it is smooth: [`Smooth`]).
-pub const SMOOTH_STRIDE: usize = 128;
+pub const SMOOTH_STRIDE: usize = 256;
 
 /// Share of the fill's tolerance of the background ([`TOLERANCE`] of it plus [`FLOOR`]) below
 /// which a bound on the glitter over a run's tail lets it be taken as dark (+0).
