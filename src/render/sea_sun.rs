@@ -636,19 +636,40 @@ mod tests {
         worst
     }
 
-    #[test]
-    fn the_table_inverts_the_sea_rays_within_a_tenth_of_a_microradian() {
+    /// Refraction falling from 0.6° at the surface (a strong duct): a ray launched at e leaves at
+    /// e − 0.0105 e^(−e/0.02) rad.
+    fn smooth_duct(e: f64) -> Option<f64> {
+        Some(e - 0.0105 * (-e / 0.02).exp())
+    }
+
+    /// [`smooth_duct`], but trapping every ray launched below 0.2°: a sun below its lowest
+    /// leaving ray is hidden.
+    fn trapping_duct(e: f64) -> Option<f64> {
+        (e >= 0.0035).then(|| smooth_duct(e)).flatten()
+    }
+
+    /// Test rays leaving where a map of the launch says ([`Leaving`]).
+    type MapRays = Leaving<fn(f64) -> Option<f64>>;
+
+    /// The tables of [`smooth_duct`] and [`trapping_duct`] by name, with their tracers.
+    fn duct_tables() -> Vec<(&'static str, MapRays, SeaSunTable)> {
         let extinction = Sky::default().sun_extinction();
-        // Refraction falling from 0.6° at the surface (a strong duct), and a duct that traps
-        // every ray launched below 0.2°.
-        let smooth = |e: f64| Some(e - 0.0105 * (-e / 0.02).exp());
-        let ducted = |e: f64| (e >= 0.0035).then(|| e - 0.0105 * (-e / 0.02).exp());
-        for (name, leave) in [
-            ("smooth", &smooth as &(dyn Fn(f64) -> Option<f64> + Sync)),
-            ("ducted", &ducted),
-        ] {
+        [
+            ("smooth", smooth_duct as fn(f64) -> Option<f64>),
+            ("ducted", trapping_duct),
+        ]
+        .into_iter()
+        .map(|(name, leave)| {
             let tracer = Leaving::new(leave);
             let table = SeaSunTable::build(&tracer, &extinction);
+            (name, tracer, table)
+        })
+        .collect()
+    }
+
+    #[test]
+    fn the_table_inverts_the_sea_rays_within_a_tenth_of_a_microradian() {
+        for (name, tracer, table) in duct_tables() {
             let rays = tracer.traces();
             eprintln!("{name}: {rays} traces");
             assert!(rays <= 300, "{name}: {rays} traces");
@@ -725,16 +746,7 @@ mod tests {
 
     #[test]
     fn the_transmittance_bound_holds_every_lookup_and_is_tight_over_a_narrow_range() {
-        let extinction = Sky::default().sun_extinction();
-        // A smooth map, and a duct that hides every sun below its lowest leaving ray.
-        let smooth = |e: f64| Some(e - 0.0105 * (-e / 0.02).exp());
-        let ducted = |e: f64| (e >= 0.0035).then(|| e - 0.0105 * (-e / 0.02).exp());
-        for (name, leave) in [
-            ("smooth", &smooth as &(dyn Fn(f64) -> Option<f64> + Sync)),
-            ("ducted", &ducted),
-        ] {
-            let tracer = Leaving::new(leave);
-            let table = SeaSunTable::build(&tracer, &extinction);
+        for (name, _, table) in duct_tables() {
             let mut loosest = 0.0f64;
             for i in 0..300 {
                 // From below the table (hidden or not) to above its last ray (1.5 rad).
