@@ -615,7 +615,11 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
     /// neighbours) and at the points refinement evaluates; elsewhere of the factor and each
     /// channel's transmittance interpolated by quadratics in their logarithms through an
     /// interval's ends and middle ([`Fit`]), where [`Self::accepts`] them; other intervals are
-    /// halved.
+    /// halved. The run's two ends are evaluated first; where either's radiance is far below the
+    /// tolerance ([`TAIL_SEARCH`] of [`NEGLIGIBLE`] of it), `tails` (told which ends are) gives
+    /// the columns [lo, hi) outside of which the glitter is dark: those are set to +0 and the
+    /// nodes taken in [lo, hi) alone. Returns the columns outside of which `out` is +0 (empty,
+    /// (a, a), where every column is).
     fn fill(
         &self,
         (a, b): (usize, usize),
@@ -1336,6 +1340,83 @@ mod tests {
         };
         let (err, _) = worst_attenuated(|x| cox_munk(x, 300.0, 60.0, 3e4), setting, 300, sea);
         assert!(err <= 1.0, "setting sun: {err}");
+    }
+
+    #[test]
+    fn tails_found_dark_are_left_at_zero_unevaluated_and_the_rest_filled() {
+        let sea = [0.15, 0.19, 0.23];
+        // A narrow glitter streak at column 170: far below the tolerance at both ends of the
+        // run, and lit around it.
+        let k = |x: usize| 5e3 * (-((x as f64 - 170.0) / 12.0).powi(2)).exp();
+        let radiance = |k: f64, _: [f64; 3]| [2.0 * k, 0.6 * k, 0.02 * k];
+        for (found, span) in [
+            ((60, 290), (60, 290)),
+            ((0, 400), (0, 400)),
+            ((0, 0), (0, 0)),
+        ] {
+            let (calls, outside) = (std::cell::Cell::new(0), std::cell::Cell::new(0));
+            let asked = std::cell::Cell::new(None);
+            let glitter = Smooth {
+                exact: |x: usize| {
+                    calls.set(calls.get() + 1);
+                    outside.set(outside.get() + usize::from(!(span.0..span.1).contains(&x)));
+                    (k(x), [1.0; 3])
+                },
+                radiance,
+            };
+            let mut out = vec![[f64::NAN; 3]; 400];
+            let lit = glitter.fill(
+                (0, 400),
+                Some(170),
+                sea,
+                &mut out,
+                &mut Scratch::default(),
+                |ends| {
+                    asked.set(Some(ends));
+                    found
+                },
+            );
+            // Both ends were far below it, so the search was asked for both tails.
+            assert_eq!(asked.get(), Some([true, true]), "{found:?}");
+            assert_eq!(lit, span, "{found:?}");
+            // Outside the span: +0, and no column evaluated but the run's two ends.
+            assert!(
+                out[..span.0]
+                    .iter()
+                    .chain(&out[span.1..])
+                    .all(|v| *v == [0.0; 3])
+            );
+            assert!(outside.get() <= 2, "{found:?}: {} outside", outside.get());
+            // Inside: within the tolerance of the exact radiance.
+            let inside = &out[span.0..span.1];
+            let err = worst_error(inside, |i| radiance(k(span.0 + i), [1.0; 3]), sea);
+            assert!(err <= 1.0, "{found:?}: {err}");
+            assert!(calls.get() < 60, "{found:?}: {} columns", calls.get());
+        }
+        // An end that shows: the tails are not looked for.
+        let asked = std::cell::Cell::new(false);
+        let wide = Smooth {
+            exact: |x: usize| {
+                (
+                    5e3 * (-((x as f64 - 170.0) / 300.0).powi(2)).exp(),
+                    [1.0; 3],
+                )
+            },
+            radiance,
+        };
+        let mut out = vec![[f64::NAN; 3]; 400];
+        let lit = wide.fill(
+            (0, 400),
+            Some(170),
+            sea,
+            &mut out,
+            &mut Scratch::default(),
+            |_| {
+                asked.set(true);
+                (0, 0)
+            },
+        );
+        assert_eq!((lit, asked.get()), ((0, 400), false));
     }
 
     #[test]

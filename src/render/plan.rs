@@ -1183,7 +1183,7 @@ mod tests {
 
     #[test]
     fn the_glitters_dark_tails_and_fits_are_within_the_tolerance_of_each_columns_own() {
-        use crate::render::band_sun::{BandColumns, BandSun, FLOOR, TOLERANCE};
+        use crate::render::band_sun::{BandColumns, BandSun, FLOOR, NEGLIGIBLE, TOLERANCE};
         use crate::render::reflection::SeaSunAt;
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
@@ -1256,7 +1256,17 @@ mod tests {
                             let want = [0, 1, 2].map(|c| want[c] * transmittance[c]);
                             let outside = !(lo..hi).contains(&x);
                             if outside {
+                                // Dark only where the glitter is below the share of the
+                                // tolerance a bound promises, not merely within the tolerance.
                                 assert_eq!(got, [0.0; 3], "{sun_deg}° row {y} column {x}");
+                                for c in 0..3 {
+                                    let negligible =
+                                        NEGLIGIBLE * (TOLERANCE * background[c].abs() + FLOOR);
+                                    assert!(
+                                        want[c] <= negligible,
+                                        "{sun_deg}° row {y} column {x}: {want:?} left dark"
+                                    );
+                                }
                             }
                             for c in 0..3 {
                                 let allowed = TOLERANCE * (background[c] + want[c]).abs() + FLOOR;

@@ -1320,9 +1320,13 @@ impl GlitterBound {
 
 /// Bounds (lo, hi) on cos φ for every φ between φa and φb (rad, either way round, less than π
 /// apart), given as (φa, cos φa) and (φb, cos φb): the ends' cosines, widened to 1 or −1 where
-/// the range holds a multiple of 2π or an odd multiple of π.
+/// the range holds a multiple of 2π or an odd multiple of π. NaN bounds where an end is not
+/// finite.
 #[inline]
 fn cos_range((phi_a, ca): (f64, f64), (phi_b, cb): (f64, f64)) -> (f64, f64) {
+    if !(phi_a.is_finite() && phi_b.is_finite()) {
+        return (f64::NAN, f64::NAN);
+    }
     let (lo, hi) = (phi_a.min(phi_b), phi_a.max(phi_b));
     let from = wrap_pi(lo);
     let to = from + (hi - lo);
@@ -2116,6 +2120,11 @@ mod launch_tests {
             }
         }
         assert!(widened[0] > 10 && widened[1] > 10, "{widened:?}");
+        // No range from a non-finite end.
+        for bad in [f64::NAN, f64::INFINITY] {
+            let (lo, hi) = cos_range((bad, bad.cos()), (0.1, 0.1f64.cos()));
+            assert!(lo.is_nan() && hi.is_nan(), "{bad}");
+        }
     }
 
     #[test]

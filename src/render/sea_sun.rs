@@ -343,8 +343,10 @@ fn cubic_bounds(c: [f64; 4]) -> (f64, f64) {
         if disc < 0.0 {
             [None, None]
         } else {
-            let r = disc.sqrt();
-            [Some((-qb - r) / (2.0 * qa)), Some((-qb + r) / (2.0 * qa))]
+            // The form without cancellation: q = −(qb + sign(qb)·√disc)/2, roots q/qa and qc/q
+            // (the textbook form loses the small root when qa is tiny).
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            [Some(q / qa), (q != 0.0).then(|| qc / q)]
         }
     };
     for u in roots.into_iter().flatten().filter(|u| *u > 0.0 && *u < 1.0) {
@@ -702,6 +704,21 @@ mod tests {
         let worst = worst_launch_error(tracer.as_ref(), &table, sun, tilt, 200);
         eprintln!("fig12: {} rays, worst {worst:.2e} rad", table.rays());
         assert!(worst <= 1e-7, "{worst:e} rad");
+    }
+
+    #[test]
+    fn cubic_bounds_hold_the_cubics_turning_points() {
+        // A nearly quadratic cubic (c3 tiny): its minimum at u = 0.5 is 0.75.
+        let (lo, hi) = cubic_bounds([1.0, -1.0, 1.0, 1e-15]);
+        assert!((lo - 0.75).abs() < 1e-12 && hi == 1.0 + 1e-15, "{lo} {hi}");
+        // Two turning points inside (0, 1), at ½ ∓ 1/√12, beyond the ends' values.
+        let (lo, hi) = cubic_bounds([1.0, -24.0, 72.0, -48.0]);
+        let turn = 0.5 - 0.5 / 3f64.sqrt();
+        let value = |u: f64| 1.0 - 24.0 * u + 72.0 * u * u - 48.0 * u * u * u;
+        assert!((lo - value(turn)).abs() < 1e-12, "{lo}");
+        assert!((hi - value(1.0 - turn)).abs() < 1e-12, "{hi}");
+        // Monotone: the ends.
+        assert_eq!(cubic_bounds([0.0, 1.0, 0.0, 0.0]), (0.0, 1.0));
     }
 
     #[test]
