@@ -34,7 +34,9 @@ use super::elevation_fan::{ElevationFan, FanSpec};
 use super::ray_model::{FanEnd, RayTracer};
 use super::reflection::{FacetTable, Facets, Glint, Reflection, SeaFan, SlopeTable};
 use super::sea_sun::SeaSunTable;
-use super::shade::{AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, wrap_pi};
+use super::shade::{
+    AerialShading, AngleTable, ReflectedHaze, Shader, ViewCard, cos_range, wrap_pi,
+};
 use super::sun::SunTransmittance;
 use super::terrain::{TerrainFrame, TerrainView};
 use super::texture_box::TextureColumns;
@@ -428,21 +430,7 @@ fn cos_azimuth_range(camera: &Camera, sun_azimuth_rad: f64, elevations: (f64, f6
     // φ = sun − pixel over [sun − centre − hi − pad, sun − centre − lo + pad].
     let base = sun_azimuth_rad - centre;
     let (a, b) = (base - hi - pad, base - lo + pad);
-    if b - a >= std::f64::consts::TAU {
-        return (-1.0, 1.0);
-    }
-    let has = |phi: f64| {
-        let k = ((a - phi) / std::f64::consts::TAU).ceil();
-        phi + k * std::f64::consts::TAU <= b
-    };
-    let ends = [a.cos(), b.cos()];
-    let min = if has(std::f64::consts::PI) {
-        -1.0
-    } else {
-        ends[0].min(ends[1])
-    };
-    let max = if has(0.0) { 1.0 } else { ends[0].max(ends[1]) };
-    (min, max)
+    cos_range((a, a.cos()), (b, b.cos()))
 }
 
 /// The sea's reflections of `scene` from its sun-independent `tables`, with the sun's glitter

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 use super::objects::{Composed, Meet, PartAtCard, RayAlong, SampleRay, SceneObject};
 use super::ray_model::{FanEnd, FanRay, RayTracer};
 use super::sea_sun::SeaSunTable;
-use super::shade::{AngleTable, Shader, ViewCard, wrap_pi};
+use super::shade::{AngleTable, Shader, ViewCard, cos_range};
 use super::terrain::{TerrainView, piece_density};
 use crate::scene::camera::ViewDirection;
 use crate::scene::sea::{FacetNode, GlintBound, GlintGeometry, facet_slope_range};
@@ -1318,31 +1318,6 @@ impl GlitterBound {
     }
 }
 
-/// Bounds (lo, hi) on cos φ for every φ between φa and φb (rad, either way round, less than π
-/// apart), given as (φa, cos φa) and (φb, cos φb): the ends' cosines, widened to 1 or −1 where
-/// the range holds a multiple of 2π or an odd multiple of π. NaN bounds where an end is not
-/// finite.
-#[inline]
-fn cos_range((phi_a, ca): (f64, f64), (phi_b, cb): (f64, f64)) -> (f64, f64) {
-    if !(phi_a.is_finite() && phi_b.is_finite()) {
-        return (f64::NAN, f64::NAN);
-    }
-    let (lo, hi) = (phi_a.min(phi_b), phi_a.max(phi_b));
-    let from = wrap_pi(lo);
-    let to = from + (hi - lo);
-    let top = if from <= 0.0 && to >= 0.0 {
-        1.0
-    } else {
-        ca.max(cb)
-    };
-    let bottom = if to >= std::f64::consts::PI {
-        -1.0
-    } else {
-        ca.min(cb)
-    };
-    (bottom, top)
-}
-
 /// [`SeaSunAt::glint_radiance`] with its [`SeaSunAt::glint_scales`].
 #[inline]
 pub(super) fn glint_radiance(
@@ -2089,42 +2064,6 @@ mod launch_tests {
             }
         }
         0.5 * (lo + hi)
-    }
-
-    #[test]
-    fn cos_ranges_hold_every_cosine_between_their_ends() {
-        let tau = std::f64::consts::TAU;
-        let mut widened = [0, 0];
-        for i in 0..400 {
-            // Ranges anywhere in (−3π, 3π), some across 0, ±π and ±2π, up to 3 rad wide.
-            let a = -9.4 + 18.8 * f64::from(i) / 400.0;
-            for width in [0.0, 1e-9, 0.01, 0.5, 3.0] {
-                for (p, q) in [(a, a + width), (a + width, a)] {
-                    let (lo, hi) = cos_range((p, p.cos()), (q, q.cos()));
-                    for k in 0..=200 {
-                        let c = (a + width * f64::from(k) / 200.0).cos();
-                        assert!(lo <= c && c <= hi, "{p}…{q}: {c} outside {lo}…{hi}");
-                    }
-                    // Widened only where the range holds a top (2πn) or a bottom (2πn + π).
-                    let holds = |shift: f64| ((a - shift) / tau).ceil() * tau + shift <= a + width;
-                    let (top, bottom) = (holds(0.0), holds(std::f64::consts::PI));
-                    if !top {
-                        assert_eq!(hi, p.cos().max(q.cos()), "{p}…{q}");
-                    }
-                    if !bottom {
-                        assert_eq!(lo, p.cos().min(q.cos()), "{p}…{q}");
-                    }
-                    widened[0] += usize::from(top && hi == 1.0);
-                    widened[1] += usize::from(bottom && lo == -1.0);
-                }
-            }
-        }
-        assert!(widened[0] > 10 && widened[1] > 10, "{widened:?}");
-        // No range from a non-finite end.
-        for bad in [f64::NAN, f64::INFINITY] {
-            let (lo, hi) = cos_range((bad, bad.cos()), (0.1, 0.1f64.cos()));
-            assert!(lo.is_nan() && hi.is_nan(), "{bad}");
-        }
     }
 
     #[test]

@@ -397,6 +397,31 @@ pub(super) fn wrap_pi(x: f64) -> f64 {
     if y.is_finite() { y } else { 0.0 }
 }
 
+/// Bounds (lo, hi) on cos φ for every φ between φa and φb (rad, either way round), given as
+/// (φa, cos φa) and (φb, cos φb): the ends' cosines, widened to 1 or −1 where the range holds a
+/// multiple of 2π or an odd multiple of π; (−1, 1) for a range 2π wide or wider, NaN bounds
+/// where an end is not finite.
+#[inline]
+pub(super) fn cos_range((phi_a, ca): (f64, f64), (phi_b, cb): (f64, f64)) -> (f64, f64) {
+    let tau = std::f64::consts::TAU;
+    if !(phi_a.is_finite() && phi_b.is_finite()) {
+        return (f64::NAN, f64::NAN);
+    }
+    let (a, b) = (phi_a.min(phi_b), phi_a.max(phi_b));
+    if b - a >= tau {
+        return (-1.0, 1.0);
+    }
+    // Whether φ + 2πk lies in [a, b] for some k.
+    let holds = |phi: f64| phi + ((a - phi) / tau).ceil() * tau <= b;
+    let bottom = if holds(std::f64::consts::PI) {
+        -1.0
+    } else {
+        ca.min(cb)
+    };
+    let top = if holds(0.0) { 1.0 } else { ca.max(cb) };
+    (bottom, top)
+}
+
 impl<'a> Shader<'a> {
     /// Ground distance (m) of the cards with distance index `k`.
     #[inline]
@@ -692,6 +717,47 @@ impl<'a> Shader<'a> {
 mod tests {
     use super::*;
     use crate::scene::Sky;
+
+    #[test]
+    fn cos_ranges_hold_every_cosine_between_their_ends() {
+        let tau = std::f64::consts::TAU;
+        let mut widened = [0, 0];
+        for i in 0..400 {
+            // Ranges anywhere in (−3π, 3π), some across 0, ±π and ±2π, up to 3 rad wide.
+            let a = -9.4 + 18.8 * f64::from(i) / 400.0;
+            for width in [0.0, 1e-9, 0.01, 0.5, 3.0] {
+                for (p, q) in [(a, a + width), (a + width, a)] {
+                    let (lo, hi) = cos_range((p, p.cos()), (q, q.cos()));
+                    for k in 0..=200 {
+                        let c = (a + width * f64::from(k) / 200.0).cos();
+                        assert!(lo <= c && c <= hi, "{p}…{q}: {c} outside {lo}…{hi}");
+                    }
+                    // Widened only where the range holds a top (2πn) or a bottom (2πn + π).
+                    let holds = |shift: f64| ((a - shift) / tau).ceil() * tau + shift <= a + width;
+                    let (top, bottom) = (holds(0.0), holds(std::f64::consts::PI));
+                    if !top {
+                        assert_eq!(hi, p.cos().max(q.cos()), "{p}…{q}");
+                    }
+                    if !bottom {
+                        assert_eq!(lo, p.cos().min(q.cos()), "{p}…{q}");
+                    }
+                    widened[0] += usize::from(top && hi == 1.0);
+                    widened[1] += usize::from(bottom && lo == -1.0);
+                }
+            }
+        }
+        assert!(widened[0] > 10 && widened[1] > 10, "{widened:?}");
+        // A range a full turn wide holds every cosine.
+        assert_eq!(
+            cos_range((0.3, 0.3f64.cos()), (7.0, 7.0f64.cos())),
+            (-1.0, 1.0)
+        );
+        // No range from a non-finite end.
+        for bad in [f64::NAN, f64::INFINITY] {
+            let (lo, hi) = cos_range((bad, bad.cos()), (0.1, 0.1f64.cos()));
+            assert!(lo.is_nan() && hi.is_nan(), "{bad}");
+        }
+    }
 
     #[test]
     fn wrap_pi_wraps() {
