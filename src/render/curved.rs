@@ -316,7 +316,7 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         h: f64,
         elevation_rad: f64,
         scales: [f64; 2],
-    ) -> (FanEnd, Option<[f64; 2]>) {
+    ) -> (FanRay, Option<[f64; 2]>) {
         // The fate rule of `trace` with the sky direction, which `density_paths_m` also
         // follows: one trace gives both.
         let watch = self
@@ -329,11 +329,11 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
             .trace_into(h, elevation_rad, &[], &mut hook, &mut record, None)
         {
             Ok(()) => (
-                fan_ray(&record, elevation_rad, 0).end,
+                fan_ray(&record, elevation_rad, 0),
                 self.tracer
                     .density_paths_m(h, elevation_rad, &hook, &record),
             ),
-            Err(_) => (FanEnd::Lost, None),
+            Err(_) => (lost(elevation_rad, 0), None),
         }
     }
 
@@ -693,14 +693,22 @@ mod tests {
             let rays = CurvedRays::new(&field, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
             let scales = [8_000.0, 1_000.0];
             let mut kinds = [0; 2];
-            for i in 0..60 {
+            for (h, i) in [0.0, 100.0]
+                .into_iter()
+                .flat_map(|h| (0..60).map(move |i| (h, i)))
+            {
                 let e = -0.001 + 0.0005 * f64::from(i) * f64::from(i);
-                let (end, paths) = rays.trace_to_sky_with_density_paths(0.0, e, scales);
+                let (ray, paths) = rays.trace_to_sky_with_density_paths(h, e, scales);
+                let end = ray.end;
                 let want = (
-                    rays.trace(0.0, e, &[], true).end,
-                    rays.density_paths_m(0.0, e, scales),
+                    rays.trace(h, e, &[], true),
+                    rays.density_paths_m(h, e, scales),
                 );
-                assert_eq!(format!("{:?}", (end, paths)), format!("{want:?}"), "{e}");
+                assert_eq!(
+                    format!("{:?}", (ray, paths)),
+                    format!("{want:?}"),
+                    "{h} {e}"
+                );
                 kinds[usize::from(matches!(end, FanEnd::Sky { .. }))] += 1;
             }
             assert!(kinds[1] > 10, "{kinds:?}");

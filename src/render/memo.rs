@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use super::ray_model::{FanEnd, FanRay, RayTracer};
+use super::ray_model::{FanRay, RayTracer};
 use crate::tracer::RayDensityPaths;
 
 /// The arguments of one call, by their bits.
@@ -40,8 +40,18 @@ fn scales_key(scale_heights_m: [f64; 2]) -> u64 {
     scale_heights_m[0].to_bits() ^ scale_heights_m[1].to_bits().rotate_left(32)
 }
 
+/// The key of [`RayTracer::density_paths_m`]'s arguments.
+fn paths_key(camera_height_m: f64, elevation_rad: f64, scale_heights_m: [f64; 2]) -> Key {
+    Key::new(
+        camera_height_m,
+        elevation_rad,
+        &scale_heights_m,
+        scales_key(scale_heights_m),
+    )
+}
+
 /// What [`RayTracer::trace_to_sky_with_density_paths`] answers.
-type SkyAndPaths = (FanEnd, Option<[f64; 2]>);
+type SkyAndPaths = (FanRay, Option<[f64; 2]>);
 
 /// A [`RayTracer`] that answers every call it has seen before from memory.
 pub struct MemoRays<'a> {
@@ -53,6 +63,10 @@ pub struct MemoRays<'a> {
     sky_paths: Mutex<HashMap<Key, SkyAndPaths>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
     heights: Mutex<HashMap<Key, Vec<Option<f64>>>>,
+    /// Scale heights for which every sky-fan ray ([`RayTracer::trace`] with the sky direction
+    /// and no distances) is traced with its density paths, remembered for
+    /// [`RayTracer::density_paths_m`] ([`Self::with_density_paths`]).
+    density_scales_m: Option<[f64; 2]>,
 }
 
 impl<'a> MemoRays<'a> {
@@ -65,7 +79,18 @@ impl<'a> MemoRays<'a> {
             sky_paths: Mutex::new(HashMap::new()),
             paths_along: Mutex::new(HashMap::new()),
             heights: Mutex::new(HashMap::new()),
+            density_scales_m: None,
         }
+    }
+
+    /// Trace every sky-fan ray not yet remembered together with its density paths for the
+    /// scale heights `scale_heights_m` ([`RayTracer::trace_to_sky_with_density_paths`]: one
+    /// trace for both, the same values as the two calls), and remember those paths too. Worth
+    /// it where most sky rays' paths will be asked for: a sun sweep, whose sun crosses most of
+    /// the fan's sky rays in turn. `None`: trace them alone.
+    pub fn with_density_paths(mut self, scale_heights_m: Option<[f64; 2]>) -> Self {
+        self.density_scales_m = scale_heights_m;
+        self
     }
 
     /// Number of distinct rays traced so far (calls of [`RayTracer::trace`] that were not
@@ -105,6 +130,21 @@ impl RayTracer for MemoRays<'_> {
             distances_m,
             u64::from(need_sky_direction),
         );
+        if let Some(scales) = self.density_scales_m
+            && distances_m.is_empty()
+            && need_sky_direction
+        {
+            return remembered(&self.traces, key, || {
+                let (ray, paths) = self.inner.trace_to_sky_with_density_paths(
+                    camera_height_m,
+                    elevation_rad,
+                    scales,
+                );
+                let key = paths_key(camera_height_m, elevation_rad, scales);
+                lock(&self.paths).entry(key).or_insert(paths);
+                ray
+            });
+        }
         remembered(&self.traces, key, || {
             self.inner.trace(
                 camera_height_m,
@@ -149,12 +189,7 @@ impl RayTracer for MemoRays<'_> {
         elevation_rad: f64,
         scale_heights_m: [f64; 2],
     ) -> Option<[f64; 2]> {
-        let key = Key::new(
-            camera_height_m,
-            elevation_rad,
-            &scale_heights_m,
-            scales_key(scale_heights_m),
-        );
+        let key = paths_key(camera_height_m, elevation_rad, scale_heights_m);
         remembered(&self.paths, key, || {
             self.inner
                 .density_paths_m(camera_height_m, elevation_rad, scale_heights_m)
@@ -166,7 +201,7 @@ impl RayTracer for MemoRays<'_> {
         camera_height_m: f64,
         elevation_rad: f64,
         scale_heights_m: [f64; 2],
-    ) -> (FanEnd, Option<[f64; 2]>) {
+    ) -> (FanRay, Option<[f64; 2]>) {
         let key = Key::new(
             camera_height_m,
             elevation_rad,
@@ -251,5 +286,75 @@ mod tests {
         memo.trace(10.0, 0.0, &[5_000.0], false);
         memo.trace(11.0, 0.0, &[5_000.0], false);
         assert_eq!(memo.traced(), 53);
+    }
+
+    /// Counts the calls of each kind it passes on: plain traces, density paths, both at once.
+    struct Counting<'a> {
+        inner: &'a dyn RayTracer,
+        calls: Mutex<[usize; 3]>,
+    }
+
+    impl Counting<'_> {
+        fn count(&self, kind: usize) {
+            lock(&self.calls)[kind] += 1;
+        }
+    }
+
+    impl RayTracer for Counting<'_> {
+        fn trace(&self, h: f64, alpha: f64, distances: &[f64], sky: bool) -> FanRay {
+            self.count(0);
+            self.inner.trace(h, alpha, distances, sky)
+        }
+        fn density_paths_m(&self, h: f64, alpha: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
+            self.count(1);
+            self.inner.density_paths_m(h, alpha, scales)
+        }
+        fn trace_to_sky_with_density_paths(
+            &self,
+            h: f64,
+            alpha: f64,
+            scales: [f64; 2],
+        ) -> (FanRay, Option<[f64; 2]>) {
+            self.count(2);
+            self.inner.trace_to_sky_with_density_paths(h, alpha, scales)
+        }
+    }
+
+    #[test]
+    fn with_density_paths_sky_fan_rays_bring_their_paths_and_nothing_else_does() {
+        let plain = ConstantCurvatureRays::new(0.13, EARTH_RADIUS_M).unwrap();
+        let inner = Counting {
+            inner: &plain,
+            calls: Mutex::new([0; 3]),
+        };
+        let scales = [8_000.0, 1_200.0];
+        let memo = MemoRays::new(&inner).with_density_paths(Some(scales));
+        let alphas: Vec<f64> = (0..50).map(|i| -0.004 + 1e-4 * f64::from(i)).collect();
+        for &alpha in &alphas {
+            assert_eq!(
+                memo.trace(10.0, alpha, &[], true),
+                plain.trace(10.0, alpha, &[], true)
+            );
+        }
+        assert_eq!(*lock(&inner.calls), [0, 0, 50]);
+        // Their paths are remembered: the same values, not asked again.
+        let mut escaping = 0;
+        for &alpha in &alphas {
+            let paths = memo.density_paths_m(10.0, alpha, scales);
+            assert_eq!(paths, plain.density_paths_m(10.0, alpha, scales));
+            escaping += usize::from(paths.is_some());
+        }
+        assert!(escaping > 10 && escaping < 50, "{escaping}");
+        assert_eq!(*lock(&inner.calls), [0, 0, 50]);
+        // Rays with distances or without the sky direction are traced alone, and other scale
+        // heights are other paths.
+        memo.trace(10.0, 0.001, &[5_000.0], true);
+        memo.trace(10.0, 0.001, &[], false);
+        memo.density_paths_m(10.0, 0.001, [8_000.0, 1_000.0]);
+        assert_eq!(*lock(&inner.calls), [2, 1, 50]);
+        // Without scale heights a sky-fan ray is a plain trace.
+        let memo = MemoRays::new(&inner).with_density_paths(None);
+        memo.trace(10.0, 0.001, &[], true);
+        assert_eq!(*lock(&inner.calls), [3, 1, 50]);
     }
 }

@@ -123,17 +123,17 @@ pub trait RayTracer: Sync {
         None
     }
 
-    /// The end of [`Self::trace`] with the sky direction and no distances, and
-    /// [`Self::density_paths_m`] of the same ray, from one trace where the model can (the same
-    /// values as the two calls). Default: the two calls.
+    /// [`Self::trace`] with the sky direction and no distances, and [`Self::density_paths_m`]
+    /// of the same ray, from one trace where the model can (the same values as the two calls).
+    /// Default: the two calls.
     fn trace_to_sky_with_density_paths(
         &self,
         camera_height_m: f64,
         elevation_rad: f64,
         scale_heights_m: [f64; 2],
-    ) -> (FanEnd, Option<[f64; 2]>) {
+    ) -> (FanRay, Option<[f64; 2]>) {
         (
-            self.trace(camera_height_m, elevation_rad, &[], true).end,
+            self.trace(camera_height_m, elevation_rad, &[], true),
             self.density_paths_m(camera_height_m, elevation_rad, scale_heights_m),
         )
     }

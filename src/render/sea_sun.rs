@@ -68,9 +68,9 @@ struct SeaRay {
 
 impl SeaRay {
     fn trace(tracer: &dyn RayTracer, extinction: &Extinction, launch_rad: f64) -> Self {
-        let (end, paths) =
+        let (ray, paths) =
             tracer.trace_to_sky_with_density_paths(0.0, launch_rad, extinction.scale_heights_m());
-        let true_rad = match end {
+        let true_rad = match ray.end {
             FanEnd::Sky { elevation_rad } if elevation_rad.is_finite() => Some(elevation_rad),
             _ => None,
         };

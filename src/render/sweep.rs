@@ -10,7 +10,10 @@
 //! changing the sky leaves every ray from the camera the same ray. The frames are rendered
 //! through one [`MemoRays`], so each ray (of the elevation fan, of the sun's transmittance, of
 //! the sea's reflections and glitter, of the haze, of the facts) is traced once for the whole
-//! sweep and looked up by every later frame that asks for it with the same arguments. Each
+//! sweep and looked up by every later frame that asks for it with the same arguments; the
+//! fan's rays to the sky are traced with the density paths of the sun's transmittance along
+//! them ([`MemoRays::with_density_paths`]: one trace for both, which the moving sun mostly
+//! needs in turn). Each
 //! frame still builds its own fan (refined around its own sun, from remembered rays) and
 //! shades every pixel, so it is bit for bit the frame a single render gives. For a sun sweep
 //! the union of the frames' fans is the fan widened to the whole sweep, traced once; frames
@@ -499,10 +502,15 @@ pub fn render_shared(
     options: &RenderOptions,
     transfer: bool,
 ) -> Result<Vec<SweepFrame>, RenderError> {
-    let memo = MemoRays::new(tracer);
     let Some((first, rest)) = scenes.split_first() else {
         return Ok(Vec::new());
     };
+    // The sun of a sweep crosses most of the fan's sky rays: trace them with the density
+    // paths its transmittance integrates along them.
+    let scales = first
+        .sun
+        .map(|_| first.sky.sun_extinction().scale_heights_m());
+    let memo = MemoRays::new(tracer).with_density_paths(scales);
     let first_record = record_without_sun(first);
     let on_base: Vec<bool> = rest
         .iter()

@@ -667,7 +667,7 @@ impl RayTracer for Recording<'_> {
         h: f64,
         elevation_rad: f64,
         scales: [f64; 2],
-    ) -> (FanEnd, Option<[f64; 2]>) {
+    ) -> (FanRay, Option<[f64; 2]>) {
         self.timed(|| {
             self.inner
                 .trace_to_sky_with_density_paths(h, elevation_rad, scales)

@@ -13,9 +13,7 @@ use ghostship::jobs::sequence::{
 };
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::sweep::render_shared;
-use ghostship::render::{
-    FanEnd, FanRay, RayTracer, RenderOptions, prepare_tracer, render_tracer_config,
-};
+use ghostship::render::{FanRay, RayTracer, RenderOptions, prepare_tracer, render_tracer_config};
 use ghostship::scene::Scene;
 use ghostship::solar::{Site, UtcTime, sun_position_with_delta_t};
 use ghostship::tracer::{RayDensityPaths, Tracer};
@@ -144,7 +142,7 @@ impl RayTracer for Counting<'_> {
         h: f64,
         alpha: f64,
         scales: [f64; 2],
-    ) -> (FanEnd, Option<[f64; 2]>) {
+    ) -> (FanRay, Option<[f64; 2]>) {
         self.calls.fetch_add(1, Ordering::Relaxed);
         self.inner.trace_to_sky_with_density_paths(h, alpha, scales)
     }
