@@ -4,21 +4,15 @@
 //! band's ray leaves towards it, or its glitter or mirror image on the sea, seen through the air
 //! from the sea to the camera.
 //!
-//! The addition is evaluated exactly (the shading a sample at the band's elevation and the
-//! column's azimuth gets) at node columns — the ends of each run of columns, every
-//! [`STRIDE`]th column, and the column nearest the sun's azimuth with its neighbours (the disc,
-//! its mirror image and the glitter are centred on that azimuth) — and interpolated linearly
-//! between them. An interval between two nodes is split at its middle column until linear
-//! interpolation predicts the middle within [`TOLERANCE`] of the pixel's radiance there (the
-//! band's colour plus the addition, per channel, plus [`FLOOR`]) or the nodes are neighbours.
-//! So the sharp edges of the disc and of its mirror image are resolved to single columns (the
-//! test fails across them), and inside them the addition is within about that tolerance of the
-//! exact shading. The disc's terms that depend on the elevation alone are worked out once per
-//! band ([`DiscChord`]), and a column whose azimuth is outside the chord's half-width is dark
-//! without evaluating it (the same 0 the exact shading gives): the columns on either side of the
-//! chord are found by binary search ([`chord_columns`]), and they and every node interval among
-//! them are set to +0 without refinement; the caller is told the span outside which the addition
-//! is +0, and fills the pixels there with one colour.
+//! The disc and a mirror sea's image of it are evaluated exactly at every column of the chord
+//! the band's elevation cuts through them — the shading a sample at the band's elevation and the
+//! column's azimuth gets, bit for bit: the disc's terms that depend on the elevation alone are
+//! worked out once per band ([`DiscChord`]), the columns' azimuths once per row of the film
+//! ([`crate::scene::camera::FilmAzimuths`], shared by the frames of a sweep), and the columns on
+//! either side of the chord, whose azimuth is outside its half-width, are found by binary search
+//! ([`chord_columns`]) and set to +0 without evaluating them (the same 0 the exact shading
+//! gives); the caller is told the span outside which the addition is +0, and fills the pixels
+//! there with one colour.
 //!
 //! A rough sea's glitter is smooth but falls by orders of magnitude across a row, which linear
 //! interpolation follows only by evaluating most columns: its Cox–Munk factor is interpolated
@@ -36,11 +30,7 @@ use std::cell::RefCell;
 use super::ray_model::FanEnd;
 use super::reflection::{SeaSunAt, glint_radiance};
 use super::shade::{Shader, wrap_pi};
-use crate::scene::camera::CameraFrame;
 use crate::scene::sky::DiscChord;
-
-/// Node spacing (columns) before refinement.
-pub const STRIDE: usize = 8;
 
 /// Node spacing (columns) of the glitter before refinement (it is smooth: [`Smooth`]).
 pub const SMOOTH_STRIDE: usize = 256;
@@ -52,7 +42,8 @@ pub const NEGLIGIBLE: f64 = 1e-3;
 /// How far below [`NEGLIGIBLE`] a run's end must be for its dark tail to be looked for.
 const TAIL_SEARCH: f64 = 1e-8;
 
-/// Relative error (per channel) at which linear interpolation closes an interval.
+/// Relative error (per channel of the pixel) within which the glitter's interpolation fills
+/// an interval ([`Smooth`]).
 pub const TOLERANCE: f64 = 1e-3;
 
 /// Absolute floor of that test, in film units (1 = the horizon sky): far below an 8-bit step.
@@ -99,11 +90,8 @@ impl BandSun {
 /// The sun's addition along a run of columns of one row of a band.
 pub(super) struct BandColumns<'a> {
     pub(super) shader: &'a Shader<'a>,
-    pub(super) frame: &'a CameraFrame,
-    /// The row's film y of its pixel centres.
-    pub(super) film_y: f64,
-    /// The band's elevation (rad).
-    pub(super) alpha: f64,
+    /// The azimuth offsets of the row's pixel centres ([`Shader::azimuths`]).
+    pub(super) offsets: &'a [f64],
     pub(super) sun: BandSun,
     /// The band's sun-free colour, to which the addition is added.
     pub(super) background: [f64; 3],
@@ -111,9 +99,7 @@ pub(super) struct BandColumns<'a> {
 
 impl BandColumns<'_> {
     fn azimuth_offset(&self, x: usize) -> f64 {
-        self.frame
-            .view_direction_at_elevation(x as f64 + 0.5, self.film_y, self.alpha)
-            .azimuth_offset_rad()
+        self.offsets[x]
     }
 
     /// The column of [`a`, `b`) whose azimuth is nearest the sun's, if the sun's azimuth lies
@@ -158,7 +144,6 @@ impl BandColumns<'_> {
         out: &mut [[f64; 3]],
         scratch: &mut Scratch,
     ) -> (usize, usize) {
-        let centre = self.sun_column((a, b));
         if let BandSun::Sea {
             sun: sun @ SeaSunAt::Glint { .. },
             transmittance,
@@ -175,6 +160,7 @@ impl BandColumns<'_> {
                 air: transmittance,
             };
             let glitter = Smooth { exact, radiance };
+            let centre = self.sun_column((a, b));
             let tails = |ends| self.glitter_lit((a, b), &sun, refl, transmittance, ends);
             return glitter.fill((a, b), centre, self.background, out, scratch, tails);
         }
@@ -188,25 +174,15 @@ impl BandColumns<'_> {
         // within ±π differ by at most 3π/2, below 2π less a half-width under π/3).
         let target = wrap_pi(chord.azimuth_rad() - heading);
         let half_width = chord.half_width_rad();
-        let value = |x: usize| {
-            let offset = self.azimuth_offset(x);
-            if offset.abs() <= std::f64::consts::FRAC_PI_2 && (offset - target).abs() >= half_width
-            {
-                return [0.0; 3];
-            }
-            weight.apply(chord.radiance(heading + offset))
-        };
-        let offset = |x: usize| self.azimuth_offset(x);
-        let dark_outside = chord_columns((a, b), offset, target, half_width);
-        fill_columns(
-            (a, b),
-            dark_outside,
-            centre,
-            self.background,
-            value,
-            out,
-            scratch,
-        )
+        let (lo, hi) = chord_columns((a, b), |x| self.azimuth_offset(x), target, half_width);
+        out[a..lo].fill([0.0; 3]);
+        out[hi..b].fill([0.0; 3]);
+        // Every column between is evaluated exactly (the dark test above is only a shortcut to
+        // the 0 the radiance gives beyond the chord).
+        for (v, &offset) in out[lo..hi].iter_mut().zip(&self.offsets[lo..hi]) {
+            *v = weight.apply(chord.radiance(heading + offset));
+        }
+        if lo < hi { (lo, hi) } else { (a, a) }
     }
 
     /// The columns [lo, hi) of [`a`, `b`) (not empty) outside of which the glitter of `sun`,
@@ -362,7 +338,7 @@ impl DiscWeight {
     }
 }
 
-/// Work space of [`fill_columns`] and [`Smooth::fill`], reused across the bands a thread fills.
+/// Work space of [`Smooth::fill`], reused across the bands a thread fills.
 #[derive(Default)]
 struct Scratch {
     nodes: Vec<usize>,
@@ -441,65 +417,6 @@ fn chord_columns(
     (lo, hi)
 }
 
-/// Fill `out[x]` for the columns x of [`a`, `b`) with `value(x)` at the nodes (every
-/// [`STRIDE`]th column, the last, and `centre` with its neighbours) and where refinement needs
-/// it, linear interpolation between them elsewhere (module docs); `background` is the colour
-/// the values are added to. `value` is +0 (every channel) at the columns outside `lit`: those
-/// are set so without asking it, and so is every interval between two nodes on one side of
-/// `lit`, or between any two nodes when `lit` is empty (refinement would find its middle +0 and
-/// interpolate +0 from its ends: the same).
-/// Returns the columns outside of which `out` was set to +0 (possibly empty).
-fn fill_columns(
-    (a, b): (usize, usize),
-    (lit_lo, lit_hi): (usize, usize),
-    centre: Option<usize>,
-    background: [f64; 3],
-    value: impl Fn(usize) -> [f64; 3],
-    out: &mut [[f64; 3]],
-    scratch: &mut Scratch,
-) -> (usize, usize) {
-    if b <= a {
-        return (a, a);
-    }
-    let dark = |x: usize| x < lit_lo || x >= lit_hi;
-    let Scratch { nodes, open, .. } = scratch;
-    node_columns((a, b), STRIDE, centre, nodes);
-    // The span of the nodes outside the dark columns and of the intervals that are refined.
-    let mut span = (b, a);
-    let mut widen = |x: usize, y: usize| span = (span.0.min(x), span.1.max(y + 1));
-    for &x in nodes.iter() {
-        out[x] = if dark(x) { [0.0; 3] } else { value(x) };
-        if !dark(x) {
-            widen(x, x);
-        }
-    }
-    // A node interval is dark when it lies on one side of `lit`, or `lit` is empty.
-    let dark_between = |i: usize, j: usize| j < lit_lo || i >= lit_hi || lit_lo >= lit_hi;
-    for w in nodes.windows(2).filter(|w| !dark_between(w[0], w[1])) {
-        widen(w[0], w[1]);
-    }
-    open.clear();
-    open.extend(nodes.windows(2).map(|w| (w[0], w[1])));
-    while let Some((i, j)) = open.pop() {
-        if j <= i + 1 {
-            continue;
-        }
-        if dark_between(i, j) {
-            out[i + 1..j].fill([0.0; 3]);
-            continue;
-        }
-        let m = (i + j) / 2;
-        out[m] = value(m);
-        if predicts(out, i, j, m, background) {
-            interpolate(out, i, m);
-            interpolate(out, m, j);
-        } else {
-            open.extend([(i, m), (m, j)]);
-        }
-    }
-    if span.0 < span.1 { span } else { (a, a) }
-}
-
 /// The node columns of [`a`, `b`) (not empty) into `nodes`: every `stride`th column, the last,
 /// and `centre` with its neighbours when it lies in the run; ascending.
 fn node_columns(
@@ -516,19 +433,6 @@ fn node_columns(
     }
     nodes.sort_unstable();
     nodes.dedup();
-}
-
-/// Whether linear interpolation between columns `i` and `j` of `out` predicts column `m`
-/// within [`TOLERANCE`] of the pixel's radiance there (`background` plus the addition), plus
-/// [`FLOOR`].
-#[inline]
-fn predicts(out: &[[f64; 3]], i: usize, j: usize, m: usize, background: [f64; 3]) -> bool {
-    let t = (m - i) as f64 / (j - i) as f64;
-    let (a, b, v) = (out[i], out[j], out[m]);
-    (0..3).all(|c| {
-        let predicted = a[c] + (b[c] - a[c]) * t;
-        (predicted - v[c]).abs() <= TOLERANCE * (background[c] + v[c]).abs() + FLOOR
-    })
 }
 
 /// A positive factor that is smooth in the column and whose logarithm is close to a quadratic
@@ -637,6 +541,7 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
             open,
             exact: w,
             stamp,
+            ..
         } = scratch;
         // The exact factor and transmittance of the columns evaluated so far, those entries of
         // `w` with this call's stamp (a NaN factor is kept as 0, and its radiance as the exact
@@ -722,7 +627,7 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
     /// Whether `fit`, through the exact factors and transmittances at the ends and middle of
     /// (`i`, `j`), may fill that interval: at the test points `tests` (its quarter points,
     /// evaluated exactly with their radiance in `out`) it predicts the pixel's radiance within
-    /// [`TOLERANCE`] (plus [`FLOOR`]) as [`fill_columns`] tests its middle; and its largest
+    /// [`TOLERANCE`] of the pixel's radiance there (plus [`FLOOR`]; [`within`]); and its largest
     /// error in the logarithm there, E (the factor's plus the worst channel's transmittance's:
     /// the interpolation error of a quadratic is a cubic in the column, about as large at the
     /// quarter points as anywhere in the interval), taken as 1.5 E anywhere, keeps the radiance
@@ -997,95 +902,9 @@ fn within(predicted: [f64; 3], value: [f64; 3], background: [f64; 3]) -> bool {
     })
 }
 
-/// Fill the columns strictly between `i` and `j` of `out` by linear interpolation.
-#[inline]
-fn interpolate(out: &mut [[f64; 3]], i: usize, j: usize) {
-    let (a, b) = (out[i], out[j]);
-    for (k, v) in out[i + 1..j].iter_mut().enumerate() {
-        let t = (k + 1) as f64 / (j - i) as f64;
-        *v = [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn columns_known_dark_are_filled_with_the_bits_refinement_gives_them() {
-        // Limb-darkened chords (zero outside), wide, narrow (below the node spacing), at the
-        // run's ends and outside it, bright and faint (a faint chord's interpolation into the
-        // dark columns is accepted, so an interval skipped wrongly changes bits), with chord
-        // edges on nodes and between them, on runs that start at and after column 0: filling
-        // with the columns outside the chord known dark gives the same bits as refining them,
-        // and the span returned holds every column not set to +0, within the nodes round the
-        // chord.
-        let background = [0.3, 0.35, 0.4];
-        let chords = [
-            (200.0, 150.0),
-            (13.0, 40.0),
-            (390.0, 20.0),
-            (101.3, 2.5),
-            (250.0, 0.4),
-            (200.0, 152.0),
-            (201.0, 152.0),
-            (500.0, 20.0),
-        ];
-        for ((c, half), amplitude) in chords.into_iter().flat_map(|c| [(c, 2.0), (c, 2e-4)]) {
-            let value = |x: usize| {
-                let s = ((x as f64 + 0.5 - c) / half).abs();
-                if s >= 1.0 {
-                    return [0.0; 3];
-                }
-                let v = amplitude * (1.0 - 0.6 * (1.0 - (1.0 - s * s).sqrt()));
-                [v, 0.9 * v, 0.8 * v]
-            };
-            for ((a, b), centre) in [((0, 400), None), ((37, 333), Some(c as usize))] {
-                // The chord's columns in the run, exactly.
-                let lit_columns: Vec<usize> = (a..b).filter(|&x| value(x) != [0.0; 3]).collect();
-                let lit = match (lit_columns.first(), lit_columns.last()) {
-                    (Some(&lo), Some(&last)) => (lo, last + 1),
-                    _ => (a, a),
-                };
-                let fill = |lit: (usize, usize)| {
-                    let mut out = vec![[f64::NAN; 3]; 400];
-                    let span = fill_columns(
-                        (a, b),
-                        lit,
-                        centre,
-                        background,
-                        value,
-                        &mut out,
-                        &mut Scratch::default(),
-                    );
-                    (out, span)
-                };
-                let (refined, _) = fill((a, b));
-                let (known, (lo, hi)) = fill(lit);
-                let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> {
-                    v.iter().map(|p| p.map(f64::to_bits)).collect()
-                };
-                let case = format!("chord {c} ± {half} × {amplitude} in {a}..{b}");
-                assert_eq!(bits(&refined), bits(&known), "{case}");
-                assert!(a <= lo && lo <= hi && hi <= b, "{case}: {lo}..{hi}");
-                for x in (a..b).filter(|x| !(lo..hi).contains(x)) {
-                    assert_eq!(known[x].map(f64::to_bits), [0; 3], "{case}: column {x}");
-                }
-                // Tight: within the nodes round the chord, the last before it and the first
-                // after it (an interval from a dark node to a lit one may interpolate into its
-                // dark columns); empty when the chord is outside the run.
-                let mut nodes = Vec::new();
-                node_columns((a, b), STRIDE, centre, &mut nodes);
-                if lit.0 < lit.1 {
-                    let below = *nodes.iter().rev().find(|&&n| n < lit.0).unwrap_or(&lit.0);
-                    let above = *nodes.iter().find(|&&n| n >= lit.1).unwrap_or(&(b - 1));
-                    assert!(lo >= below && hi <= above + 1, "{case}: {lo}..{hi}");
-                } else {
-                    assert_eq!(lo, hi, "{case}");
-                }
-            }
-        }
-    }
 
     #[test]
     fn chord_columns_hold_every_column_the_dark_test_may_light_and_no_more() {
@@ -1128,31 +947,6 @@ mod tests {
         assert_eq!(chord_columns((100, 300), wide, 0.0, 0.01), (200, 201));
     }
 
-    /// The worst error of `fill_columns` over 400 columns against `exact`, in units of the
-    /// tolerance on the pixel's radiance; and how many columns it evaluated.
-    fn worst(
-        exact: impl Fn(usize) -> [f64; 3],
-        centre: usize,
-        background: [f64; 3],
-    ) -> (f64, usize) {
-        let calls = std::cell::Cell::new(0);
-        let value = |x: usize| {
-            calls.set(calls.get() + 1);
-            exact(x)
-        };
-        let mut out = vec![[f64::NAN; 3]; 400];
-        fill_columns(
-            (0, 400),
-            (0, 400),
-            Some(centre),
-            background,
-            value,
-            &mut out,
-            &mut Scratch::default(),
-        );
-        (worst_error(&out, exact, background), calls.get())
-    }
-
     /// The worst error of the filled `out` against `exact`, in units of the tolerance on the
     /// pixel's radiance.
     fn worst_error(
@@ -1169,36 +963,6 @@ mod tests {
             }
         }
         worst
-    }
-
-    #[test]
-    fn glitter_and_disc_profiles_are_filled_within_the_tolerance() {
-        let sea = [0.15, 0.19, 0.23];
-        // A glitter peak 36 columns wide, 3e4 times the sea at its centre (the strips scene's
-        // sun at 0°), and a faint one: the tails are resolved where they still show over the
-        // sea, and interpolated where they do not.
-        for peak in [5e3, 1e-2] {
-            let glitter = |x: usize| {
-                let g = peak * (-((x as f64 - 203.0) / 36.0).powi(2)).exp();
-                [g, 0.3 * g, 0.01 * g]
-            };
-            let (err, calls) = worst(glitter, 203, sea);
-            assert!(err <= 1.0, "peak {peak}: {err}");
-            assert!(calls < 400, "peak {peak}: {calls} columns evaluated");
-        }
-        // A limb-darkened disc chord with sharp edges between columns 61.5 and 341.5: the
-        // edges land on the columns the exact shading puts them, the inside is interpolated.
-        let disc = |x: usize| {
-            let s = (x as f64 - 201.5) / 140.0;
-            if s.abs() >= 1.0 {
-                return [0.0; 3];
-            }
-            let i = 1850.0 * (1.0 - 0.6 * (1.0 - (1.0 - s * s).sqrt()));
-            [i, 0.5 * i, 0.1 * i]
-        };
-        let (err, calls) = worst(disc, 201, [0.3; 3]);
-        assert!(err <= 1.0, "disc: {err}");
-        assert!(calls < 200, "disc: {calls} columns evaluated");
     }
 
     /// The worst error of [`Smooth::fill`] over 400 columns for the factor `k` and a capped
@@ -1291,15 +1055,7 @@ mod tests {
                 let (err, calls) = worst_smooth(k, centre, [0.15, 0.19, 0.23]);
                 let label = format!("wind {wind}, fov {fov}°, grazing {grazing}°, sun {sun}°");
                 assert!(err <= 1.0, "{label}: {err}");
-                let radiance = |x: usize| {
-                    let k = k(x);
-                    [(k * 2.0).min(900.0), k * 0.6, (k * 0.02).min(0.5)]
-                };
-                let (_, linear) = worst(radiance, centre, [0.15, 0.19, 0.23]);
-                assert!(
-                    2 * calls <= linear,
-                    "{label}: {calls} columns, linear {linear}"
-                );
+                assert!(calls <= 100, "{label}: {calls} columns");
             }
         }
         let cut = |x: usize| {
@@ -1417,19 +1173,5 @@ mod tests {
             },
         );
         assert_eq!((lit, asked.get()), ((0, 400), false));
-    }
-
-    #[test]
-    fn a_peak_between_the_first_nodes_is_found_at_the_centre_column() {
-        // Three columns wide, centred between two nodes 8 apart: only the centre node sees it.
-        let spike = |x: usize| {
-            if (203..206).contains(&x) {
-                [100.0; 3]
-            } else {
-                [0.0; 3]
-            }
-        };
-        let (err, _) = worst(spike, 204, [0.1; 3]);
-        assert!(err <= 1.0, "{err}");
     }
 }

@@ -452,9 +452,7 @@ fn shade_flat_row(
             sun_added.resize(width as usize, [0.0; 3]);
             let run = BandColumns {
                 shader: ctx.shader,
-                frame: ctx.frame,
-                film_y,
-                alpha,
+                offsets: ctx.shader.azimuths.row(ctx.y),
                 sun,
                 background,
             };

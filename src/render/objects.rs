@@ -354,6 +354,11 @@ mod tests {
             distances_m: Vec::new(),
             reflection: None,
             terrain: None,
+            azimuths: std::sync::Arc::new(crate::scene::camera::FilmAzimuths::new(
+                small_camera().frame(),
+                4,
+                2,
+            )),
         }
     }
 
@@ -374,6 +379,11 @@ mod tests {
 
     /// The view through the centre of a small level frame.
     fn centre_view() -> ViewDirection {
+        small_camera().frame().view_direction(2.0, 1.0)
+    }
+
+    /// A small level camera.
+    fn small_camera() -> crate::scene::camera::Camera {
         crate::scene::camera::Camera {
             height_m: 10.0,
             heading_rad: 0.0,
@@ -383,8 +393,6 @@ mod tests {
             height: 2,
             samples_per_pixel: 1,
         }
-        .frame()
-        .view_direction(2.0, 1.0)
     }
 
     /// A level sample ray from the fan along `dir`, no card heights.

@@ -46,7 +46,7 @@ use super::{
     row_may_meet_terrain, shade_fan_sample, shade_flat_row, shade_traced_sample, sun_band_rad,
     traced_grid,
 };
-use crate::scene::camera::{Camera, CameraFrame};
+use crate::scene::camera::{Camera, CameraFrame, FilmAzimuths};
 use crate::scene::sky::{Extinction, Sky, SunDisc};
 use crate::scene::{Scene, Texture, samples_per_pixel_root};
 
@@ -759,7 +759,18 @@ impl<'a> PlanInputs<'a> {
                 .and_then(|b| b.shader.sun_transmittance.clone())
                 .unwrap_or_else(|| Arc::new(AngleTable::new(lo, hi, |e| sky.transmittance(e))))
         });
+        // The film's azimuths: the base frame's when the camera is the same.
+        let frame = cam.frame();
+        let azimuths = parts
+            .base
+            .map(|b| &b.shader.azimuths)
+            .filter(|a| *a.frame() == frame)
+            .map_or_else(
+                || Arc::new(FilmAzimuths::new(frame, cam.width, cam.height)),
+                Arc::clone,
+            );
         Shader {
+            azimuths,
             distances_m: parts.view.distances_m,
             reflection: sea_reflection(scene, parts.sea, parts.glint),
             terrain: parts.terrain,
@@ -1169,16 +1180,30 @@ mod tests {
         );
     }
 
-    #[test]
-    fn the_glitters_dark_tails_and_fits_are_within_the_tolerance_of_each_columns_own() {
-        use crate::render::band_sun::{BandColumns, BandSun, FLOOR, NEGLIGIBLE, TOLERANCE};
-        use crate::render::reflection::SeaSunAt;
+    /// One flat band of a row that may show the sun, as [`BandColumns::fill_band`] filled it.
+    struct SunBand<'p> {
+        y: u32,
+        alpha: f64,
+        sun: crate::render::band_sun::BandSun,
+        background: [f64; 3],
+        /// The band's two runs of columns and, for each, the span outside of which the fill
+        /// left +0.
+        runs: [((usize, usize), (usize, usize)); 2],
+        /// The row's sun additions (only the band's columns are set).
+        out: &'p [[f64; 3]],
+    }
+
+    /// The strips scene at 400×200, one sample per pixel, with its sun at `sun_deg`: its plan,
+    /// and each of its flat bands that may show the sun, filled, passed to `each`.
+    fn strips_sun_bands(sun_deg: f64, mut each: impl FnMut(&FramePlan<'_>, &SunBand<'_>)) {
+        use crate::render::band_sun::{BandColumns, BandSun};
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/data/scenes/fig12b_novaya_zemlya_strips.toml"
         );
         let mut scene = Scene::from_file(std::path::Path::new(path)).expect("scene");
         (scene.camera.width, scene.camera.height) = (400, 200);
+        scene.sun.as_mut().expect("sun").elevation_rad = sun_deg.to_radians();
         let loaded = scene.atmosphere.load().expect("atmosphere");
         let refractive = loaded.as_ref().map(|a| &a.refractive);
         let options = RenderOptions {
@@ -1188,88 +1213,153 @@ mod tests {
         };
         let tracer = crate::render::prepare_tracer(&scene, refractive, &options).expect("tracer");
         let width = scene.camera.width as usize;
+        let plan = FramePlan::new(&scene, tracer.as_ref(), &options, None).expect("plan");
+        let (fan, shader) = (plan.fan.as_ref().expect("fan"), &plan.shader);
+        let mut heights = vec![None; shader.distances_m.len()];
+        let mut out = vec![[f64::NAN; 3]; width];
+        for y in 0..plan.height {
+            let film_y = f64::from(y) + 0.5;
+            let bands = flat_bands(&plan.frame, y, plan.width, plan.flat_row_limit_rad);
+            let bands: Vec<(usize, f64)> = bands.into_iter().flatten().collect();
+            for (k, &(start, alpha)) in bands.iter().enumerate() {
+                let end_of_band = bands.get(k + 1).map_or(width, |b| b.0);
+                if alpha >= plan.clear_sky_from {
+                    continue;
+                }
+                let fan_end = fan.interpolate(alpha, &mut heights);
+                let Some(sun) = BandSun::of(shader, alpha, fan_end) else {
+                    continue;
+                };
+                let dir = plan
+                    .frame
+                    .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
+                let background = shader.background_with(&dir, fan_end, false);
+                let columns = BandColumns {
+                    shader,
+                    offsets: shader.azimuths.row(y),
+                    sun,
+                    background,
+                };
+                out.fill([f64::NAN; 3]);
+                let spans = columns.fill_band((start, end_of_band), width, &mut out);
+                let runs = crate::render::band_runs(start, end_of_band, width);
+                let band = SunBand {
+                    y,
+                    alpha,
+                    sun,
+                    background,
+                    runs: [(runs[0], spans[0]), (runs[1], spans[1])],
+                    out: &out,
+                };
+                each(&plan, &band);
+            }
+        }
+    }
+
+    /// The azimuth (rad) of column `x`'s pixel centre on `band`'s row, as a sample there takes
+    /// it.
+    fn column_azimuth(plan: &FramePlan<'_>, band: &SunBand<'_>, x: usize) -> f64 {
+        let film_y = f64::from(band.y) + 0.5;
+        plan.frame
+            .view_direction_at_elevation(x as f64 + 0.5, film_y, band.alpha)
+            .azimuth_offset_rad()
+            + plan.shader.heading_rad
+    }
+
+    #[test]
+    fn every_column_of_a_disc_band_is_the_samples_own_bit_for_bit() {
+        use crate::render::band_sun::BandSun;
+        // The sun below the sea horizon (its disc in strips) and rising through it.
+        for sun_deg in [-1.55, -1.0, -0.6] {
+            let (mut lit, mut compared) = (0, 0);
+            strips_sun_bands(sun_deg, |plan, band| {
+                let BandSun::Disc {
+                    elevation_rad,
+                    transmittance,
+                } = band.sun
+                else {
+                    return;
+                };
+                let disc = plan.shader.sun.expect("sun");
+                for ((a, b), (lo, hi)) in band.runs {
+                    for x in a..b {
+                        let radiance = disc.radiance(column_azimuth(plan, band, x), elevation_rad);
+                        let want = if radiance > 0.0 {
+                            transmittance.map(|t| radiance * t)
+                        } else {
+                            [0.0; 3]
+                        };
+                        let got = band.out[x];
+                        let case = format!("{sun_deg}° row {} column {x}", band.y);
+                        assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{case}");
+                        if !(lo..hi).contains(&x) {
+                            assert_eq!(got, [0.0; 3], "{case} outside {lo}..{hi}");
+                        }
+                        lit += usize::from(radiance > 0.0);
+                        compared += 1;
+                    }
+                }
+            });
+            eprintln!("{sun_deg}°: {compared} disc columns, {lit} lit");
+            assert!(
+                lit > 2_000 && compared > lit,
+                "{sun_deg}°: {lit} of {compared}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_glitters_dark_tails_and_fits_are_within_the_tolerance_of_each_columns_own() {
+        use crate::render::band_sun::{BandSun, FLOOR, NEGLIGIBLE, TOLERANCE};
+        use crate::render::reflection::SeaSunAt;
         // Suns low enough for the glitter to fall far below the sea across most of a row, and
         // one high enough for it to cover the whole row.
         for sun_deg in [-1.1, -0.96, -0.6, -0.2, 0.54] {
-            let mut scene = scene.clone();
-            scene.sun.as_mut().expect("sun").elevation_rad = f64::to_radians(sun_deg);
-            let plan = FramePlan::new(&scene, tracer.as_ref(), &options, None).expect("plan");
-            let (fan, shader) = (plan.fan.as_ref().expect("fan"), &plan.shader);
-            let refl = shader.reflection.as_ref().expect("sea");
-            let mut heights = vec![None; shader.distances_m.len()];
             let (mut compared, mut dark, mut lit) = (0, 0, 0);
-            let mut out = vec![[f64::NAN; 3]; width];
-            for y in 0..plan.height {
-                let film_y = f64::from(y) + 0.5;
-                let bands = flat_bands(&plan.frame, y, plan.width, plan.flat_row_limit_rad);
-                let bands: Vec<(usize, f64)> = bands.into_iter().flatten().collect();
-                for (k, &(start, alpha)) in bands.iter().enumerate() {
-                    let end_of_band = bands.get(k + 1).map_or(width, |b| b.0);
-                    if alpha >= plan.clear_sky_from {
-                        continue;
-                    }
-                    let fan_end = fan.interpolate(alpha, &mut heights);
-                    let Some(
-                        band_sun @ BandSun::Sea {
-                            sun: sun @ SeaSunAt::Glint { .. },
-                            transmittance,
-                        },
-                    ) = BandSun::of(shader, alpha, fan_end)
-                    else {
-                        continue;
-                    };
-                    let dir =
-                        plan.frame
-                            .view_direction_at_elevation(start as f64 + 0.5, film_y, alpha);
-                    let background = shader.background_with(&dir, fan_end, false);
-                    let columns = BandColumns {
-                        shader,
-                        frame: &plan.frame,
-                        film_y,
-                        alpha,
-                        sun: band_sun,
-                        background,
-                    };
-                    out.fill([f64::NAN; 3]);
-                    let spans = columns.fill_band((start, end_of_band), width, &mut out);
-                    let runs = crate::render::band_runs(start, end_of_band, width);
-                    for ((a, b), (lo, hi)) in runs.into_iter().zip(spans) {
-                        for (x, &got) in out.iter().enumerate().take(b).skip(a) {
-                            let azimuth = plan
-                                .frame
-                                .view_direction_at_elevation(x as f64 + 0.5, film_y, alpha)
-                                .azimuth_offset_rad()
-                                + shader.heading_rad;
-                            let want = sun.at(refl, azimuth);
-                            let want = [0, 1, 2].map(|c| want[c] * transmittance[c]);
-                            let outside = !(lo..hi).contains(&x);
-                            if outside {
-                                // Dark only where the glitter is below the share of the
-                                // tolerance a bound promises, not merely within the tolerance.
-                                assert_eq!(got, [0.0; 3], "{sun_deg}° row {y} column {x}");
-                                for c in 0..3 {
-                                    let negligible =
-                                        NEGLIGIBLE * (TOLERANCE * background[c].abs() + FLOOR);
-                                    assert!(
-                                        want[c] <= negligible,
-                                        "{sun_deg}° row {y} column {x}: {want:?} left dark"
-                                    );
-                                }
-                            }
+            strips_sun_bands(sun_deg, |plan, band| {
+                let BandSun::Sea {
+                    sun: sun @ SeaSunAt::Glint { .. },
+                    transmittance,
+                } = band.sun
+                else {
+                    return;
+                };
+                let (refl, background) = (
+                    plan.shader.reflection.as_ref().expect("sea"),
+                    band.background,
+                );
+                let y = band.y;
+                for ((a, b), (lo, hi)) in band.runs {
+                    for (x, &got) in band.out.iter().enumerate().take(b).skip(a) {
+                        let want = sun.at(refl, column_azimuth(plan, band, x));
+                        let want = [0, 1, 2].map(|c| want[c] * transmittance[c]);
+                        let outside = !(lo..hi).contains(&x);
+                        if outside {
+                            // Dark only where the glitter is below the share of the
+                            // tolerance a bound promises, not merely within the tolerance.
+                            assert_eq!(got, [0.0; 3], "{sun_deg}° row {y} column {x}");
                             for c in 0..3 {
-                                let allowed = TOLERANCE * (background[c] + want[c]).abs() + FLOOR;
+                                let negligible =
+                                    NEGLIGIBLE * (TOLERANCE * background[c].abs() + FLOOR);
                                 assert!(
-                                    (got[c] - want[c]).abs() <= allowed,
-                                    "{sun_deg}° row {y} column {x} ({outside}): {got:?} vs {want:?}"
+                                    want[c] <= negligible,
+                                    "{sun_deg}° row {y} column {x}: {want:?} left dark"
                                 );
                             }
-                            compared += 1;
-                            dark += usize::from(outside);
-                            lit += usize::from(want.iter().any(|&v| v > 1e-3 * background[1]));
                         }
+                        for c in 0..3 {
+                            let allowed = TOLERANCE * (background[c] + want[c]).abs() + FLOOR;
+                            assert!(
+                                (got[c] - want[c]).abs() <= allowed,
+                                "{sun_deg}° row {y} column {x} ({outside}): {got:?} vs {want:?}"
+                            );
+                        }
+                        compared += 1;
+                        dark += usize::from(outside);
+                        lit += usize::from(want.iter().any(|&v| v > 1e-3 * background[1]));
                     }
                 }
-            }
+            });
             eprintln!("{sun_deg}°: {compared} columns, {dark} dark, {lit} visibly lit");
             assert!(
                 compared >= 10_000 && lit > 500,

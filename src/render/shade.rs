@@ -17,7 +17,7 @@ use super::sun::SunTransmittance;
 use super::terrain::TerrainView;
 use super::texture_box::TextureColumns;
 use crate::scene::Texture;
-use crate::scene::camera::ViewDirection;
+use crate::scene::camera::{FilmAzimuths, ViewDirection};
 use crate::scene::sky::{Extinction, SunDisc};
 
 /// The aerial perspective of a frame: extinction and the geometry of the chords.
@@ -388,6 +388,8 @@ pub(super) struct Shader<'a> {
     pub(super) reflection: Option<super::reflection::Reflection>,
     /// The terrain in view, if any.
     pub(super) terrain: Option<Arc<TerrainView<'a>>>,
+    /// The azimuth offsets of the film's pixel centres (the sun's columns read them).
+    pub(super) azimuths: Arc<FilmAzimuths>,
 }
 
 #[inline]

@@ -28,7 +28,7 @@ pub struct Camera {
 }
 
 /// The camera's orthonormal basis in east–north–up coordinates, and its focal length in pixels.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraFrame {
     forward: [f64; 3],
     right: [f64; 3],
@@ -110,6 +110,45 @@ fn small_atan(x: f64) -> f64 {
     let p47 = p45 + p67 * z2;
     let p = p03 + (p47 + C[8] * z4) * z4;
     x * p
+}
+
+/// The azimuth offsets from the heading of the pixel centres of one camera's film, row by row
+/// as first asked for ([`CameraFrame::row_azimuth_offsets`]): shared by the frames of a sweep
+/// that share the camera, each row is worked out once for all of them.
+#[derive(Debug)]
+pub struct FilmAzimuths {
+    frame: CameraFrame,
+    width: usize,
+    rows: Vec<std::sync::OnceLock<Box<[f64]>>>,
+}
+
+impl FilmAzimuths {
+    /// For a film `width` × `height` pixels seen through `frame`.
+    pub fn new(frame: CameraFrame, width: u32, height: u32) -> Self {
+        FilmAzimuths {
+            frame,
+            width: width as usize,
+            rows: (0..height).map(|_| std::sync::OnceLock::new()).collect(),
+        }
+    }
+
+    /// The camera frame they are of.
+    pub fn frame(&self) -> &CameraFrame {
+        &self.frame
+    }
+
+    /// The offsets (rad) of row `y`'s pixel centres, one per column.
+    ///
+    /// # Panics
+    /// If `y` is not a row of the film.
+    pub fn row(&self, y: u32) -> &[f64] {
+        self.rows[y as usize].get_or_init(|| {
+            let mut offsets = Vec::with_capacity(self.width);
+            self.frame
+                .row_azimuth_offsets(y as f64 + 0.5, 0..self.width, &mut offsets);
+            offsets.into_boxed_slice()
+        })
+    }
 }
 
 /// One sample's viewing direction in the camera's own terms: its apparent elevation, and what
@@ -222,6 +261,31 @@ impl CameraFrame {
         } else {
             for d in out.iter_mut() {
                 d.elevation_rad = elevation_from(dz, (a * a + d.u * d.u).sqrt());
+            }
+        }
+    }
+
+    /// The azimuth offsets from the heading ([`ViewDirection::azimuth_offset_rad`]) of the
+    /// directions through the pixel centres of `columns` on film row `y` (pixels, y down),
+    /// into `out`: the same values as [`Self::view_direction_at_elevation`] gives them (they do
+    /// not depend on the elevation), with the arctangent series in a loop the compiler can
+    /// vectorise.
+    pub fn row_azimuth_offsets(&self, y: f64, columns: std::ops::Range<usize>, out: &mut Vec<f64>) {
+        let (_, a) = self.row_terms(y);
+        out.clear();
+        out.extend(columns.map(|x| (x as f64 + 0.5 - self.half_w) / self.focal_px));
+        if a > 0.0 && out.iter().all(|u| u.abs() <= SMALL_ATAN_MAX * a) {
+            for u in out.iter_mut() {
+                *u = small_atan(*u / a);
+            }
+        } else {
+            for u in out.iter_mut() {
+                *u = ViewDirection {
+                    elevation_rad: 0.0,
+                    u: *u,
+                    a,
+                }
+                .azimuth_offset_rad();
             }
         }
     }
