@@ -13,9 +13,10 @@
 //! sweep and looked up by every later frame that asks for it with the same arguments; the
 //! fan's rays to the sky are traced with the density paths of the sun's transmittance along
 //! them ([`MemoRays::with_density_paths`]: one trace for both, which the moving sun mostly
-//! needs in turn). Each
-//! frame still builds its own fan (refined around its own sun, from remembered rays) and
-//! shades every pixel, so it is bit for bit the frame a single render gives. For a sun sweep
+//! needs in turn). Each frame still builds its own fan (refined around its own sun, from
+//! remembered rays) and shades every row its sun may change; a frame that differs from the
+//! first only in its sun holds just those rows over the first frame's film ([`FrameImage`]),
+//! and either way it is bit for bit the frame a single render gives. For a sun sweep
 //! the union of the frames' fans is the fan widened to the whole sweep, traced once; frames
 //! whose fans share no ray (a swept pitch, field of view or card distance) gain nothing but
 //! lose nothing either. The first frame is rendered alone (its fan is traced in parallel), then
@@ -33,6 +34,7 @@
 //! card's distance between its base and top (nearer cards and terrain not considered); each
 //! maximal run of such rows is one image.
 
+use std::borrow::Cow;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use rayon::prelude::*;
@@ -89,18 +91,87 @@ pub struct TransferSamples {
     pub heights_m: Vec<Option<f64>>,
 }
 
+/// A frame's image: the film [`render_scene`] gives for the frame's scene, held as the rows
+/// the frame shaded over the film of the sweep's first frame (shared, not copied) when it
+/// differs from that frame only in its sun, whole otherwise.
+#[derive(Debug, Clone)]
+pub struct FrameImage(Image);
+
+#[derive(Debug, Clone)]
+enum Image {
+    Whole(Arc<Film>),
+    OnBase {
+        base: Arc<Film>,
+        /// The rows shaded, ascending, and their pixels one after another.
+        rows: Vec<u32>,
+        pixels: Vec<[f32; 4]>,
+        stats: RenderStats,
+    },
+}
+
+impl FrameImage {
+    /// Width and height (pixels).
+    pub fn size(&self) -> (u32, u32) {
+        match &self.0 {
+            Image::Whole(film) | Image::OnBase { base: film, .. } => (film.width, film.height),
+        }
+    }
+
+    /// The frame's counters.
+    pub fn stats(&self) -> &RenderStats {
+        match &self.0 {
+            Image::Whole(film) => &film.stats,
+            Image::OnBase { stats, .. } => stats,
+        }
+    }
+
+    /// Row `y`'s pixels.
+    ///
+    /// # Panics
+    /// If `y` is not a row of the image.
+    pub fn row(&self, y: u32) -> &[[f32; 4]] {
+        let (width, height) = self.size();
+        assert!(y < height, "row {y} of {height}");
+        let w = width as usize;
+        match &self.0 {
+            Image::Whole(film) => &film.pixels[y as usize * w..(y as usize + 1) * w],
+            Image::OnBase {
+                base, rows, pixels, ..
+            } => match rows.binary_search(&y) {
+                Ok(k) => &pixels[k * w..(k + 1) * w],
+                Err(_) => &base.pixels[y as usize * w..(y as usize + 1) * w],
+            },
+        }
+    }
+
+    /// The whole film (borrowed when the frame holds it whole, put together from its rows and
+    /// the first frame's otherwise).
+    pub fn film(&self) -> Cow<'_, Film> {
+        match &self.0 {
+            Image::Whole(film) => Cow::Borrowed(film),
+            Image::OnBase { base, stats, .. } => {
+                let mut pixels = Vec::with_capacity(base.pixels.len());
+                for y in 0..base.height {
+                    pixels.extend_from_slice(self.row(y));
+                }
+                Cow::Owned(film_of(base.width, base.height, pixels, stats.clone()))
+            }
+        }
+    }
+}
+
 /// One frame of a sweep.
 #[derive(Debug, Clone)]
 pub struct SweepFrame {
     /// The image: the same as [`render_scene`] of the frame's scene.
-    pub film: Film,
+    pub image: FrameImage,
     /// The sun and the cards in the traced map.
     pub facts: FrameFacts,
     /// The transfer curve at the farthest card's distance, when asked for and the scene has a
     /// card.
     pub transfer: Option<TransferSamples>,
     /// Rows of the film this frame shaded itself: all of them, unless it differs from the
-    /// sweep's first frame only in its sun; then the rows its sun cannot change are copied
+    /// sweep's first frame only in its sun; then the rows its sun cannot change are taken
     /// from the first frame, which they equal (module docs).
     pub rows_shaded: u32,
 }
@@ -360,7 +431,7 @@ pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> T
 /// their sun need to copy its rows (`None` in exact mode, or when no such frame follows).
 struct SweepBase<'a> {
     plan: FramePlan<'a>,
-    film: Film,
+    film: Arc<Film>,
     /// Per row: what a copy decision reads of it, and its non-finite samples.
     rows: Vec<(BaseRow, u64)>,
 }
@@ -373,14 +444,14 @@ impl<'a> SweepBase<'a> {
         tracer: &'a dyn RayTracer,
         options: &RenderOptions,
         keep_rows: bool,
-    ) -> Result<(Film, Option<Self>), RenderError> {
+    ) -> Result<(Arc<Film>, Option<Self>), RenderError> {
         let plan = FramePlan::new(scene, tracer, options, None)?;
         let reads = plan.sun_reads().filter(|_| keep_rows);
         let (width, height) = plan.size();
         let Some(reads) = reads else {
             let (pixels, non_finite) = plan.shade_all(true);
             let stats = plan.stats(non_finite);
-            return Ok((film_of(width, height, pixels, stats), None));
+            return Ok((Arc::new(film_of(width, height, pixels, stats)), None));
         };
         let mut pixels = vec![[0.0f32; 4]; width as usize * height as usize];
         let rows: Vec<(BaseRow, u64)> = pixels
@@ -397,10 +468,10 @@ impl<'a> SweepBase<'a> {
             )
             .collect();
         let stats = plan.stats(rows.iter().map(|r| r.1).sum());
-        let film = film_of(width, height, pixels, stats);
+        let film = Arc::new(film_of(width, height, pixels, stats));
         let base = SweepBase {
             plan,
-            film: film.clone(),
+            film: Arc::clone(&film),
             rows,
         };
         Ok((film, Some(base)))
@@ -416,41 +487,53 @@ fn film_of(width: u32, height: u32, pixels: Vec<[f32; 4]>, stats: RenderStats) -
     }
 }
 
-/// Render `scene`, which differs from the base's scene only in its sun, copying the base's
-/// rows that its sun cannot change ([`FramePlan::copies_base_row`]) and shading the others:
-/// the film [`render_scene`] gives, and the number of rows shaded.
+/// A frame held whole.
+fn whole(film: Arc<Film>) -> FrameImage {
+    FrameImage(Image::Whole(film))
+}
+
+/// Render `scene`, which differs from the base's scene only in its sun: the rows its sun
+/// cannot change ([`FramePlan::copies_base_row`]) are the base's, the others are shaded. The
+/// image of the film [`render_scene`] gives, and the number of rows shaded.
 fn render_on_base<'a>(
     base: &SweepBase<'a>,
     scene: &'a Scene,
     tracer: &'a dyn RayTracer,
     options: &RenderOptions,
-) -> Result<(Film, u32), RenderError> {
+) -> Result<(FrameImage, u32), RenderError> {
     let plan = FramePlan::new(scene, tracer, options, Some(&base.plan))?;
     let Some(reads) = plan.sun_reads() else {
-        return Ok((render_scene(scene, tracer, options)?, scene.camera.height));
+        let film = render_scene(scene, tracer, options)?;
+        return Ok((whole(Arc::new(film)), scene.camera.height));
     };
-    let (width, height) = plan.size();
-    // Each row is either copied from the base or shaded: neither reads what it starts as.
-    let mut pixels = vec![[0.0f32; 4]; base.film.pixels.len()];
-    let (shaded, non_finite) = pixels
-        .par_chunks_mut(width as usize)
-        .zip(base.film.pixels.par_chunks(width as usize))
-        .zip(&base.rows)
-        .enumerate()
+    let width = plan.size().0 as usize;
+    let mut kept_bad = 0;
+    let mut rows = Vec::new();
+    for (y, &(decision, base_bad)) in base.rows.iter().enumerate() {
+        if plan.copies_base_row(&reads, &base.plan, &decision) {
+            kept_bad += base_bad;
+        } else {
+            rows.push(y as u32);
+        }
+    }
+    // Each shaded row is written whole: none reads what it starts as.
+    let mut pixels = vec![[0.0f32; 4]; rows.len() * width];
+    let shaded_bad: u64 = pixels
+        .par_chunks_mut(width)
+        .zip(&rows)
         .map_init(
             || plan.scratch(),
-            |scratch, (y, ((row, base_row), &(decision, base_bad)))| {
-                if plan.copies_base_row(&reads, &base.plan, &decision) {
-                    row.copy_from_slice(base_row);
-                    (0, base_bad)
-                } else {
-                    (1, plan.shade_row(y as u32, row, scratch))
-                }
-            },
+            |scratch, (row, &y)| plan.shade_row(y, row, scratch),
         )
-        .reduce(|| (0u32, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
-    let film = film_of(width, height, pixels, plan.stats(non_finite));
-    Ok((film, shaded))
+        .sum();
+    let shaded = rows.len() as u32;
+    let image = FrameImage(Image::OnBase {
+        base: Arc::clone(&base.film),
+        rows,
+        pixels,
+        stats: plan.stats(kept_bad + shaded_bad),
+    });
+    Ok((image, shaded))
 }
 
 /// Whether `a` and `b` are the same scene but for their suns (both have one): then a frame of
@@ -523,14 +606,14 @@ pub fn render_shared(
     };
     // `first_camera`: the frame has the first frame's camera (it differs from it only in its
     // sun), so it shares the first frame's sun columns.
-    let finish = |scene: &Scene, film: Film, rows_shaded: u32, first_camera: bool| {
+    let finish = |scene: &Scene, image: FrameImage, rows_shaded: u32, first_camera: bool| {
         let facts = if first_camera {
             frame_facts_with(scene, &memo, &|sun| columns.get(scene, &memo, sun))
         } else {
             frame_facts(scene, &memo)
         };
         SweepFrame {
-            film,
+            image,
             facts,
             transfer: farthest_card(scene)
                 .filter(|_| transfer)
@@ -538,16 +621,19 @@ pub fn render_shared(
             rows_shaded,
         }
     };
-    let mut frames = vec![finish(first, film, first.camera.height, true)];
+    let mut frames = vec![finish(first, whole(film), first.camera.height, true)];
     let rest: Vec<SweepFrame> = rest
         .par_iter()
         .zip(&on_base)
         .map(|(scene, &on_base)| {
-            let (film, rows) = match &base {
+            let (image, rows) = match &base {
                 Some(base) if on_base => render_on_base(base, scene, &memo, options)?,
-                _ => (render_scene(scene, &memo, options)?, scene.camera.height),
+                _ => (
+                    whole(Arc::new(render_scene(scene, &memo, options)?)),
+                    scene.camera.height,
+                ),
             };
-            Ok(finish(scene, film, rows, on_base))
+            Ok(finish(scene, image, rows, on_base))
         })
         .collect::<Result<_, RenderError>>()?;
     frames.extend(rest);

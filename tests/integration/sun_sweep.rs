@@ -59,12 +59,16 @@ fn sweep_equals_single_renders(
         single.sun.as_mut().unwrap().elevation_rad = elevation_rad;
         let want = render_scene(&single, tracer.as_ref(), &opts).unwrap();
         let deg = elevation_rad.to_degrees();
-        assert_eq!(
-            frame.film.stats, want.stats,
-            "sun {deg:.3}°, {threads} threads"
-        );
+        let film = frame.image.film();
+        assert_eq!(film.stats, want.stats, "sun {deg:.3}°, {threads} threads");
+        assert_eq!(frame.image.stats(), &want.stats);
+        for y in 0..want.height {
+            let w = want.width as usize;
+            let want_row = &want.pixels[y as usize * w..(y as usize + 1) * w];
+            assert!(frame.image.row(y) == want_row, "sun {deg:.3}°: row {y}");
+        }
         assert!(
-            frame.film.pixels == want.pixels,
+            film.pixels == want.pixels,
             "sun {deg:.3}°, {threads} threads: {} rows shaded, pixels differ",
             frame.rows_shaded
         );
@@ -72,11 +76,12 @@ fn sweep_equals_single_renders(
         assert_eq!(frame.facts, facts, "sun {deg:.3}°, {threads} threads");
     }
     let width = scene.camera.width as usize;
-    let first = &frames[0].film.pixels;
+    let first = frames[0].image.film();
     let differ = frames
         .iter()
         .map(|f| {
-            let rows = f.film.pixels.chunks(width).zip(first.chunks(width));
+            let film = f.image.film();
+            let rows = film.pixels.chunks(width).zip(first.pixels.chunks(width));
             rows.filter(|(a, b)| a != b).count() as u32
         })
         .collect();

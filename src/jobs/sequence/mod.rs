@@ -37,7 +37,7 @@ use crate::output::film::{ImageFormat, encode_film};
 use crate::profile::TimeBlend;
 use crate::render::curved::cards_top_m;
 use crate::render::sweep::{SweepFrame, render_shared};
-use crate::render::{Film, prepare_tracer};
+use crate::render::{RenderStats, prepare_tracer};
 use crate::scene::Scene;
 
 /// Most frames a sequence may have (frame numbers have four digits).
@@ -304,7 +304,7 @@ impl SequenceRequest {
         let frames: Vec<SweepFrame> = frames.into_iter().flatten().collect();
         let name = scene_name(&self.render.scene);
         for (i, f) in frames.iter().enumerate() {
-            warn_non_finite(&name, i, &f.film);
+            warn_non_finite(&name, i, f.image.stats());
         }
         Ok(frames)
     }
@@ -333,7 +333,7 @@ impl SequenceRequest {
                 meta.extra
                     .push(("sequence_values".into(), plan.values.join(",")));
                 formats.par_iter().map(move |&format| {
-                    let bytes = encode_film(&frame.film, format, &meta, exposure)?;
+                    let bytes = encode_film(&frame.image.film(), format, &meta, exposure)?;
                     Ok(Product::new(frame_file(i, format), bytes))
                 })
             })
@@ -341,14 +341,13 @@ impl SequenceRequest {
         // PNGs first, then EXRs, each in frame order.
         let (mut products, exrs): (Vec<Product>, Vec<Product>) =
             encoded.into_iter().partition(|p| p.name.ends_with(".png"));
-        let films: Vec<&Film> = frames.iter().map(|f| &f.film).collect();
         let mp4 = if self.mp4 {
             output::encode_mp4(&products)?
         } else {
             None
         };
         products.extend(exrs);
-        products.push(Product::new("sequence.gif", encode_gif(&films, exposure)?));
+        products.push(Product::new("sequence.gif", encode_gif(frames, exposure)?));
         products.extend(mp4.map(|bytes| Product::new("sequence.mp4", bytes)));
         products.push(Product::new(
             "frames.csv",
@@ -417,12 +416,12 @@ fn scene_name(scene: &Scene) -> String {
 }
 
 /// Never silent about non-finite samples (as `render` reports them).
-fn warn_non_finite(name: &str, index: usize, film: &Film) {
-    if film.stats.non_finite_samples > 0 {
+fn warn_non_finite(name: &str, index: usize, stats: &RenderStats) {
+    if stats.non_finite_samples > 0 {
         eprintln!(
             "warning: {name}: frame {index}: {} sample(s) had non-finite radiance and were \
              shaded as horizon sky",
-            film.stats.non_finite_samples
+            stats.non_finite_samples
         );
     }
 }

@@ -9,7 +9,6 @@ use rayon::prelude::*;
 
 use super::{FramePlan, SweepSpec};
 use crate::jobs::{JobError, Product};
-use crate::render::Film;
 use crate::render::sweep::{SweepFrame, TransferSamples};
 use crate::render::sweep_plot::{SunSeries, sun_sweep_png, transfer_png};
 use crate::scene::{Card, Scene};
@@ -72,10 +71,10 @@ pub fn frames_csv(columns: &[String], plans: &[FramePlan], frames: &[SweepFrame]
     text
 }
 
-/// An animated GIF of `films` (8-bit sRGB at `exposure`, one palette of 256 colours for all
-/// frames, [`GIF_FRAME_MS`] per frame, looping; `crate::output::gif`).
-pub fn encode_gif(films: &[&Film], exposure: f64) -> Result<Vec<u8>, JobError> {
-    let Some(first) = films.first() else {
+/// An animated GIF of the images of `frames` (8-bit sRGB at `exposure`, one palette of 256
+/// colours for all frames, [`GIF_FRAME_MS`] per frame, looping; `crate::output::gif`).
+pub fn encode_gif(frames: &[SweepFrame], exposure: f64) -> Result<Vec<u8>, JobError> {
+    let Some(first) = frames.first() else {
         return Ok(crate::output::gif::encode_animation(
             &[],
             1,
@@ -83,14 +82,15 @@ pub fn encode_gif(films: &[&Film], exposure: f64) -> Result<Vec<u8>, JobError> {
             GIF_FRAME_MS,
         )?);
     };
-    let frames: Vec<Vec<u8>> = films
+    let (width, height) = first.image.size();
+    let frames: Vec<Vec<u8>> = frames
         .par_iter()
-        .map(|film| crate::output::png::film_to_srgb8(film, exposure))
+        .map(|f| crate::output::png::film_to_srgb8(&f.image.film(), exposure))
         .collect();
     Ok(crate::output::gif::encode_animation(
         &frames,
-        first.width,
-        first.height,
+        width,
+        height,
         GIF_FRAME_MS,
     )?)
 }
