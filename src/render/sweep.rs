@@ -154,7 +154,7 @@ impl FrameImage {
                 for y in 0..base.height {
                     pixels.extend_from_slice(self.row(y));
                 }
-                Cow::Owned(film_of(base.width, base.height, pixels, stats.clone()))
+                Cow::Owned(film_of(base.width, base.height, pixels, *stats))
             }
         }
     }
