@@ -274,9 +274,43 @@ fn peak_rss_kb() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
+/// The median time (ns) criterion measured for `group/function` in this or an earlier run, from
+/// its `estimates.json` under the target folder.
+fn criterion_median_ns(group: &str, function: &str) -> Option<f64> {
+    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(
+        || PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/target")),
+        PathBuf::from,
+    );
+    let path = target.join(format!("criterion/{group}/{function}/new/estimates.json"));
+    let text = std::fs::read_to_string(path).ok()?;
+    let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    json["median"]["point_estimate"].as_f64()
+}
+
+/// The issue's target for a sun sweep: 100 frames at 400×200 in at most 3 times one frame, from
+/// the medians of `sun_sequence` (when that group ran).
+fn report_sun_sequence_target() {
+    let group = "sun_sequence_400x200";
+    let (Some(one), Some(sweep)) = (
+        criterion_median_ns(group, "one_frame"),
+        criterion_median_ns(group, "100_sun_frames"),
+    ) else {
+        return;
+    };
+    let ratio = sweep / one;
+    let verdict = if ratio <= 3.0 { "met" } else { "NOT met" };
+    eprintln!(
+        "{group}: 100 sun frames {:.2} ms / one frame {:.2} ms = {ratio:.2} (target ≤ 3: {verdict}; \
+         medians of the latest criterion run of each)",
+        sweep * 1e-6,
+        one * 1e-6
+    );
+}
+
 fn main() {
     benches();
     Criterion::default().configure_from_args().final_summary();
+    report_sun_sequence_target();
     match peak_rss_kb() {
         Some(kb) => eprintln!("peak resident memory (VmHWM): {:.1} MB", kb as f64 / 1024.0),
         None => eprintln!("peak resident memory: /proc/self/status not available"),

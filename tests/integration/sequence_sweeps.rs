@@ -13,10 +13,14 @@ use ghostship::jobs::sequence::{
 };
 use ghostship::refractivity::RefractiveAtmosphere;
 use ghostship::render::sweep::render_shared;
-use ghostship::render::{FanRay, RayTracer, RenderOptions, prepare_tracer, render_tracer_config};
+use ghostship::render::{
+    ConstantCurvatureRays, FanRay, MemoRays, RayTracer, RenderOptions, prepare_tracer,
+    render_tracer_config,
+};
 use ghostship::scene::Scene;
 use ghostship::solar::{Site, UtcTime, sun_position_with_delta_t};
 use ghostship::tracer::{RayDensityPaths, Tracer};
+use ghostship::units::EARTH_RADIUS_M;
 
 use crate::scenes::atmosphere;
 use crate::support::cli::{fails, ghostship, ok, output_tree, usage_error};
@@ -122,19 +126,38 @@ fn the_sun_position_matches_the_nrel_spa_paper_example() {
     );
 }
 
-/// A tracer that counts the rays asked of it.
+/// A tracer that counts the calls asked of it, by kind: plain traces, density paths, both at
+/// once, density paths along a ray.
 struct Counting<'a> {
     inner: &'a dyn RayTracer,
-    calls: AtomicUsize,
+    calls: [AtomicUsize; 4],
+}
+
+impl<'a> Counting<'a> {
+    fn new(inner: &'a dyn RayTracer) -> Self {
+        Counting {
+            inner,
+            calls: Default::default(),
+        }
+    }
+
+    fn count(&self, kind: usize) {
+        self.calls[kind].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The calls so far, by kind.
+    fn calls(&self) -> [usize; 4] {
+        self.calls.each_ref().map(|c| c.load(Ordering::Relaxed))
+    }
 }
 
 impl RayTracer for Counting<'_> {
     fn trace(&self, h: f64, alpha: f64, distances: &[f64], sky: bool) -> FanRay {
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.count(0);
         self.inner.trace(h, alpha, distances, sky)
     }
     fn density_paths_m(&self, h: f64, alpha: f64, scales: [f64; 2]) -> Option<[f64; 2]> {
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.count(1);
         self.inner.density_paths_m(h, alpha, scales)
     }
     fn trace_to_sky_with_density_paths(
@@ -143,7 +166,7 @@ impl RayTracer for Counting<'_> {
         alpha: f64,
         scales: [f64; 2],
     ) -> (FanRay, Option<[f64; 2]>) {
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.count(2);
         self.inner.trace_to_sky_with_density_paths(h, alpha, scales)
     }
     fn density_paths_along(
@@ -153,9 +176,44 @@ impl RayTracer for Counting<'_> {
         distances: &[f64],
         scales: [f64; 2],
     ) -> Option<RayDensityPaths> {
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.count(3);
         self.inner.density_paths_along(h, alpha, distances, scales)
     }
+}
+
+#[test]
+fn with_density_paths_sky_fan_rays_bring_their_paths_and_nothing_else_does() {
+    let plain = ConstantCurvatureRays::new(0.13, EARTH_RADIUS_M).unwrap();
+    let inner = Counting::new(&plain);
+    let scales = [8_000.0, 1_200.0];
+    let memo = MemoRays::new(&inner).with_density_paths(Some(scales));
+    let alphas: Vec<f64> = (0..50).map(|i| -0.004 + 1e-4 * f64::from(i)).collect();
+    for &alpha in &alphas {
+        assert_eq!(
+            memo.trace(10.0, alpha, &[], true),
+            plain.trace(10.0, alpha, &[], true)
+        );
+    }
+    assert_eq!(inner.calls(), [0, 0, 50, 0]);
+    // Their paths are remembered: the same values, not asked again.
+    let mut escaping = 0;
+    for &alpha in &alphas {
+        let paths = memo.density_paths_m(10.0, alpha, scales);
+        assert_eq!(paths, plain.density_paths_m(10.0, alpha, scales));
+        escaping += usize::from(paths.is_some());
+    }
+    assert!(escaping > 10 && escaping < 50, "{escaping}");
+    assert_eq!(inner.calls(), [0, 0, 50, 0]);
+    // Rays with distances or without the sky direction are traced alone, and other scale
+    // heights are other paths.
+    memo.trace(10.0, 0.001, &[5_000.0], true);
+    memo.trace(10.0, 0.001, &[], false);
+    memo.density_paths_m(10.0, 0.001, [8_000.0, 1_000.0]);
+    assert_eq!(inner.calls(), [2, 1, 50, 0]);
+    // Without scale heights a sky-fan ray is a plain trace.
+    let memo = MemoRays::new(&inner).with_density_paths(None);
+    memo.trace(10.0, 0.001, &[], true);
+    assert_eq!(inner.calls(), [3, 1, 50, 0]);
 }
 
 /// A sweep of the sun over time through the Danmarkshavn sounding, the camera turning with it.
@@ -191,12 +249,9 @@ fn a_sun_sweep_over_time_traces_its_rays_once_though_sun_and_camera_turn() {
     };
     let tracer = prepare_tracer(&scenes[0], Some(&air.refractive), &options).unwrap();
     let rays = |scenes: &[Scene]| {
-        let counting = Counting {
-            inner: tracer.as_ref(),
-            calls: AtomicUsize::new(0),
-        };
+        let counting = Counting::new(tracer.as_ref());
         let frames = render_shared(scenes, &counting, &options, false).unwrap();
-        (counting.calls.into_inner(), frames)
+        (counting.calls().iter().sum::<usize>(), frames)
     };
     let (one, _) = rays(&scenes[5..6]);
     let (all, frames) = rays(&scenes);
