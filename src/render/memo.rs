@@ -3,9 +3,12 @@
 //! a view (a sun sweep: the same camera, atmosphere and cards, only the sun moves) trace each
 //! ray once and look it up afterwards.
 //!
-//! A cached answer is the value the inner tracer returned for exactly the same arguments, and
-//! the tracers are deterministic, so a frame rendered through [`MemoRays`] is bit for bit the
-//! frame rendered through the inner tracer, whichever frame or thread traced a ray first. Two
+//! A cached answer is the value the inner tracer returned for exactly the same arguments — or,
+//! with [`MemoRays::with_density_paths`], for a sky-fan ray and its density paths, the values of
+//! [`RayTracer::trace_to_sky_with_density_paths`], which its contract makes those of the two
+//! calls — and the tracers are deterministic, so a frame rendered through [`MemoRays`] is bit
+//! for bit the frame rendered through the inner tracer, whichever frame or thread traced a ray
+//! first. Two
 //! threads asking for the same ray at once may both trace it (the lock is not held while
 //! tracing); they store the same value.
 

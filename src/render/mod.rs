@@ -17,8 +17,9 @@
 //! or sky colour, and per pixel only the card tests in card columns. Rows that would need more
 //! than a few bands are shaded pixel by pixel. A band whose ray may show the sun — its disc, or
 //! its glitter or mirror image on the sea, which depend on each pixel's azimuth — adds the sun's
-//! part column by column, exact at node columns and interpolated between them within a
-//! documented tolerance (`band_sun`).
+//! part column by column: the disc and its mirror image exactly at every column of their chord,
+//! the glitter exactly at node columns and interpolated between them within a documented
+//! tolerance (`band_sun`).
 //!
 //! **The sea's reflections** (`reflection`): a reflected ray is a ray from the sea surface, so
 //! one *sea fan* traced from height 0 per frame serves every sample (and exact mode too); a flat

@@ -1195,13 +1195,20 @@ mod tests {
 
     /// The strips scene at 400×200, one sample per pixel, with its sun at `sun_deg`: its plan,
     /// and each of its flat bands that may show the sun, filled, passed to `each`.
-    fn strips_sun_bands(sun_deg: f64, mut each: impl FnMut(&FramePlan<'_>, &SunBand<'_>)) {
+    fn strips_sun_bands(sun_deg: f64, each: impl FnMut(&FramePlan<'_>, &SunBand<'_>)) {
+        sun_bands("fig12b_novaya_zemlya_strips.toml", sun_deg, each);
+    }
+
+    /// [`strips_sun_bands`] of the shipped scene `name` (given a sun if it has none).
+    fn sun_bands(name: &str, sun_deg: f64, mut each: impl FnMut(&FramePlan<'_>, &SunBand<'_>)) {
         use crate::render::band_sun::{BandColumns, BandSun};
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/data/scenes/fig12b_novaya_zemlya_strips.toml"
-        );
-        let mut scene = Scene::from_file(std::path::Path::new(path)).expect("scene");
+        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/data/scenes"));
+        let path = dir.join(name);
+        let mut text = std::fs::read_to_string(&path).expect("scene");
+        if !text.contains("[sun]") {
+            text.push_str("\n[sun]\nelevation_deg = 0.0\n");
+        }
+        let mut scene = Scene::from_toml_str(&text, dir, &path).expect("scene");
         (scene.camera.width, scene.camera.height) = (400, 200);
         scene.sun.as_mut().expect("sun").elevation_rad = sun_deg.to_radians();
         let loaded = scene.atmosphere.load().expect("atmosphere");
@@ -1269,41 +1276,85 @@ mod tests {
     #[test]
     fn every_column_of_a_disc_band_is_the_samples_own_bit_for_bit() {
         use crate::render::band_sun::BandSun;
-        // The sun below the sea horizon (its disc in strips) and rising through it.
-        for sun_deg in [-1.55, -1.0, -0.6] {
-            let (mut lit, mut compared) = (0, 0);
-            strips_sun_bands(sun_deg, |plan, band| {
-                let BandSun::Disc {
-                    elevation_rad,
-                    transmittance,
-                } = band.sun
-                else {
-                    return;
+        use crate::render::reflection::SeaSunAt;
+        // The sun below the sea horizon (its disc in strips) and rising through it, and a mirror
+        // sea's image of a sun just above the horizon.
+        let cases = [
+            ("fig12b_novaya_zemlya_strips.toml", -1.55),
+            ("fig12b_novaya_zemlya_strips.toml", -1.0),
+            ("fig12b_novaya_zemlya_strips.toml", -0.6),
+            ("fig15_calm_sea.toml", -0.2),
+        ];
+        for (name, sun_deg) in cases {
+            let (mut lit, mut compared, mut mirrored) = (0, 0, 0);
+            sun_bands(name, sun_deg, |plan, band| {
+                let mirror = matches!(
+                    band.sun,
+                    BandSun::Sea {
+                        sun: SeaSunAt::Mirror { .. },
+                        ..
+                    }
+                );
+                // The disc's radiance at an azimuth and what weights it, as a sample takes them.
+                type Weight = Box<dyn Fn(f64) -> [f64; 3]>;
+                let (disc, elevation_rad, weight): (_, f64, Weight) = match band.sun {
+                    BandSun::Disc {
+                        elevation_rad,
+                        transmittance,
+                    } => (
+                        plan.shader.sun.expect("sun"),
+                        elevation_rad,
+                        Box::new(move |d: f64| transmittance.map(|t| d * t)),
+                    ),
+                    BandSun::Sea {
+                        sun:
+                            SeaSunAt::Mirror {
+                                elevation_rad,
+                                reflectance,
+                                transmittance: sky,
+                            },
+                        transmittance: air,
+                    } => {
+                        let refl = plan.shader.reflection.as_ref().expect("sea");
+                        let (_, disc) = refl.mirror_sun.expect("mirror sun");
+                        let weight = move |d: f64| {
+                            let sun = sky.map(|t| reflectance * d * t);
+                            [0, 1, 2].map(|c| sun[c] * air[c])
+                        };
+                        (disc, elevation_rad, Box::new(weight))
+                    }
+                    BandSun::Sea { .. } => return,
                 };
-                let disc = plan.shader.sun.expect("sun");
                 for ((a, b), (lo, hi)) in band.runs {
                     for x in a..b {
                         let radiance = disc.radiance(column_azimuth(plan, band, x), elevation_rad);
                         let want = if radiance > 0.0 {
-                            transmittance.map(|t| radiance * t)
+                            weight(radiance)
                         } else {
                             [0.0; 3]
                         };
                         let got = band.out[x];
-                        let case = format!("{sun_deg}° row {} column {x}", band.y);
+                        let case = format!("{name} {sun_deg}° row {} column {x}", band.y);
                         assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{case}");
                         if !(lo..hi).contains(&x) {
                             assert_eq!(got, [0.0; 3], "{case} outside {lo}..{hi}");
                         }
                         lit += usize::from(radiance > 0.0);
+                        mirrored += usize::from(mirror && radiance > 0.0);
                         compared += 1;
                     }
                 }
             });
-            eprintln!("{sun_deg}°: {compared} disc columns, {lit} lit");
+            eprintln!("{name} {sun_deg}°: {compared} disc columns, {lit} lit, {mirrored} mirrored");
             assert!(
                 lit > 2_000 && compared > lit,
-                "{sun_deg}°: {lit} of {compared}"
+                "{name} {sun_deg}°: {lit} of {compared}"
+            );
+            // The calm sea shows the disc's mirror image (the strips scene's sea is rough).
+            assert_eq!(
+                mirrored > 1_000,
+                name.starts_with("fig15"),
+                "{name}: {mirrored}"
             );
         }
     }

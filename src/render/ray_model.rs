@@ -124,8 +124,9 @@ pub trait RayTracer: Sync {
     }
 
     /// [`Self::trace`] with the sky direction and no distances, and [`Self::density_paths_m`]
-    /// of the same ray, from one trace where the model can (the same values as the two calls).
-    /// Default: the two calls.
+    /// of the same ray, from one trace where the model can. An implementation must give exactly
+    /// the values of the two calls, bit for bit ([`super::MemoRays`] answers the two calls with
+    /// them). Default: the two calls.
     fn trace_to_sky_with_density_paths(
         &self,
         camera_height_m: f64,

@@ -10,10 +10,10 @@
 //! changing the sky leaves every ray from the camera the same ray. The frames are rendered
 //! through one [`MemoRays`], so each ray (of the elevation fan, of the sun's transmittance, of
 //! the sea's reflections and glitter, of the haze, of the facts) is traced once for the whole
-//! sweep and looked up by every later frame that asks for it with the same arguments; the
-//! fan's rays to the sky are traced with the density paths of the sun's transmittance along
-//! them ([`MemoRays::with_density_paths`]: one trace for both, which the moving sun mostly
-//! needs in turn). Each frame still builds its own fan (refined around its own sun, from
+//! sweep and looked up by every later frame that asks for it with the same arguments; where the
+//! fan's rays carry no card distances (no card in view), its rays to the sky are traced with the
+//! density paths of the sun's transmittance along them ([`MemoRays::with_density_paths`]: one
+//! trace for both, which the moving sun mostly needs in turn). Each frame still builds its own fan (refined around its own sun, from
 //! remembered rays) and shades every row its sun may change; a frame that differs from the
 //! first only in its sun holds just those rows over the first frame's film ([`FrameImage`]),
 //! and either way it is bit for bit the frame a single render gives. For a sun sweep
@@ -428,11 +428,11 @@ pub fn transfer_samples(scene: &Scene, tracer: &dyn RayTracer, card: &Card) -> T
 }
 
 /// The first frame of a sweep, rendered alone, with what frames that differ from it only in
-/// their sun need to copy its rows (`None` in exact mode, or when no such frame follows).
+/// their sun need to take its rows (`None` in exact mode, or when no such frame follows).
 struct SweepBase<'a> {
     plan: FramePlan<'a>,
     film: Arc<Film>,
-    /// Per row: what a copy decision reads of it, and its non-finite samples.
+    /// Per row: what the decision to take it reads of it, and its non-finite samples.
     rows: Vec<(BaseRow, u64)>,
 }
 
@@ -575,10 +575,10 @@ fn record_without_sun(scene: &Scene) -> Option<String> {
 
 /// Render every scene of `scenes` through one ray cache over `tracer` (module docs). The
 /// scenes must all be renderable by `tracer` (same atmosphere, camera height, Earth radius and
-/// highest card or terrain): then each film is the one [`render_scene`] gives with `tracer`.
-/// Frames that differ from the first only in their sun copy the rows of the first frame that
-/// their sun cannot change (module docs). `transfer`: also sample each frame's transfer curve
-/// at its farthest card's distance.
+/// highest card or terrain): then each frame's image is the film [`render_scene`] gives with
+/// `tracer`. Frames that differ from the first only in their sun hold the rows they shaded over
+/// the first frame's film, whose rows their sun cannot change (module docs, [`FrameImage`]).
+/// `transfer`: also sample each frame's transfer curve at its farthest card's distance.
 pub fn render_shared(
     scenes: &[Scene],
     tracer: &dyn RayTracer,
@@ -589,9 +589,11 @@ pub fn render_shared(
         return Ok(Vec::new());
     };
     // The sun of a sweep crosses most of the fan's sky rays: trace them with the density
-    // paths its transmittance integrates along them.
+    // paths its transmittance integrates along them (not in exact mode, whose samples' rays
+    // never ask for them).
     let scales = first
         .sun
+        .filter(|_| !options.exact)
         .map(|_| first.sky.sun_extinction().scale_heights_m());
     let memo = MemoRays::new(tracer).with_density_paths(scales);
     let first_record = record_without_sun(first);

@@ -65,10 +65,13 @@ fn sweep_equals_single_renders(
         for y in 0..want.height {
             let w = want.width as usize;
             let want_row = &want.pixels[y as usize * w..(y as usize + 1) * w];
-            assert!(frame.image.row(y) == want_row, "sun {deg:.3}°: row {y}");
+            assert!(
+                bits(frame.image.row(y)) == bits(want_row),
+                "sun {deg:.3}°: row {y}"
+            );
         }
         assert!(
-            film.pixels == want.pixels,
+            bits(&film.pixels) == bits(&want.pixels),
             "sun {deg:.3}°, {threads} threads: {} rows shaded, pixels differ",
             frame.rows_shaded
         );
@@ -82,10 +85,15 @@ fn sweep_equals_single_renders(
         .map(|f| {
             let film = f.image.film();
             let rows = film.pixels.chunks(width).zip(first.pixels.chunks(width));
-            rows.filter(|(a, b)| a != b).count() as u32
+            rows.filter(|(a, b)| bits(a) != bits(b)).count() as u32
         })
         .collect();
     (frames.iter().map(|f| f.rows_shaded).collect(), differ)
+}
+
+/// The bits of `pixels` (so that −0 and +0 differ, as bytes would).
+fn bits(pixels: &[[f32; 4]]) -> Vec<[u32; 4]> {
+    pixels.iter().map(|p| p.map(f32::to_bits)).collect()
 }
 
 /// From `from` in `count` steps of `step` (degrees).

@@ -321,33 +321,48 @@ impl SequenceRequest {
         let exposure = self.render.settings.exposure;
         let description = self.sweep.describe();
         let formats = &self.render.settings.formats;
+        // Each frame's film is put together once (a frame of a sun sweep holds only the rows
+        // it shaded), for its files and its GIF frame.
         let encoded = frames
             .par_iter()
             .zip(&self.frames)
             .enumerate()
-            .flat_map(|(i, (frame, plan))| {
+            .map(|(i, (frame, plan))| {
                 let mut meta = provenance(&plan.scene, &options);
                 meta.extra
                     .push(("sequence_sweep".into(), description.clone()));
                 meta.extra.push(("sequence_frame".into(), i.to_string()));
                 meta.extra
                     .push(("sequence_values".into(), plan.values.join(",")));
-                formats.par_iter().map(move |&format| {
-                    let bytes = encode_film(&frame.image.film(), format, &meta, exposure)?;
-                    Ok(Product::new(frame_file(i, format), bytes))
-                })
+                let film = frame.image.film();
+                let files = formats
+                    .iter()
+                    .map(|&format| {
+                        let bytes = encode_film(&film, format, &meta, exposure)?;
+                        Ok(Product::new(frame_file(i, format), bytes))
+                    })
+                    .collect::<Result<Vec<Product>, JobError>>()?;
+                let gif_frame = crate::output::png::film_to_srgb8(&film, exposure);
+                Ok((files, gif_frame))
             })
-            .collect::<Result<Vec<Product>, JobError>>()?;
+            .collect::<Result<Vec<_>, JobError>>()?;
+        let (files, gif_frames): (Vec<Vec<Product>>, Vec<Vec<u8>>) = encoded.into_iter().unzip();
         // PNGs first, then EXRs, each in frame order.
-        let (mut products, exrs): (Vec<Product>, Vec<Product>) =
-            encoded.into_iter().partition(|p| p.name.ends_with(".png"));
+        let (mut products, exrs): (Vec<Product>, Vec<Product>) = files
+            .into_iter()
+            .flatten()
+            .partition(|p| p.name.ends_with(".png"));
         let mp4 = if self.mp4 {
             output::encode_mp4(&products)?
         } else {
             None
         };
         products.extend(exrs);
-        products.push(Product::new("sequence.gif", encode_gif(frames, exposure)?));
+        let (width, height) = frames.first().map_or((1, 1), |f| f.image.size());
+        products.push(Product::new(
+            "sequence.gif",
+            encode_gif(&gif_frames, width, height)?,
+        ));
         products.extend(mp4.map(|bytes| Product::new("sequence.mp4", bytes)));
         products.push(Product::new(
             "frames.csv",

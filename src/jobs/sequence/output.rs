@@ -5,8 +5,6 @@
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
-
 use super::{FramePlan, SweepSpec};
 use crate::jobs::{JobError, Product};
 use crate::render::sweep::{SweepFrame, TransferSamples};
@@ -71,24 +69,11 @@ pub fn frames_csv(columns: &[String], plans: &[FramePlan], frames: &[SweepFrame]
     text
 }
 
-/// An animated GIF of the images of `frames` (8-bit sRGB at `exposure`, one palette of 256
-/// colours for all frames, [`GIF_FRAME_MS`] per frame, looping; `crate::output::gif`).
-pub fn encode_gif(frames: &[SweepFrame], exposure: f64) -> Result<Vec<u8>, JobError> {
-    let Some(first) = frames.first() else {
-        return Ok(crate::output::gif::encode_animation(
-            &[],
-            1,
-            1,
-            GIF_FRAME_MS,
-        )?);
-    };
-    let (width, height) = first.image.size();
-    let frames: Vec<Vec<u8>> = frames
-        .par_iter()
-        .map(|f| crate::output::png::film_to_srgb8(&f.image.film(), exposure))
-        .collect();
+/// An animated GIF of `frames`, each 8-bit sRGB RGB of `width` × `height` pixels (one palette
+/// of 256 colours for all frames, [`GIF_FRAME_MS`] per frame, looping; `crate::output::gif`).
+pub fn encode_gif(frames: &[Vec<u8>], width: u32, height: u32) -> Result<Vec<u8>, JobError> {
     Ok(crate::output::gif::encode_animation(
-        &frames,
+        frames,
         width,
         height,
         GIF_FRAME_MS,
