@@ -268,8 +268,7 @@ impl CameraFrame {
     /// The azimuth offsets from the heading ([`ViewDirection::azimuth_offset_rad`]) of the
     /// directions through the pixel centres of `columns` on film row `y` (pixels, y down),
     /// into `out`: the same values as [`Self::view_direction_at_elevation`] gives them (they do
-    /// not depend on the elevation), with the arctangent series in a loop the compiler can
-    /// vectorise.
+    /// not depend on the elevation), the row's shared terms worked out once.
     pub fn row_azimuth_offsets(&self, y: f64, columns: std::ops::Range<usize>, out: &mut Vec<f64>) {
         let (_, a) = self.row_terms(y);
         out.clear();
