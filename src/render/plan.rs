@@ -692,6 +692,7 @@ impl<'a> FramePlan<'a> {
             traced: &traced,
             sun_extinction: sun_extinction.as_deref(),
             base,
+            frame,
         });
         stats.sea_fan_rays = shader
             .reflection
@@ -737,6 +738,8 @@ struct ShaderParts<'a, 'b> {
     /// a sun.
     sun_extinction: Option<&'b Extinction>,
     base: Option<&'b FramePlan<'a>>,
+    /// The camera's frame (basis and focal length).
+    frame: CameraFrame,
 }
 
 impl<'a> PlanInputs<'a> {
@@ -760,7 +763,7 @@ impl<'a> PlanInputs<'a> {
                 .unwrap_or_else(|| Arc::new(AngleTable::new(lo, hi, |e| sky.transmittance(e))))
         });
         // The film's azimuths: the base frame's when the camera is the same.
-        let frame = cam.frame();
+        let frame = parts.frame;
         let azimuths = parts
             .base
             .map(|b| &b.shader.azimuths)
