@@ -11,7 +11,9 @@
 
 use std::hint::black_box;
 use std::path::PathBuf;
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::SystemTime;
 
 use criterion::{Criterion, criterion_group};
 use ghostship::atmosphere::LoadedAtmosphere;
@@ -263,15 +265,30 @@ fn encoding(c: &mut Criterion) {
 }
 
 criterion_group!(
-    benches,
-    small,
-    large,
-    sun_sequence,
-    sequence_kinds,
-    exact,
-    effects,
-    encoding
+    name = benches;
+    config = Criterion::default().output_directory(&criterion_dir());
+    targets = small, large, sun_sequence, sequence_kinds, exact, effects, encoding
 );
+
+/// Where criterion writes its estimates: `$CRITERION_HOME`, else `criterion` in the cargo target
+/// folder (`$CARGO_TARGET_DIR` or this package's `target`). Set explicitly, not left to
+/// criterion (which runs `cargo metadata` to find the target folder, and outside cargo falls
+/// back to a folder under the working directory), so that [`report_sun_sequence_target`] reads
+/// what this run wrote wherever the bench binary is started from.
+fn criterion_dir() -> PathBuf {
+    if let Some(home) = std::env::var_os("CRITERION_HOME") {
+        return PathBuf::from(home);
+    }
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map_or_else(
+            || PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/target")),
+            PathBuf::from,
+        )
+        .join("criterion")
+}
+
+/// When this process started (estimates written before it are an earlier run's).
+static STARTED: OnceLock<SystemTime> = OnceLock::new();
 
 /// Peak resident memory of this process (kB), from /proc/self/status (Linux).
 fn peak_rss_kb() -> Option<u64> {
@@ -280,14 +297,15 @@ fn peak_rss_kb() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-/// The median time (ns) criterion measured for `group/function` in this or an earlier run, from
-/// its `estimates.json` under the target folder.
+/// The median time (ns) criterion measured for `group/function` in this run, from its
+/// `estimates.json` under [`criterion_dir`]; `None` when there is none written since this
+/// process started.
 fn criterion_median_ns(group: &str, function: &str) -> Option<f64> {
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(
-        || PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/target")),
-        PathBuf::from,
-    );
-    let path = target.join(format!("criterion/{group}/{function}/new/estimates.json"));
+    let path = criterion_dir().join(format!("{group}/{function}/new/estimates.json"));
+    let written = std::fs::metadata(&path).and_then(|m| m.modified()).ok()?;
+    if written < *STARTED.get()? {
+        return None;
+    }
     let text = std::fs::read_to_string(path).ok()?;
     let json: serde_json::Value = serde_json::from_str(&text).ok()?;
     json["median"]["point_estimate"].as_f64()
@@ -307,6 +325,10 @@ fn report_sun_sequence_target() {
         criterion_median_ns(group, "one_frame"),
         criterion_median_ns(group, "100_sun_frames"),
     ) else {
+        eprintln!(
+            "{group}: no ratio: criterion's estimates of this run not found under {}",
+            criterion_dir().display()
+        );
         return;
     };
     let ratio = sweep / one;
@@ -320,6 +342,7 @@ fn report_sun_sequence_target() {
 }
 
 fn main() {
+    STARTED.get_or_init(SystemTime::now);
     benches();
     Criterion::default().configure_from_args().final_summary();
     report_sun_sequence_target();

@@ -179,8 +179,11 @@ impl BandColumns<'_> {
         out[hi..b].fill([0.0; 3]);
         // Every column between is evaluated exactly (the dark test above is only a shortcut to
         // the 0 the radiance gives beyond the chord).
-        for (v, &offset) in out[lo..hi].iter_mut().zip(&self.offsets[lo..hi]) {
-            *v = weight.apply(chord.radiance(heading + offset));
+        let disc = &mut scratch.disc;
+        disc.resize(disc.len().max(hi - lo), 0.0);
+        chord.radiance_along(heading, &self.offsets[lo..hi], disc);
+        for (v, &radiance) in out[lo..hi].iter_mut().zip(disc.iter()) {
+            *v = weight.apply(radiance);
         }
         if lo < hi { (lo, hi) } else { (a, a) }
     }
@@ -348,6 +351,8 @@ struct Scratch {
     exact: Vec<Exact>,
     /// The stamp of the latest call of [`Smooth::fill`].
     stamp: u32,
+    /// The disc's radiance per column of a chord ([`DiscChord::radiance_along`]).
+    disc: Vec<f64>,
 }
 
 /// A column's exact weights in a call of [`Smooth::fill`], and once asked for their

@@ -621,8 +621,9 @@ fn fill_run(
     for (px, add) in sums {
         let sum = [c[0] + add[0], c[1] + add[1], c[2] + add[2]];
         // Without a branch per pixel (the loop vectorises); a run with a colour that is not
-        // finite is done again below, pixel by pixel.
-        all_finite &= sum[0].is_finite() & sum[1].is_finite() & sum[2].is_finite();
+        // finite is done again below, pixel by pixel. x · 0 is ±0 for a finite x and NaN for
+        // any other: one comparison tests the three channels.
+        all_finite &= sum[0] * 0.0 + sum[1] * 0.0 + sum[2] * 0.0 == 0.0;
         *px = pixel(sum);
     }
     if !all_finite {
@@ -899,7 +900,7 @@ mod tests {
         // Per pixel, as a run was filled before lit spans: the background plus the addition
         // (which is +0 outside the span), the fallback where that is not finite, counted once
         // per pixel. Runs before, across, inside and after the span; empty spans; a −0, a NaN
-        // and an infinite background channel; a NaN addition.
+        // and an infinite background channel; a NaN and an infinite addition.
         let fallback = [0.5, 0.25, 0.125];
         let nan = f64::NAN;
         let backgrounds = [[0.2, -0.0, 0.4], [0.2, nan, 0.4], [f64::INFINITY, 0.1, 0.1]];
@@ -916,14 +917,13 @@ mod tests {
                     }
                 })
                 .collect();
-            let mut with_nan = added.clone();
-            with_nan[9] = if lit.0 < lit.1 {
-                [nan, 0.0, 0.0]
-            } else {
-                [0.0; 3]
-            };
+            let (mut with_nan, mut with_inf) = (added.clone(), added.clone());
+            if lit.0 < lit.1 {
+                with_nan[9] = [nan, 0.0, 0.0];
+                with_inf[11] = [0.0, 0.0, f64::NEG_INFINITY];
+            }
             for background in backgrounds {
-                for sun_added in [&added, &with_nan] {
+                for sun_added in [&added, &with_nan, &with_inf] {
                     for (first, len) in runs {
                         let band = FlatBand {
                             start: 0,
