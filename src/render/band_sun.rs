@@ -651,22 +651,15 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
         out: &[[f64; 3]],
     ) -> bool {
         let mut log_error = 0.0f64;
-        let (mut largest, mut clearest) = fit.max_over(i, j);
-        let mut widen = |(k, t): Weights| {
-            largest = largest.max(k);
-            (0..3).for_each(|c| clearest[c] = clearest[c].max(t[c]));
-        };
-        for x in [i, (i + j) / 2, j] {
-            widen(exact[x].weights);
-        }
         for x in tests.into_iter().flatten() {
-            let (want, got) = (exact[x].weights, fit.at(x));
-            widen(want);
+            let logs = fit.logs_at(x);
+            let got = (logs[0].exp(), [1, 2, 3].map(|n| logs[n].exp()));
+            let want = exact[x].weights;
             if !within(self.radiance.of(got.0, got.1), out[x], background) {
                 return false;
             }
             let mut error =
-                |n: usize, want: f64, got: f64| log_ratio(want, got, || exact[x].log(n));
+                |n: usize, want: f64, got: f64| log_ratio(want, (got, logs[n]), || exact[x].log(n));
             let errors = [
                 error(0, want.0, got.0),
                 error(1, want.1[0], got.1[0]),
@@ -688,6 +681,16 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
         if excess <= 0.0 {
             return true;
         }
+        // The largest values the interval may hold: the fits' maxima, or an exact value.
+        let (mut largest, mut clearest) = fit.max_over(i, j);
+        for x in [i, (i + j) / 2, j]
+            .into_iter()
+            .chain(tests.into_iter().flatten())
+        {
+            let (k, t) = exact[x].weights;
+            largest = largest.max(k);
+            (0..3).for_each(|c| clearest[c] = clearest[c].max(t[c]));
+        }
         let v = self
             .radiance
             .of(largest * growth, clearest.map(|t| t * growth));
@@ -695,13 +698,14 @@ impl<E: Fn(usize) -> Weights, R: Radiance> Smooth<E, R> {
     }
 }
 
-/// |ln(`got` / `want`)| (0 when they are equal), `ln_want` giving ln `want`; `None` when they
-/// differ and not both are positive.
-fn log_ratio(want: f64, got: f64, ln_want: impl FnOnce() -> f64) -> Option<f64> {
+/// |ln(`got` / `want`)| (0 when they are equal), `got` given with its logarithm (the exponent
+/// it is the exponential of) and `ln_want` giving ln `want`; `None` when they differ and not
+/// both are positive.
+fn log_ratio(want: f64, (got, ln_got): (f64, f64), ln_want: impl FnOnce() -> f64) -> Option<f64> {
     if want == got {
         return Some(0.0);
     }
-    (want > 0.0 && got > 0.0).then(|| (got.ln() - ln_want()).abs())
+    (want > 0.0 && got > 0.0).then(|| (ln_got - ln_want()).abs())
 }
 
 /// Quadratics in the logarithms of a column's factor and of each channel of its
@@ -733,10 +737,16 @@ impl Fit {
         })
     }
 
-    /// The weights at column `x`.
-    fn at(&self, x: usize) -> Weights {
+    /// The logarithms of the weights at column `x` (the factor's, then each channel's):
+    /// [`LogQuadratic::log_at`].
+    fn logs_at(&self, x: usize) -> [f64; 4] {
         let t = &self.transmittance;
-        (self.factor.at(x), [t[0].at(x), t[1].at(x), t[2].at(x)])
+        [
+            self.factor.log_at(x),
+            t[0].log_at(x),
+            t[1].log_at(x),
+            t[2].log_at(x),
+        ]
     }
 
     /// The largest factor and transmittance per channel over columns [`i`, `j`]
@@ -860,8 +870,9 @@ impl LogQuadratic {
         y.exp()
     }
 
-    /// The factor at column `x`.
-    fn at(&self, x: usize) -> f64 {
+    /// The logarithm of the factor at column `x`, whose exponential is the factor there (−∞
+    /// for [`LogQuadratic::Zero`]).
+    fn log_at(&self, x: usize) -> f64 {
         let LogQuadratic::Quadratic {
             x0,
             alpha,
@@ -869,10 +880,10 @@ impl LogQuadratic {
             gamma,
         } = *self
         else {
-            return 0.0;
+            return f64::NEG_INFINITY;
         };
         let u = (x - x0) as f64;
-        (alpha + u * (beta + u * gamma)).exp()
+        alpha + u * (beta + u * gamma)
     }
 
     /// The values at the columns after `start` (the quadratic's first column), in order.
