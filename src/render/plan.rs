@@ -42,7 +42,7 @@ use super::terrain::{TerrainFrame, TerrainView};
 use super::texture_box::TextureColumns;
 use super::{
     FLAT_ROW_FRACTION, FlatRow, RenderError, RenderOptions, RenderStats, RowScratch, TracedSample,
-    azimuth_span, card_columns_in_row, check_tracer_tolerance, elevation_range, flat_bands,
+    azimuth_span, card_columns_in_row, check_tracer_tolerance, elevation_range,
     row_may_meet_terrain, shade_fan_sample, shade_flat_row, shade_traced_sample, sun_band_rad,
     traced_grid,
 };
@@ -974,10 +974,15 @@ pub(super) struct BaseRow {
 }
 
 impl FramePlan<'_> {
-    /// The lowest and highest elevation (rad) at which shading row `y` looks anything up: its
-    /// samples' and its flat bands' (−∞ and +∞ when one is not finite). The same for every
-    /// frame of one camera and sample count.
+    /// Bounds on the elevations (rad) at which shading row `y` looks anything up: its
+    /// samples' and its flat bands' (−∞ and +∞ when one is not finite). With one sample per
+    /// pixel, whose samples and bands are at pixel centres, the camera's bounds on those
+    /// ([`CameraFrame::row_elevation_range`]); else the samples' lowest and highest. The same
+    /// for every frame of one camera and sample count.
     pub(super) fn row_elevations(&self, y: u32, scratch: &mut RowScratch) -> (f64, f64) {
+        if self.n == 1 {
+            return self.frame.row_elevation_range(y, self.width);
+        }
         scratch.directions(&self.frame, y, self.width, self.n);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let mut add = |e: f64| {
@@ -988,11 +993,6 @@ impl FramePlan<'_> {
             }
         };
         scratch.dirs.iter().for_each(|d| add(d.elevation_rad));
-        if self.n == 1
-            && let Some(bands) = flat_bands(&self.frame, y, self.width, self.flat_row_limit_rad)
-        {
-            bands.iter().for_each(|&(_, alpha)| add(alpha));
-        }
         (lo, hi)
     }
 

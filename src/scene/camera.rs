@@ -177,6 +177,10 @@ impl ViewDirection {
     }
 }
 
+/// How far (rad) [`CameraFrame::row_elevation_range`] widens its bounds: thousands of times the
+/// rounding of an elevation (below 1e-15 rad), and far below a pixel's height at any film size.
+pub const ROW_ELEVATION_PAD_RAD: f64 = 1e-12;
+
 /// Elevation (rad) of a direction with vertical component `dz` and horizontal length
 /// `horizontal` (> 0 or a zenith/nadir direction).
 #[inline]
@@ -238,6 +242,33 @@ impl CameraFrame {
             u: (x - self.half_w) / self.focal_px,
             a,
         }
+    }
+
+    /// Bounds (rad) on the elevations of the view directions through the pixel centres of row
+    /// `y` of a film `width` pixels wide ([`Self::row_view_directions`], [`Self::view_direction`]):
+    /// along a row the elevation depends on the column only through its distance from the
+    /// film's centre, and monotonically (its tangent is a fixed height over a horizontal length
+    /// that grows with that distance), so it is bounded by the elevations of the columns
+    /// nearest to and farthest from the centre, here widened by [`ROW_ELEVATION_PAD_RAD`] on
+    /// either side for rounding. (−∞, +∞) when one of those is not finite.
+    pub fn row_elevation_range(&self, y: u32, width: u32) -> (f64, f64) {
+        let Some(last) = width.checked_sub(1) else {
+            return (f64::INFINITY, f64::NEG_INFINITY);
+        };
+        // The column nearest the centre (of two as near, the other mirrors it), and both ends.
+        let near = (self.half_w - 0.5).floor().clamp(0.0, f64::from(last)) as u32;
+        let columns = [0, last, near];
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in columns {
+            let e = self
+                .view_direction(f64::from(x) + 0.5, f64::from(y) + 0.5)
+                .elevation_rad;
+            if !e.is_finite() {
+                return (f64::NEG_INFINITY, f64::INFINITY);
+            }
+            (lo, hi) = (lo.min(e), hi.max(e));
+        }
+        (lo - ROW_ELEVATION_PAD_RAD, hi + ROW_ELEVATION_PAD_RAD)
     }
 
     /// The view directions through the pixel centres of row `y` (integer row index, so the film
@@ -492,6 +523,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_rows_elevation_range_holds_its_pixels_elevations_and_no_more() {
+        // Films even and odd in width, level and pitched cameras, rows from top to bottom
+        // (elevations on both sides of the switch to the library's arctangent).
+        let mut row = Vec::new();
+        for (width, hfov_deg) in [(400, 60.0), (401, 60.0), (1, 10.0), (2, 10.0), (1920, 0.6)] {
+            for pitch in [-70.0, -3.0, 0.0, 0.2, 30.0] {
+                let c = Camera {
+                    width,
+                    height: 120,
+                    hfov_rad: f64::to_radians(hfov_deg),
+                    ..cam(20.0, pitch)
+                };
+                let f = c.frame();
+                for y in (0..120).step_by(7) {
+                    f.row_view_directions(y, width, &mut row);
+                    let (lo, hi) = f.row_elevation_range(y, width);
+                    let elevations = row.iter().map(|d| d.elevation_rad);
+                    let min = elevations.clone().fold(f64::INFINITY, f64::min);
+                    let max = elevations.fold(f64::NEG_INFINITY, f64::max);
+                    let case = format!("{width} {pitch} {y}");
+                    assert_eq!(lo, min - ROW_ELEVATION_PAD_RAD, "{case}");
+                    assert_eq!(hi, max + ROW_ELEVATION_PAD_RAD, "{case}");
+                }
+            }
+        }
+        assert_eq!(
+            cam(0.0, 0.0).frame().row_elevation_range(3, 0),
+            (f64::INFINITY, f64::NEG_INFINITY)
+        );
     }
 
     #[test]
