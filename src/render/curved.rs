@@ -29,9 +29,9 @@ use super::ray_model::{FanEnd, FanRay, RayModelError, RayTracer, StraightRays};
 use crate::refractivity::RefractiveAtmosphere;
 use crate::scene::Scene;
 use crate::tracer::{
-    BouguerEnvelope, DensityPaths, FateWatch, Ground, RayDensityPaths, RayPoint, RayRecord,
-    Settled, Spherical, StratifiedIndex, Termination, Tracer, TracerConfig, TracerError,
-    trace_field,
+    BouguerEnvelope, DensityPaths, DensityPathsSoFar, FateWatch, Ground, PendingClimb,
+    RayDensityPaths, RayPoint, RayRecord, Settled, Spherical, StratifiedIndex, Termination, Tracer,
+    TracerConfig, TracerError, trace_field,
 };
 
 /// The tracer settings the renderer uses: [`TracerConfig::default`] (its tolerance, top at
@@ -317,6 +317,20 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
         elevation_rad: f64,
         scales: [f64; 2],
     ) -> (FanRay, Option<[f64; 2]>) {
+        let (ray, so_far) = self.trace_to_sky_deferring_density_paths(h, elevation_rad, scales);
+        let paths = match so_far {
+            DensityPathsSoFar::Done(paths) => paths,
+            DensityPathsSoFar::Climb(climb) => self.tracer.finish_climb(&climb),
+        };
+        (ray, paths)
+    }
+
+    fn trace_to_sky_deferring_density_paths(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        scales: [f64; 2],
+    ) -> (FanRay, DensityPathsSoFar) {
         // The fate rule of `trace` with the sky direction, which `density_paths_m` also
         // follows: one trace gives both.
         let watch = self
@@ -331,10 +345,14 @@ impl<S: StratifiedIndex + ?Sized> RayTracer for CurvedRays<'_, S> {
             Ok(()) => (
                 fan_ray(&record, elevation_rad, 0),
                 self.tracer
-                    .density_paths_m(h, elevation_rad, &hook, &record),
+                    .density_paths_so_far(h, elevation_rad, &hook, &record),
             ),
-            Err(_) => (lost(elevation_rad, 0), None),
+            Err(_) => (lost(elevation_rad, 0), DensityPathsSoFar::Done(None)),
         }
+    }
+
+    fn finish_density_paths(&self, climb: &PendingClimb) -> Option<[f64; 2]> {
+        self.tracer.finish_climb(climb)
     }
 
     fn trace(
@@ -692,7 +710,7 @@ mod tests {
         ] {
             let rays = CurvedRays::new(&field, render_tracer_config(EARTH_RADIUS_M), 0.0).unwrap();
             let scales = [8_000.0, 1_000.0];
-            let mut kinds = [0; 2];
+            let (mut kinds, mut climbs) = ([0; 2], 0);
             for (h, i) in [0.0, 100.0]
                 .into_iter()
                 .flat_map(|h| (0..60).map(move |i| (h, i)))
@@ -709,9 +727,24 @@ mod tests {
                     format!("{want:?}"),
                     "{h} {e}"
                 );
+                // The same with the climb out left for later, then done.
+                let (ray, so_far) = rays.trace_to_sky_deferring_density_paths(h, e, scales);
+                let paths = match so_far {
+                    DensityPathsSoFar::Done(paths) => paths,
+                    DensityPathsSoFar::Climb(climb) => {
+                        climbs += 1;
+                        rays.finish_density_paths(&climb)
+                    }
+                };
+                assert_eq!(
+                    format!("{:?}", (ray, paths)),
+                    format!("{want:?}"),
+                    "{h} {e}"
+                );
                 kinds[usize::from(matches!(end, FanEnd::Sky { .. }))] += 1;
             }
             assert!(kinds[1] > 10, "{kinds:?}");
+            assert!(climbs > 10, "{climbs}");
         }
     }
 

@@ -5,8 +5,9 @@
 //!
 //! A cached answer is the value the inner tracer returned for exactly the same arguments — or,
 //! with [`MemoRays::with_density_paths`], for a sky-fan ray and its density paths, the values of
-//! [`RayTracer::trace_to_sky_with_density_paths`], which its contract makes those of the two
-//! calls — and the tracers are deterministic, so a frame rendered through [`MemoRays`] is bit
+//! [`RayTracer::trace_to_sky_deferring_density_paths`] and
+//! [`RayTracer::finish_density_paths`], which their contract makes those of the two calls —
+//! and the tracers are deterministic, so a frame rendered through [`MemoRays`] is bit
 //! for bit the frame rendered through the inner tracer, whichever frame or thread traced a ray
 //! first. Two
 //! threads asking for the same ray at once may both trace it (the lock is not held while
@@ -16,7 +17,7 @@ use std::collections::HashMap;
 use std::sync::Mutex;
 
 use super::ray_model::{FanRay, RayTracer};
-use crate::tracer::RayDensityPaths;
+use crate::tracer::{DensityPathsSoFar, RayDensityPaths};
 
 /// The arguments of one call, by their bits.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
@@ -60,8 +61,10 @@ type SkyAndPaths = (FanRay, Option<[f64; 2]>);
 pub struct MemoRays<'a> {
     inner: &'a dyn RayTracer,
     traces: Mutex<HashMap<Key, FanRay>>,
-    /// Keyed with both scale heights (the second in `distances`).
-    paths: Mutex<HashMap<Key, Option<[f64; 2]>>>,
+    /// Keyed with both scale heights (the second in `distances`); a sky-fan ray's climb out
+    /// through the top is integrated when its paths are first asked for
+    /// ([`Self::with_density_paths`]).
+    paths: Mutex<HashMap<Key, DensityPathsSoFar>>,
     /// As `paths`, for [`RayTracer::trace_to_sky_with_density_paths`].
     sky_paths: Mutex<HashMap<Key, SkyAndPaths>>,
     paths_along: Mutex<HashMap<Key, Option<RayDensityPaths>>>,
@@ -87,9 +90,10 @@ impl<'a> MemoRays<'a> {
     }
 
     /// Trace every sky-fan ray not yet remembered together with its density paths for the
-    /// scale heights `scale_heights_m` ([`RayTracer::trace_to_sky_with_density_paths`]: one
-    /// trace for both, the same values as the two calls), and remember those paths too. Worth
-    /// it where most sky rays' paths will be asked for: a sun sweep, whose sun crosses most of
+    /// scale heights `scale_heights_m` ([`RayTracer::trace_to_sky_deferring_density_paths`]:
+    /// one trace for both, the same values as the two calls), and remember those paths too,
+    /// their climb out through the top integrated only when they are first asked for. Worth it
+    /// where many sky rays' paths will be asked for: a sun sweep, whose sun crosses most of
     /// the fan's sky rays in turn. `None`: trace them alone.
     pub fn with_density_paths(mut self, scale_heights_m: Option<[f64; 2]>) -> Self {
         self.density_scales_m = scale_heights_m;
@@ -138,7 +142,7 @@ impl RayTracer for MemoRays<'_> {
             && need_sky_direction
         {
             return remembered(&self.traces, key, || {
-                let (ray, paths) = self.inner.trace_to_sky_with_density_paths(
+                let (ray, paths) = self.inner.trace_to_sky_deferring_density_paths(
                     camera_height_m,
                     elevation_rad,
                     scales,
@@ -193,10 +197,16 @@ impl RayTracer for MemoRays<'_> {
         scale_heights_m: [f64; 2],
     ) -> Option<[f64; 2]> {
         let key = paths_key(camera_height_m, elevation_rad, scale_heights_m);
-        remembered(&self.paths, key, || {
-            self.inner
-                .density_paths_m(camera_height_m, elevation_rad, scale_heights_m)
-        })
+        let known = lock(&self.paths).get(&key).copied();
+        let paths = match known {
+            Some(DensityPathsSoFar::Done(paths)) => return paths,
+            Some(DensityPathsSoFar::Climb(climb)) => self.inner.finish_density_paths(&climb),
+            None => self
+                .inner
+                .density_paths_m(camera_height_m, elevation_rad, scale_heights_m),
+        };
+        lock(&self.paths).insert(key, DensityPathsSoFar::Done(paths));
+        paths
     }
 
     fn trace_to_sky_with_density_paths(

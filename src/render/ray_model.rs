@@ -17,7 +17,7 @@
 //! Both serve as development back-ends and as test oracles. They are written by hand because they
 //! are a few lines of trigonometry that no crate provides in this form.
 
-use crate::tracer::{RayDensityPaths, straight_density_paths_m};
+use crate::tracer::{DensityPathsSoFar, PendingClimb, RayDensityPaths, straight_density_paths_m};
 
 /// What the renderer needs of one ray launched from the camera at apparent elevation α.
 #[derive(Debug, Clone, PartialEq)]
@@ -137,6 +137,29 @@ pub trait RayTracer: Sync {
             self.trace(camera_height_m, elevation_rad, &[], true),
             self.density_paths_m(camera_height_m, elevation_rad, scale_heights_m),
         )
+    }
+
+    /// [`Self::trace_to_sky_with_density_paths`], the density paths' climb out through the top
+    /// possibly left for later: [`Self::finish_density_paths`] then gives the paths that call
+    /// gives, bit for bit. For a caller that traces many rays and is asked for the paths of few.
+    /// Default: the paths at once.
+    fn trace_to_sky_deferring_density_paths(
+        &self,
+        camera_height_m: f64,
+        elevation_rad: f64,
+        scale_heights_m: [f64; 2],
+    ) -> (FanRay, DensityPathsSoFar) {
+        let (ray, paths) =
+            self.trace_to_sky_with_density_paths(camera_height_m, elevation_rad, scale_heights_m);
+        (ray, DensityPathsSoFar::Done(paths))
+    }
+
+    /// The density paths of a ray whose climb out [`Self::trace_to_sky_deferring_density_paths`]
+    /// left to do. A tracer that leaves climbs must answer this, and a tracer that passes that
+    /// call on must pass this one on too. Default: `None` (never asked of a tracer that leaves
+    /// none).
+    fn finish_density_paths(&self, _climb: &PendingClimb) -> Option<[f64; 2]> {
+        None
     }
 
     /// The same integrals from the camera to each of the ground distances `distances_m` the ray

@@ -158,6 +158,28 @@ impl<H> DensityPaths<H> {
     }
 }
 
+/// What [`Tracer::density_paths_m`] still has to do for a ray that left through the top: the
+/// climb from the last point the hook saw, in closed form ([`Tracer::finish_climb`]). Kept so a
+/// caller can trace many rays and integrate the climbs only of those it is asked for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PendingClimb {
+    /// The sums up to the last point.
+    sums_m: [f64; 2],
+    /// Where the climb starts: its height (m) and elevation (rad, > 0).
+    height_m: f64,
+    elevation_rad: f64,
+    scale_heights_m: [f64; 2],
+}
+
+/// A ray's density-weighted path lengths, or the climb they still need ([`PendingClimb`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DensityPathsSoFar {
+    /// The paths (`None` as [`Tracer::density_paths_m`] gives it).
+    Done(Option<[f64; 2]>),
+    /// Still to climb.
+    Climb(PendingClimb),
+}
+
 impl<S: StratifiedIndex + ?Sized> Tracer<'_, S> {
     /// The density-weighted path lengths of the ray that `record` holds, traced from
     /// `observer_height_m` at `elevation_rad` with `hook` (fresh for that trace): `None` unless it
@@ -169,10 +191,24 @@ impl<S: StratifiedIndex + ?Sized> Tracer<'_, S> {
         hook: &DensityPaths<H>,
         record: &RayRecord,
     ) -> Option<[f64; 2]> {
-        if record.termination != Some(Termination::Escaped) {
-            return None;
+        match self.density_paths_so_far(observer_height_m, elevation_rad, hook, record) {
+            DensityPathsSoFar::Done(paths) => paths,
+            DensityPathsSoFar::Climb(climb) => self.finish_climb(&climb),
         }
-        let cfg = self.config();
+    }
+
+    /// [`Self::density_paths_m`], but a climb out through the top in closed form left for
+    /// [`Self::finish_climb`], which then gives the same values bit for bit.
+    pub fn density_paths_so_far<H>(
+        &self,
+        observer_height_m: f64,
+        elevation_rad: f64,
+        hook: &DensityPaths<H>,
+        record: &RayRecord,
+    ) -> DensityPathsSoFar {
+        if record.termination != Some(Termination::Escaped) {
+            return DensityPathsSoFar::Done(None);
+        }
         let start = RayPoint {
             arc_length_m: 0.0,
             distance_m: 0.0,
@@ -180,26 +216,44 @@ impl<S: StratifiedIndex + ?Sized> Tracer<'_, S> {
             elevation_rad,
         };
         let last = hook.last.unwrap_or(start);
-        let rest = if last.height_m >= cfg.top_m {
+        let rest = if last.height_m >= self.config().top_m {
             [0.0; 2]
         } else if last.elevation_rad > 0.0 {
-            climb_out_density_paths(
-                |h| self.field().index_and_derivative(h),
-                &self.breaks_m,
-                cfg.earth_radius_m,
-                last.height_m,
-                last.elevation_rad,
-                cfg.top_m,
-                hook.scale_heights_m,
-            )?
+            return DensityPathsSoFar::Climb(PendingClimb {
+                sums_m: hook.sums_m,
+                height_m: last.height_m,
+                elevation_rad: last.elevation_rad,
+                scale_heights_m: hook.scale_heights_m,
+            });
         } else {
             // Turned inside the last step and left through the top within it: one segment.
             let ds = record.end.arc_length_m - last.arc_length_m;
             hook.segment(last.height_m, record.end.height_m, ds)
         };
-        let total = [hook.sums_m[0] + rest[0], hook.sums_m[1] + rest[1]];
-        total.iter().all(|v| v.is_finite()).then_some(total)
+        DensityPathsSoFar::Done(total_paths(hook.sums_m, rest))
     }
+
+    /// The density-weighted path lengths of a ray whose climb `climb` was left to do
+    /// ([`Self::density_paths_so_far`]): `None` when the climb cannot be integrated.
+    pub fn finish_climb(&self, climb: &PendingClimb) -> Option<[f64; 2]> {
+        let cfg = self.config();
+        let rest = climb_out_density_paths(
+            |h| self.field().index_and_derivative(h),
+            &self.breaks_m,
+            cfg.earth_radius_m,
+            climb.height_m,
+            climb.elevation_rad,
+            cfg.top_m,
+            climb.scale_heights_m,
+        )?;
+        total_paths(climb.sums_m, rest)
+    }
+}
+
+/// The sums `sums_m` plus the rest `rest_m`, when both totals are finite.
+fn total_paths(sums_m: [f64; 2], rest_m: [f64; 2]) -> Option<[f64; 2]> {
+    let total = [sums_m[0] + rest_m[0], sums_m[1] + rest_m[1]];
+    total.iter().all(|v| v.is_finite()).then_some(total)
 }
 
 /// The density-weighted path lengths (as [`Tracer::density_paths_m`]) of a straight line (n ≡ 1)

@@ -27,7 +27,9 @@ use rayon::prelude::*;
 
 pub use bouguer::{BouguerEnvelope, Fate, FateWatch};
 pub use breaks::MinorBreak;
-pub use density_path::{DensityPaths, RayDensityPaths, straight_density_paths_m};
+pub use density_path::{
+    DensityPaths, DensityPathsSoFar, PendingClimb, RayDensityPaths, straight_density_paths_m,
+};
 pub use ray::{
     HookAction, NoHook, RayHook, RayPoint, RayRecord, Termination, TracerConfig, TracerError,
 };

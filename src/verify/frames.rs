@@ -38,7 +38,7 @@ use crate::render::{
     TRACER_TOLERANCE_RANGE_M, prepare_tracer, render_scene, render_tracer_config,
 };
 use crate::scene::{Scene, SceneError};
-use crate::tracer::{RayDensityPaths, RayRecord, TracerConfig};
+use crate::tracer::{DensityPathsSoFar, PendingClimb, RayDensityPaths, RayRecord, TracerConfig};
 
 use super::stats::median;
 
@@ -672,6 +672,24 @@ impl RayTracer for Recording<'_> {
             self.inner
                 .trace_to_sky_with_density_paths(h, elevation_rad, scales)
         })
+    }
+
+    /// Passed on and timed with the traces.
+    fn trace_to_sky_deferring_density_paths(
+        &self,
+        h: f64,
+        elevation_rad: f64,
+        scales: [f64; 2],
+    ) -> (FanRay, DensityPathsSoFar) {
+        self.timed(|| {
+            self.inner
+                .trace_to_sky_deferring_density_paths(h, elevation_rad, scales)
+        })
+    }
+
+    /// Passed on and timed with the traces.
+    fn finish_density_paths(&self, climb: &PendingClimb) -> Option<[f64; 2]> {
+        self.timed(|| self.inner.finish_density_paths(climb))
     }
 
     /// Passed on and timed with the traces.

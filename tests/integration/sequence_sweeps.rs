@@ -19,7 +19,7 @@ use ghostship::render::{
 };
 use ghostship::scene::Scene;
 use ghostship::solar::{Site, UtcTime, sun_position_with_delta_t};
-use ghostship::tracer::{RayDensityPaths, Tracer};
+use ghostship::tracer::{DensityPathsSoFar, PendingClimb, RayDensityPaths, Tracer};
 use ghostship::units::EARTH_RADIUS_M;
 
 use crate::scenes::atmosphere;
@@ -127,10 +127,11 @@ fn the_sun_position_matches_the_nrel_spa_paper_example() {
 }
 
 /// A tracer that counts the calls asked of it, by kind: plain traces, density paths, both at
-/// once, density paths along a ray.
+/// once (their climb out left for later or not), density paths along a ray, climbs out
+/// finished.
 struct Counting<'a> {
     inner: &'a dyn RayTracer,
-    calls: [AtomicUsize; 4],
+    calls: [AtomicUsize; 5],
 }
 
 impl<'a> Counting<'a> {
@@ -146,7 +147,7 @@ impl<'a> Counting<'a> {
     }
 
     /// The calls so far, by kind.
-    fn calls(&self) -> [usize; 4] {
+    fn calls(&self) -> [usize; 5] {
         self.calls.each_ref().map(|c| c.load(Ordering::Relaxed))
     }
 }
@@ -168,6 +169,20 @@ impl RayTracer for Counting<'_> {
     ) -> (FanRay, Option<[f64; 2]>) {
         self.count(2);
         self.inner.trace_to_sky_with_density_paths(h, alpha, scales)
+    }
+    fn trace_to_sky_deferring_density_paths(
+        &self,
+        h: f64,
+        alpha: f64,
+        scales: [f64; 2],
+    ) -> (FanRay, DensityPathsSoFar) {
+        self.count(2);
+        self.inner
+            .trace_to_sky_deferring_density_paths(h, alpha, scales)
+    }
+    fn finish_density_paths(&self, climb: &PendingClimb) -> Option<[f64; 2]> {
+        self.count(4);
+        self.inner.finish_density_paths(climb)
     }
     fn density_paths_along(
         &self,
@@ -194,7 +209,7 @@ fn with_density_paths_sky_fan_rays_bring_their_paths_and_nothing_else_does() {
             plain.trace(10.0, alpha, &[], true)
         );
     }
-    assert_eq!(inner.calls(), [0, 0, 50, 0]);
+    assert_eq!(inner.calls(), [0, 0, 50, 0, 0]);
     // Their paths are remembered: the same values, not asked again.
     let mut escaping = 0;
     for &alpha in &alphas {
@@ -203,17 +218,59 @@ fn with_density_paths_sky_fan_rays_bring_their_paths_and_nothing_else_does() {
         escaping += usize::from(paths.is_some());
     }
     assert!(escaping > 10 && escaping < 50, "{escaping}");
-    assert_eq!(inner.calls(), [0, 0, 50, 0]);
+    assert_eq!(inner.calls(), [0, 0, 50, 0, 0]);
     // Rays with distances or without the sky direction are traced alone, and other scale
     // heights are other paths.
     memo.trace(10.0, 0.001, &[5_000.0], true);
     memo.trace(10.0, 0.001, &[], false);
     memo.density_paths_m(10.0, 0.001, [8_000.0, 1_000.0]);
-    assert_eq!(inner.calls(), [2, 1, 50, 0]);
+    assert_eq!(inner.calls(), [2, 1, 50, 0, 0]);
     // Without scale heights a sky-fan ray is a plain trace.
     let memo = MemoRays::new(&inner).with_density_paths(None);
     memo.trace(10.0, 0.001, &[], true);
-    assert_eq!(inner.calls(), [3, 1, 50, 0]);
+    assert_eq!(inner.calls(), [3, 1, 50, 0, 0]);
+}
+
+#[test]
+fn a_memo_integrates_a_sky_rays_climb_out_only_when_its_paths_are_asked_for() {
+    // The real tracer of a measured sounding, whose sky rays leave their climb out to the top
+    // for later.
+    let scene = Scene::from_file(Path::new(&scene_path(DANMARKSHAVN))).unwrap();
+    let atm = scene.atmosphere.load().unwrap();
+    let options = RenderOptions {
+        samples_per_pixel: Some(1),
+        quiet: true,
+        ..RenderOptions::default()
+    };
+    let tracer = prepare_tracer(&scene, atm.as_ref().map(|a| &a.refractive), &options).unwrap();
+    let inner = Counting::new(tracer.as_ref());
+    let scales = scene.sky.sun_extinction().scale_heights_m();
+    let memo = MemoRays::new(&inner).with_density_paths(Some(scales));
+    let h = scene.camera.height_m;
+    let alphas: Vec<f64> = (0..40).map(|i| -0.002 + 2e-4 * f64::from(i)).collect();
+    for &alpha in &alphas {
+        assert_eq!(
+            memo.trace(h, alpha, &[], true),
+            tracer.trace(h, alpha, &[], true)
+        );
+    }
+    assert_eq!(inner.calls(), [0, 0, 40, 0, 0]);
+    // Every other ray's paths, twice: the values of the tracer's own call, each climb
+    // integrated once, on the first asking.
+    let mut first_climbs = None;
+    for pass in 0..2 {
+        let mut escaping = 0;
+        for &alpha in alphas.iter().step_by(2) {
+            let paths = memo.density_paths_m(h, alpha, scales);
+            assert_eq!(paths, tracer.density_paths_m(h, alpha, scales), "{alpha}");
+            escaping += usize::from(paths.is_some());
+        }
+        assert!(escaping > 5, "{escaping}");
+        let [traces, paths, both, along, climbs] = inner.calls();
+        assert_eq!([traces, paths, both, along], [0, 0, 40, 0], "pass {pass}");
+        assert!(climbs > 5 && climbs <= escaping, "{climbs} of {escaping}");
+        assert_eq!(*first_climbs.get_or_insert(climbs), climbs, "pass {pass}");
+    }
 }
 
 /// A sweep of the sun over time through the Danmarkshavn sounding, the camera turning with it.
@@ -251,7 +308,7 @@ fn a_sun_sweep_over_time_traces_its_rays_once_though_sun_and_camera_turn() {
     let rays = |scenes: &[Scene]| {
         let counting = Counting::new(tracer.as_ref());
         let frames = render_shared(scenes, &counting, &options, false).unwrap();
-        (counting.calls().iter().sum::<usize>(), frames)
+        (counting.calls()[..4].iter().sum::<usize>(), frames)
     };
     let (one, _) = rays(&scenes[5..6]);
     let (all, frames) = rays(&scenes);
