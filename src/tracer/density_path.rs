@@ -12,7 +12,9 @@
 //! departs from linear by at most ~ step²/(8R), 8 cm for a 2 km step). The rest — the closed-form climb out to the top
 //! that the fate rule takes once a ray provably escapes, or the part of the last step above
 //! the last accepted point — comes from the same refraction integral as the climb out
-//! (`climb_out::climb_out_density_paths`), from the last accepted point.
+//! (`climb_out::climb_out_density_paths`), from the last accepted point. A caller that traces
+//! many rays but needs the paths of few may keep that climb for later ([`PendingClimb`],
+//! [`Tracer::density_paths_so_far`], [`Tracer::finish_climb`]).
 
 use super::climb_out::climb_out_density_paths;
 use super::{RayHook, RayPoint, RayRecord, StratifiedIndex, Termination, Tracer};
@@ -234,7 +236,8 @@ impl<S: StratifiedIndex + ?Sized> Tracer<'_, S> {
     }
 
     /// The density-weighted path lengths of a ray whose climb `climb` was left to do
-    /// ([`Self::density_paths_so_far`]): `None` when the climb cannot be integrated.
+    /// ([`Self::density_paths_so_far`] of this tracer): `None` when the climb cannot be
+    /// integrated.
     pub fn finish_climb(&self, climb: &PendingClimb) -> Option<[f64; 2]> {
         let cfg = self.config();
         let rest = climb_out_density_paths(
