@@ -489,10 +489,11 @@ impl DiscChord {
     /// [`Self::radiance`] towards `heading_rad + offset` for each offset of `offsets_rad`
     /// (rad), into `out` (as long): the same values, bit for bit. For a disc whose edge is
     /// within both series' ranges and azimuths whose half-difference from the centre's is
-    /// within [`SMALL_SIN_MAX`] (the columns of a chord), one loop without branches over the
-    /// columns, which the compiler vectorises (each column evaluates both series and keeps 0
-    /// beyond the edge: within the edge the series are what [`Self::radiance`] takes); a run
-    /// that leaves those ranges anywhere is done again column by column.
+    /// within 0.01 rad, the sine series' range (the columns of a chord), one loop without
+    /// branches over the columns, which the compiler vectorises (each column evaluates both
+    /// series and keeps 0 beyond the edge: within the edge the series are what
+    /// [`Self::radiance`] takes); a run that leaves those ranges anywhere is done again column
+    /// by column.
     pub fn radiance_along(&self, heading_rad: f64, offsets_rad: &[f64], out: &mut [f64]) {
         let out = &mut out[..offsets_rad.len()];
         let mut series = self.edge_haversine <= SMALL_HAVERSINE_MAX;
